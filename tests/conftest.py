@@ -1,0 +1,33 @@
+"""Shared fixtures: where the third-party test data lives, small meshes."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = REPO.parent / "shared" / "data"
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _isolated_cache(tmp_path_factory):
+    """Modal-basis caches of the tests go to a private folder, not ~/.cache."""
+    if "TONGUEVIS_CACHE" not in os.environ:
+        os.environ["TONGUEVIS_CACHE"] = str(tmp_path_factory.mktemp("cache"))
+    yield
+
+
+def shared_file(*parts: str) -> Path:
+    """Path of a file in ../shared/data, or skip the test with the reason."""
+    path = SHARED_DATA.joinpath(*parts)
+    if not path.exists():
+        pytest.skip(f"third-party test data not available: {path} (needs ../shared beside the repo)")
+    return path
+
+
+@pytest.fixture
+def shared():
+    """``shared('ema', 'mview', 'F01...mat')`` -> Path, skipping when absent."""
+    return shared_file

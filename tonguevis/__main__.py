@@ -1,0 +1,5 @@
+import sys
+
+from tonguevis.cli import main
+
+sys.exit(main())

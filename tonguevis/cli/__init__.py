@@ -1,0 +1,85 @@
+"""The ``tonguevis`` command.
+
+Each subcommand lives in its own module ``tonguevis.cli.<name>`` defining
+``add_arguments(parser)`` and ``run(args) -> int``; modules are imported only
+when their command runs so that ``tonguevis info`` starts fast.  Errors the
+user can cause (:class:`tonguevis.errors.TonguevisError`, ``OSError``) are
+printed as one line on stderr with exit status 2, never as a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+# (command, module, one-line help).  Order is the order of ``tonguevis --help``.
+COMMANDS: list[tuple[str, str, str]] = [
+    ("view", "view", "open the desktop app on a recording (default: the demo)"),
+    ("info", "info", "describe a recording: format, rate, sensors, audio, labels"),
+    ("syllables", "syllables", "find the CV productions of a recording"),
+    ("convert", "convert", "convert a recording to another format (BVH, CSV, NDI Wave TSV)"),
+    ("simulate", "simulate", "drive the tongue model with a recording"),
+    ("export-video", "export_video", "render a recording's simulation to MP4 with its audio"),
+    ("energy", "energy", "energy-time curves of the productions of recordings"),
+    ("morph", "morph", "morph one simulated shape into another"),
+    ("segment", "segment", "deformation segmentation with rigid or constraint modes"),
+    ("validate", "validate", "leave-one-sensor-out validation of the model"),
+]
+
+
+def _module(name: str):
+    return importlib.import_module(f"tonguevis.cli.{name}")
+
+
+def build_parser(available_only: bool = True) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="tonguevis",
+        description="Physics-based deformable tongue visualisation from EMA recordings.",
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="log what happens")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for command, module_name, help_text in COMMANDS:
+        try:
+            module = _module(module_name)
+        except ModuleNotFoundError as exc:
+            if available_only and exc.name == f"tonguevis.cli.{module_name}":
+                continue
+            raise
+        p = sub.add_parser(command, help=help_text, description=help_text)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    from tonguevis.errors import Cancelled, TonguevisError
+
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser()
+    if not argv:
+        argv = ["view"]
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING,
+        format="tonguevis: %(levelname)s: %(message)s",
+    )
+    if getattr(args, "_run", None) is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(args._run(args) or 0)
+    except (TonguevisError, OSError) as exc:
+        print(f"tonguevis {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except Cancelled:
+        print(f"tonguevis {args.command}: cancelled", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:
+        print(f"tonguevis {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
