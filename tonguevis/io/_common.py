@@ -1,0 +1,191 @@
+"""Helpers shared by the readers and writers: units, axes, time gaps, text tables, safe writes."""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from tonguevis.errors import RecordingError
+
+log = logging.getLogger("tonguevis")
+
+#: metres per unit, for the units EMA files use.
+UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+
+def unit_scale(unit: str, path: str | os.PathLike | None = None) -> float:
+    """Metres per ``unit`` ('m', 'cm' or 'mm'); RecordingError for anything else."""
+    try:
+        return UNIT_SCALE[str(unit).strip().lower()]
+    except KeyError:
+        raise RecordingError(
+            f"unknown length unit {unit!r}; expected one of {sorted(UNIT_SCALE)}", path
+        ) from None
+
+
+def parse_axes(axes, path: str | os.PathLike | None = None) -> np.ndarray:
+    """The 3 x 3 matrix A with ``ours = A @ device`` from an axis specification.
+
+    ``axes`` is ``None`` (identity), a 3 x 3 signed permutation / orthogonal
+    matrix, or a string of three signed device axes naming what becomes our
+    x (anterior), y (left) and z (up), e.g. ``"-y,x,z"`` (our x is the
+    device's -y, our y the device's x, our z the device's z).
+    """
+    if axes is None:
+        return np.eye(3)
+    if isinstance(axes, str):
+        parts = [p.strip().lower() for p in axes.replace(" ", "").split(",")]
+        if len(parts) == 1 and len(parts[0]) in (3, 4, 5, 6):
+            # compact "xyz" / "-yxz": split before every letter
+            compact, parts, cur = parts[0], [], ""
+            for ch in compact:
+                cur += ch
+                if ch in "xyz":
+                    parts.append(cur)
+                    cur = ""
+        matrix = np.zeros((3, 3))
+        if len(parts) != 3:
+            raise RecordingError(f"axes {axes!r}: expected three signed axes like '-y,x,z'", path)
+        for row, part in enumerate(parts):
+            sign = -1.0 if part.startswith("-") else 1.0
+            letter = part.lstrip("+-")
+            if letter not in ("x", "y", "z"):
+                raise RecordingError(f"axes {axes!r}: {part!r} is not a signed axis x, y or z", path)
+            matrix[row, "xyz".index(letter)] = sign
+    else:
+        matrix = np.asarray(axes, dtype=float)
+    if matrix.shape != (3, 3) or not np.allclose(matrix @ matrix.T, np.eye(3), atol=1e-9):
+        raise RecordingError(f"axes {axes!r}: not an orthogonal 3 x 3 axis mapping", path)
+    return matrix
+
+
+def rotate_quaternions(quats: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """(N, 4) quaternions (w, x, y, z) re-expressed after the axis change ``axes``.
+
+    The rotation R becomes A R Aᵀ; its axis maps to det(A)·A·axis, so the vector
+    part maps the same way and w is unchanged (true for reflections as well).
+    """
+    out = quats.copy()
+    out[:, 1:] = np.linalg.det(axes) * quats[:, 1:] @ axes.T
+    return out
+
+
+def estimate_rate(times: np.ndarray, default: float | None = None) -> float:
+    """Sample rate in Hz from (N,) times: 1 / median step (robust to dropped frames)."""
+    steps = np.diff(times)
+    steps = steps[np.isfinite(steps) & (steps > 0)]
+    if steps.size == 0:
+        if default is None:
+            raise ValueError("cannot estimate a rate from fewer than two distinct times")
+        return float(default)
+    # Rounded to 1e-6 Hz so that a clock of 0.01 s steps reads as 100 Hz, not 99.99999999999991.
+    return float(np.round(1.0 / np.median(steps), 6))
+
+
+def dropped_frames(times: np.ndarray, rate: float) -> list[tuple[float, int]]:
+    """Time gaps longer than 1.5 sample periods: [(time of the last sample before, n_missing)]."""
+    if len(times) < 2:
+        return []
+    steps = np.diff(times) * rate
+    gaps = np.flatnonzero(steps > 1.5)
+    return [(float(times[i]), int(round(steps[i])) - 1) for i in gaps]
+
+
+def check_times(times: np.ndarray, path, what: str = "time column", first_line: int | None = None) -> None:
+    """RecordingError unless (N,) times are finite and strictly increasing."""
+    bad = ~np.isfinite(times)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        where = f"line {first_line + i}" if first_line is not None else f"sample {i}"
+        raise RecordingError(f"{what} is not a number at {where}", path)
+    back = np.flatnonzero(np.diff(times) <= 0)
+    if back.size:
+        i = int(back[0]) + 1
+        where = f"line {first_line + i}" if first_line is not None else f"sample {i}"
+        raise RecordingError(
+            f"{what} does not increase at {where} ({times[i - 1]!r} then {times[i]!r})", path
+        )
+
+
+def read_bytes(path: Path) -> bytes:
+    try:
+        return path.read_bytes()
+    except IsADirectoryError:
+        raise RecordingError("is a folder, not a recording file", path) from None
+
+
+def decode_text(data: bytes, path) -> str:
+    """Text of a file that should be ASCII/UTF-8 (Latin-1 accepted for header comments)."""
+    if b"\x00" in data:
+        raise RecordingError("expected a text file but found binary bytes (NUL)", path)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")
+
+
+def split_lines(text: str) -> tuple[list[str], bool]:
+    """Lines of ``text`` (any newline convention) and whether the last one was ended."""
+    ended = text.endswith(("\n", "\r"))
+    lines = text.splitlines()
+    return lines, ended
+
+
+def parse_number_table(
+    rows: Sequence[Sequence[str]], path, first_line: int, what: str = "value"
+) -> np.ndarray:
+    """(R, C) float64 from equally long rows of number strings; empty strings become NaN.
+
+    ``first_line`` is the 1-based line number of ``rows[0]`` for error messages.
+    """
+    if not rows:
+        return np.zeros((0, 0))
+    cells = np.array(rows, dtype=object)
+    cells = np.char.strip(cells.astype(str))
+    cells[cells == ""] = "nan"
+    try:
+        return cells.astype(np.float64)
+    except ValueError:
+        pass
+    # Find the first offending cell to name it (slow path, only on bad input).
+    for r, row in enumerate(cells):
+        for c, cell in enumerate(row):
+            try:
+                float(cell)
+            except ValueError:
+                raise RecordingError(
+                    f"line {first_line + r}, column {c + 1}: {what} {cell[:40]!r} is not a number", path
+                ) from None
+    raise RecordingError("could not parse the numbers", path)  # pragma: no cover
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[Path], None]) -> None:
+    """Call ``write(tmp_path)`` then move the finished file onto ``path`` (never a half file)."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
+    os.close(fd)
+    try:
+        write(Path(tmp))
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def sensor_names_in_order(sensors: dict) -> list[str]:
+    return list(sensors)
+
+
+def stack_positions(rec, names: Sequence[str]) -> np.ndarray:
+    """(N, S, 3) positions in metres of the named sensors."""
+    if not names:
+        return np.zeros((rec.n_samples, 0, 3))
+    return np.stack([np.asarray(rec.sensors[n], dtype=float) for n in names], axis=1)

@@ -1,0 +1,142 @@
+"""Sensor maps: which channel of a file is the tongue tip, the jaw, a head reference ...
+
+A sensor map is data: a dict from our canonical names to the channel as the
+file names it.  Canonical names: tongue ``TT`` tip, ``TB`` blade, ``TD``
+dorsum, ``TBK`` back/rear, ``TL`` left lateral, ``TR`` right lateral; ``JAW``;
+head references ``REF1``, ``REF2``, ...  Channel values: an NDI Wave Id (``3``),
+a Carstens channel number counted from 1, an EST_Track coil prefix or number,
+an MVIEW ``NAME``, a BVH ROOT name, or simply the default sensor name the reader
+gives (``"S3"``, ``"CH5"``).  Presets ship in ``tonguevis/presets/*.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Callable
+
+from tonguevis.errors import RecordingError
+from tonguevis.io.recording import Recording
+
+PRESET_DIR = Path(__file__).resolve().parents[1] / "presets"
+
+CANONICAL_NAMES = ("TT", "TB", "TD", "TBK", "TL", "TR", "JAW")
+
+
+class SensorMap(dict):
+    """A sensor map (canonical name -> file channel) whose ``optional`` names may be absent.
+
+    Presets mark the sensors a layout may or may not have (extra head
+    references) as optional; every other entry must exist in the file.
+    """
+
+    def __init__(self, mapping=(), optional=()):
+        super().__init__(mapping)
+        self.optional = frozenset(optional)
+
+
+def preset_names() -> list[str]:
+    return sorted(p.stem for p in PRESET_DIR.glob("*.json"))
+
+
+def load_sensor_map(spec: dict | str | os.PathLike) -> SensorMap:
+    """A sensor map from a dict, a JSON file path or a preset name ('paper', 'haskins', 'mngu0').
+
+    A JSON file holds either the map itself or ``{"sensors": {...},
+    "optional": [names that may be absent], ...}`` (the presets' layout, whose
+    other keys are documentation).
+    """
+    optional: list = []
+    if isinstance(spec, dict):
+        mapping = spec
+        optional = list(getattr(spec, "optional", ()))
+        source = "sensor map"
+    else:
+        text_spec = os.fspath(spec)
+        path = Path(text_spec)
+        if not path.exists() and (PRESET_DIR / f"{text_spec}.json").exists():
+            path = PRESET_DIR / f"{text_spec}.json"
+        if not path.exists():
+            raise RecordingError(
+                f"sensor map {text_spec!r} is neither a JSON file nor a preset "
+                f"(presets: {', '.join(preset_names())})"
+            )
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeError, json.JSONDecodeError) as exc:
+            raise RecordingError(f"sensor map is not valid JSON: {exc}", path) from None
+        mapping = data.get("sensors", data) if isinstance(data, dict) else data
+        if isinstance(data, dict) and "sensors" in data:
+            optional = data.get("optional", [])
+            if not isinstance(optional, list):
+                raise RecordingError("'optional' must be a list of sensor names", path)
+        source = str(path)
+    if not isinstance(mapping, dict):
+        raise RecordingError(f"{source}: a sensor map must be an object name -> channel")
+    out = SensorMap(optional=[o for o in optional if isinstance(o, str)])
+    for name, channel in mapping.items():
+        if not isinstance(name, str) or not name:
+            raise RecordingError(f"{source}: sensor name {name!r} is not a non-empty string")
+        if isinstance(channel, bool) or not isinstance(channel, (str, int)):
+            raise RecordingError(f"{source}: channel of {name} must be a name or a number, not {channel!r}")
+        out[name] = channel
+    channels = [str(c) for c in out.values()]
+    repeated = sorted({c for c in channels if channels.count(c) > 1})
+    if repeated:
+        raise RecordingError(f"{source}: channel(s) {', '.join(repeated)} mapped to more than one name")
+    return out
+
+
+def resolve_channel(value: Any, names: list[str], channel_name: Callable[[Any], str]) -> str | None:
+    """The default sensor name of a sensor-map ``value`` among ``names``, or None."""
+    if isinstance(value, str) and value in names:
+        return value
+    try:
+        candidate = channel_name(value)
+    except (ValueError, TypeError):
+        candidate = None
+    if candidate in names:
+        return candidate
+    if str(value) in names:
+        return str(value)
+    return None
+
+
+def apply_sensor_map(
+    rec: Recording, mapping: dict[str, Any], channel_name: Callable[[Any], str], path=None
+) -> Recording:
+    """``rec`` with its channels renamed by ``mapping`` (canonical name -> file channel).
+
+    Raises RecordingError naming a channel the file lacks, or a canonical name
+    that would collide with an unmapped channel of the same name.
+    """
+    names = rec.sensor_names
+    rename: dict[str, str] = {}
+    for canonical, value in mapping.items():
+        found = resolve_channel(value, names, channel_name)
+        if found is None and canonical in getattr(mapping, "optional", ()):
+            continue
+        if found is None:
+            raise RecordingError(
+                f"sensor map names channel {value!r} for {canonical}, but the file has no such "
+                f"channel (it has {', '.join(names) or 'none'})",
+                path,
+            )
+        rename[found] = canonical
+    targets = set(rename.values())
+    clashes = [n for n in names if n in targets and n not in rename]
+    if clashes:
+        raise RecordingError(
+            f"sensor map gives the name(s) {', '.join(clashes)} to other channels, but unmapped "
+            "channels already carry them; map them too",
+            path,
+        )
+    return rec.renamed(rename)
+
+
+def inverse_channel(name: str, mapping: dict[str, Any] | None) -> Any:
+    """The file channel a writer should use for sensor ``name`` under ``mapping`` (or None)."""
+    if mapping and name in mapping:
+        return mapping[name]
+    return None
