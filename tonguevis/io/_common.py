@@ -75,13 +75,13 @@ def rotate_quaternions(quats: np.ndarray, axes: np.ndarray) -> np.ndarray:
     return out
 
 
-def estimate_rate(times: np.ndarray, default: float | None = None) -> float:
+def estimate_rate(times: np.ndarray, default: float | None = None, path=None) -> float:
     """Sample rate in Hz from (N,) times: 1 / median step (robust to dropped frames)."""
     steps = np.diff(times)
     steps = steps[np.isfinite(steps) & (steps > 0)]
     if steps.size == 0:
         if default is None:
-            raise ValueError("cannot estimate a rate from fewer than two distinct times")
+            raise RecordingError("cannot tell the sample rate from fewer than two frames", path)
         return float(default)
     # Rounded to 1e-6 Hz so that a clock of 0.01 s steps reads as 100 Hz, not 99.99999999999991.
     return float(np.round(1.0 / np.median(steps), 6))
@@ -189,3 +189,42 @@ def stack_positions(rec, names: Sequence[str]) -> np.ndarray:
     if not names:
         return np.zeros((rec.n_samples, 0, 3))
     return np.stack([np.asarray(rec.sensors[n], dtype=float) for n in names], axis=1)
+
+
+def regrid_dropped_frames(rec):
+    """``rec`` on a uniform time grid: frames lost in time gaps re-inserted as NaN samples.
+
+    Frame k of the result is at ``times[0] + k / rate``; samples keep their
+    values and move by at most half a period (clock jitter).  Returns ``rec``
+    itself when nothing was dropped.
+    """
+    from dataclasses import replace
+
+    n_in = rec.n_samples
+    if n_in < 2:
+        return rec
+    idx = np.round((rec.times - rec.times[0]) * rec.rate).astype(np.int64)
+    if np.array_equal(idx, np.arange(n_in)):
+        return rec
+    if np.any(np.diff(idx) < 1):
+        raise RecordingError(
+            "sample times are closer than one period at the stated rate; cannot place them on a uniform grid",
+            rec.metadata.get("file"),
+        )
+    n = int(idx[-1]) + 1
+
+    def fill(a):
+        a = np.asarray(a, dtype=float)
+        out = np.full((n,) + a.shape[1:], np.nan)
+        out[idx] = a
+        return out
+
+    metadata = dict(rec.metadata)
+    metadata["regridded_from_samples"] = n_in
+    return replace(
+        rec,
+        times=rec.times[0] + np.arange(n) / rec.rate,
+        sensors={k: fill(v) for k, v in rec.sensors.items()},
+        orientations={k: fill(v) for k, v in rec.orientations.items()},
+        metadata=metadata,
+    )
