@@ -68,7 +68,12 @@ def _v5_labels(value, text_field: str, time_field: str) -> list[tuple[str, np.nd
 def _load_v5(path: Path, variable: str | None) -> list[dict[str, Any]]:
     import scipy.io
 
-    mat = scipy.io.loadmat(str(path), squeeze_me=False, struct_as_record=True)
+    try:
+        mat = scipy.io.loadmat(str(path), squeeze_me=False, struct_as_record=True)
+    except MemoryError:
+        raise
+    except Exception as exc:  # scipy raises many types (MatReadError, zlib.error, ValueError ...)
+        raise RecordingError(f"not a readable MAT v5 file ({type(exc).__name__}: {exc})", path) from None
     candidates = {k: v for k, v in mat.items() if not k.startswith("__")
                   and isinstance(v, np.ndarray) and v.dtype.names
                   and all(f in v.dtype.names for f in REQUIRED_FIELDS)}
@@ -134,7 +139,7 @@ def _h5_struct(group, f) -> list[dict[str, Any]]:
 
     fields = list(group.keys())
     ref_fields = [k for k in fields if isinstance(group[k], h5py.Dataset) and group[k].dtype == h5py.ref_dtype
-                  and not group[k].attrs.get("MATLAB_class")]
+                  and _h5_class(group[k]) != "cell"]
     if ref_fields and len(ref_fields) == len(fields):  # a struct array: one reference per element
         n = group[fields[0]].size
         values = {k: _h5_value(group[k], f) for k in fields}
@@ -156,15 +161,27 @@ def _load_v73(path: Path, variable: str | None) -> list[dict[str, Any]]:
         f = h5py.File(str(path), "r")
     except OSError as exc:
         raise RecordingError(f"MAT v7.3 file is not readable HDF5: {exc}", path) from None
-    with f:
-        groups = {k: f[k] for k in f.keys() if not k.startswith("#") and isinstance(f[k], h5py.Group)
-                  and all(fld in f[k] for fld in REQUIRED_FIELDS)}
-        group = _pick(groups, variable, path, [k for k in f.keys() if not k.startswith("#")])
-        elements = _h5_struct(group, f)
+    try:
+        with f:
+            return _channels_v73(f, path, variable)
+    except (RecordingError, MemoryError):
+        raise
+    except Exception as exc:  # h5py raises KeyError/OSError/RuntimeError on damaged files
+        raise RecordingError(f"malformed MAT v7.3 file ({type(exc).__name__}: {exc})", path) from None
+
+
+def _channels_v73(f, path, variable) -> list[dict[str, Any]]:
+    import h5py
+
+    groups = {k: f[k] for k in f.keys() if not k.startswith("#") and isinstance(f[k], h5py.Group)
+              and all(fld in f[k] for fld in REQUIRED_FIELDS)}
+    group = _pick(groups, variable, path, [k for k in f.keys() if not k.startswith("#")])
     channels = []
-    for item in elements:
-        ch = {"name": str(item["NAME"]), "srate": np.asarray(item["SRATE"], dtype=float).ravel(),
-              "signal": np.asarray(item["SIGNAL"]), "sentence": item.get("SENTENCE", "")}
+    for item in _h5_struct(group, f):
+        if not isinstance(item["NAME"], str) or not isinstance(item["SIGNAL"], np.ndarray):
+            raise RecordingError("MVIEW NAME is not text or SIGNAL not a matrix", path)
+        ch = {"name": item["NAME"], "srate": np.asarray(item["SRATE"], dtype=float).ravel(),
+              "signal": item["SIGNAL"], "sentence": item.get("SENTENCE", "")}
         if not isinstance(ch["sentence"], str):
             ch["sentence"] = ""
         for tier in ("WORDS", "PHONES"):
