@@ -124,7 +124,8 @@ def read_carstens(path, channels: int | None = None, rate: float | None = None, 
         raise RecordingError(f"no complete frame ({len(body)} data bytes, a frame has {frame_bytes})", path)
     if partial:
         log.warning("%s: dropped a partial last frame of %d bytes (file truncated?)", path, partial)
-    values = np.frombuffer(body[: n_frames * frame_bytes], dtype="<f4").astype(np.float64)
+    with np.errstate(invalid="ignore"):  # signalling-NaN payloads in damaged files
+        values = np.frombuffer(body[: n_frames * frame_bytes], dtype="<f4").astype(np.float64)
     values = values.reshape(n_frames, n_channels, VALUES_PER_CHANNEL)
     A = parse_axes(axes, path)
     xyz = values[:, :, :3] * 0.001

@@ -145,7 +145,8 @@ def read_est_track(path, unit: str = "mm", axes=None) -> Recording:
         got, partial = divmod(len(body), 4 * width)
         if partial:
             log.warning("%s: dropped a partial last frame of %d bytes (file truncated?)", path, partial)
-        table = np.frombuffer(body[: got * 4 * width], dtype=dtype).astype(np.float64).reshape(got, width)
+        with np.errstate(invalid="ignore"):  # signalling-NaN payloads in damaged files
+            table = np.frombuffer(body[: got * 4 * width], dtype=dtype).astype(np.float64).reshape(got, width)
     elif kind == "ascii":
         table = _ascii_frames(data, offset, width + n_aux, n_frames, path)[:, :width]
     else:
