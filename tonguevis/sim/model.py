@@ -1,0 +1,200 @@
+"""The tongue model: mesh, landmarks, material, and its (cached) modal basis."""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from tonguevis._progress import ProgressCallback
+from tonguevis.errors import ModelError
+from tonguevis.mesh.tetmesh import TetMesh, signed_tet_volumes
+from tonguevis.sim.assembly import assemble_mass, assemble_stiffness
+from tonguevis.sim.curl import nodal_curl_operator
+from tonguevis.sim.material import Material
+from tonguevis.sim.modal import ModalBasis, basis_key, free_dofs_for, load_basis, save_basis, solve_modes
+from tonguevis.sim.rotation import rotate_accumulated
+
+logger = logging.getLogger("tonguevis")
+
+CHUNK_FRAMES = 256  # frames reconstructed per batch: bounds memory at ~30 MB for 1,800 nodes
+
+
+class TongueModel:
+    """A tetrahedral tongue with anchors, sensor landmarks and material.
+
+    mesh : :class:`TetMesh` (points in metres).
+    landmarks : object with ``sensors`` (dict name -> node id) and
+        ``anchors`` ((a,) node ids fixed to the hyoid and jaw).
+    material : :class:`Material`.
+    """
+
+    def __init__(self, mesh: TetMesh, landmarks: Any, material: Material | None = None):
+        self.mesh = mesh
+        self.landmarks = landmarks
+        self.material = material or Material()
+        anchors = np.unique(np.asarray(landmarks.anchors, dtype=np.int64))
+        if len(anchors) < 3:
+            raise ModelError(f"a tongue model needs at least 3 anchor nodes, got {len(anchors)}")
+        if anchors.min() < 0 or anchors.max() >= mesh.n_nodes:
+            raise ModelError(f"anchor node ids {anchors.tolist()} outside the mesh's {mesh.n_nodes} nodes")
+        for name, node in landmarks.sensors.items():
+            if not 0 <= int(node) < mesh.n_nodes:
+                raise ModelError(f"sensor {name} is mapped to node {node}, which is not in the mesh")
+        self.anchors = anchors
+        self._bases: dict[int, ModalBasis] = {}
+        self._rotation_matrices: dict[str, np.ndarray] = {}
+
+    # ------------------------------------------------------------------ builders
+    @classmethod
+    def default(cls, material: Material | None = None) -> "TongueModel":
+        """Our parametric adult tongue shipped in ``meshes/``."""
+        from tonguevis.mesh import load_default_landmarks, load_default_mesh
+
+        return cls(load_default_mesh(), load_default_landmarks(), material)
+
+    @classmethod
+    def from_mesh(
+        cls,
+        mesh: TetMesh | str | os.PathLike,
+        landmarks: Any = None,
+        material: Material | None = None,
+        **read_options: Any,
+    ) -> "TongueModel":
+        """A model of any tet mesh; landmarks found from the geometry unless given.
+
+        ``landmarks`` may be a Landmarks object, a JSON path, or a dict of
+        overrides (``{"TT": 12, "anchors": [...]}``) on top of the automatic ones.
+        """
+        from tonguevis.mesh import find_landmarks, read_landmarks, read_mesh
+
+        if not isinstance(mesh, TetMesh):
+            mesh = read_mesh(mesh, **read_options)
+        if landmarks is None or isinstance(landmarks, dict):
+            landmarks = find_landmarks(mesh, overrides=landmarks)
+        elif isinstance(landmarks, (str, os.PathLike)):
+            landmarks = read_landmarks(landmarks)
+        return cls(mesh, landmarks, material)
+
+    # ------------------------------------------------------------------ FEM
+    @cached_property
+    def stiffness(self) -> sp.csr_matrix:
+        """K (3n, 3n) in N/m."""
+        return assemble_stiffness(self.mesh.points, self.mesh.tets, self.material.young, self.material.poisson)
+
+    @cached_property
+    def mass(self) -> sp.csr_matrix:
+        """Consistent M (3n, 3n) in kg."""
+        return assemble_mass(self.mesh.points, self.mesh.tets, self.material.density)
+
+    @cached_property
+    def curl_operator(self) -> sp.csr_matrix:
+        """C (3n, 3n): nodal rotation vectors w = C u."""
+        return nodal_curl_operator(self.mesh.points, self.mesh.tets)
+
+    @cached_property
+    def rest_volume(self) -> float:
+        """m³."""
+        return float(signed_tet_volumes(self.mesh.points, self.mesh.tets).sum())
+
+    @cached_property
+    def surface_faces(self) -> np.ndarray:
+        """(f, 3) outward boundary triangles."""
+        return self.mesh.boundary_faces()
+
+    # ------------------------------------------------------------------ modes
+    def basis_key(self, m: int) -> str:
+        return basis_key(self.mesh.points, self.mesh.tets, self.material, self.anchors, m)
+
+    def basis(self, m: int = 100, progress: ProgressCallback | None = None, cache: bool = True) -> ModalBasis:
+        """The ``m`` lowest modes: from memory, else the disk cache, else solved (and cached)."""
+        if m in self._bases:
+            return self._bases[m]
+        key = self.basis_key(m)
+        path = None
+        if cache:
+            from tonguevis.paths import cache_dir
+
+            path = cache_dir() / f"basis-{key}.npz"
+            t0 = time.perf_counter()
+            loaded = load_basis(path, key)
+            if loaded is not None:
+                loaded.info["load_s"] = time.perf_counter() - t0
+                self._bases[m] = loaded
+                return loaded
+        free = free_dofs_for(self.mesh.n_nodes, self.anchors)
+        phi_free, vals, info = solve_modes(self.stiffness, self.mass, free, m, progress=progress)
+        phi = np.zeros((3 * self.mesh.n_nodes, m))
+        phi[free] = phi_free
+        basis = ModalBasis(phi, vals, free, key, info)
+        if path is not None:
+            try:
+                save_basis(basis, path)
+            except OSError as exc:  # a read-only cache must not stop the simulation
+                logger.warning("could not cache the modal basis at %s: %s", path, exc)
+        self._bases[m] = basis
+        return basis
+
+    def rotation_matrix(self, basis: ModalBasis) -> np.ndarray:
+        """W = C Φ (3n, m): nodal rotation vectors per unit modal displacement."""
+        if basis.key not in self._rotation_matrices:
+            self._rotation_matrices[basis.key] = np.asarray(self.curl_operator @ basis.phi)
+        return self._rotation_matrices[basis.key]
+
+    # ------------------------------------------------------------------ reconstruction
+    def displacements(self, q: np.ndarray, warping: bool = True, use_warp: bool = True) -> np.ndarray:
+        """(F, n, 3) node displacements in m for modal displacements ``q`` (F, m).
+
+        Linear: Φq.  Warped: ũ_i = R̃((Wq)_i) (Φq)_i, the rotation in warp-lang
+        (``use_warp``) or NumPy.  Frames are processed in chunks to bound memory.
+        """
+        q = np.atleast_2d(np.asarray(q, dtype=np.float64))
+        basis = self.basis(q.shape[1])
+        n = self.mesh.n_nodes
+        out = np.empty((len(q), n, 3))
+        phi_t = basis.phi.T
+        w_t = self.rotation_matrix(basis).T if warping else None
+        for start in range(0, len(q), CHUNK_FRAMES):
+            chunk = q[start : start + CHUNK_FRAMES]
+            lin = (chunk @ phi_t).reshape(len(chunk), n, 3)
+            if warping:
+                w = (chunk @ w_t).reshape(len(chunk), n, 3)
+                if use_warp:
+                    from tonguevis.sim.warp_kernels import rotate_accumulated_warp
+
+                    lin = rotate_accumulated_warp(w, lin)
+                else:
+                    lin = rotate_accumulated(w, lin)
+            out[start : start + len(chunk)] = lin
+        return out
+
+    def displacement(self, q: np.ndarray, warping: bool = True) -> np.ndarray:
+        """(n, 3) displacement in m for one modal vector ``q`` (m,)."""
+        return self.displacements(np.asarray(q)[None, :], warping=warping)[0]
+
+    def volume_change(self, displacements: np.ndarray) -> np.ndarray:
+        """(F,) relative volume change (V - V_rest)/V_rest for (F, n, 3) displacements."""
+        d = np.asarray(displacements)
+        out = np.empty(len(d))
+        for start in range(0, len(d), CHUNK_FRAMES):
+            pts = self.mesh.points[None] + d[start : start + CHUNK_FRAMES]
+            out[start : start + len(pts)] = signed_tet_volumes(pts, self.mesh.tets).sum(axis=1)
+        return out / self.rest_volume - 1.0
+
+    def energy(self, q: np.ndarray) -> np.ndarray:
+        """(F,) elastic energy U = ½ qᵀΛq in J for q (F, m)."""
+        q = np.atleast_2d(q)
+        lam = self.basis(q.shape[1]).eigenvalues
+        return 0.5 * np.einsum("fm,m,fm->f", q, lam, q)
+
+    def __repr__(self) -> str:
+        return (
+            f"TongueModel({self.mesh.n_nodes} nodes, {self.mesh.n_tets} tets, "
+            f"{len(self.anchors)} anchors, sensors {sorted(self.landmarks.sensors)})"
+        )
