@@ -1,0 +1,116 @@
+"""``tonguevis info FILE``: what a recording holds (format, rate, sensors, audio, labels)."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from tonguevis.errors import TonguevisError
+
+
+def parse_options(pairs: list[str] | None) -> dict:
+    """``["channels=12", "axes=-y,x,z"]`` -> {"channels": 12, "axes": "-y,x,z"} (ints, floats, booleans)."""
+    options = {}
+    for pair in pairs or []:
+        key, sep, value = pair.partition("=")
+        if not sep or not key.strip():
+            raise TonguevisError(f"option {pair!r} is not KEY=VALUE")
+        text = value.strip()
+        parsed: object = text
+        if text.lower() in ("true", "false"):
+            parsed = text.lower() == "true"
+        else:
+            for convert in (int, float):
+                try:
+                    parsed = convert(text)
+                    break
+                except ValueError:
+                    pass
+        options[key.strip().replace("-", "_")] = parsed
+    return options
+
+
+def add_reading_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--sensors", metavar="MAP",
+                        help="sensor map: a preset (paper, haskins, mngu0) or a JSON file of name -> channel")
+    parser.add_argument("--format", metavar="NAME", help="read as this format instead of detecting it")
+    parser.add_argument("-O", "--option", action="append", metavar="KEY=VALUE",
+                        help="reader option, e.g. channels=12 (headerless AG500), axes=-y,x,z, unit=mm, "
+                             "audio=false; repeatable")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", help="an EMA recording (NDI Wave TSV, Carstens .pos, EST .ema, MVIEW .mat, BVH, CSV)")
+    add_reading_arguments(parser)
+
+
+def _gaps(dropped) -> str:
+    if not dropped:
+        return "none"
+    missing = sum(n for _, n in dropped)
+    shown = ", ".join(f"{n} after {t:.3f} s" for t, n in dropped[:5])
+    more = f", ... ({len(dropped) - 5} more gaps)" if len(dropped) > 5 else ""
+    return f"{missing} frame(s) missing in {len(dropped)} gap(s): {shown}{more}"
+
+
+def describe(rec) -> list[str]:
+    """The lines ``tonguevis info`` prints for a recording."""
+    from tonguevis.io.registry import FORMATS
+
+    meta = rec.metadata
+    fmt = meta.get("format", "?")
+    lines = [
+        f"file:           {meta.get('file', '?')}",
+        f"format:         {fmt}" + (f" ({FORMATS[fmt].description})" if fmt in FORMATS else ""),
+        f"sample rate:    {rec.rate:.3f} Hz",
+        f"samples:        {rec.n_samples} ({rec.duration:.3f} s"
+        + (f", {rec.times[0]:.3f} to {rec.times[-1]:.3f} s)" if rec.n_samples else ")"),
+        f"length unit:    {meta.get('original_unit', '?')} in the file (metres inside tonguevis)",
+        f"frame:          {meta.get('frame', '?')}",
+        f"dropped frames: {_gaps(meta.get('dropped_frames', []))}",
+        f"sensors ({len(rec.sensors)}):    name, valid samples, mean position x, y, z in mm",
+    ]
+    width = max((len(n) for n in rec.sensors), default=4)
+    for name, xyz in rec.sensors.items():
+        valid = rec.valid(name)
+        if valid.any():
+            mean = np.mean(xyz[valid], axis=0) * 1000.0
+            where = "  ".join(f"{v:8.1f}" for v in mean)
+        else:
+            where = "no valid sample"
+        extra = " +orientation" if name in rec.orientations else ""
+        lines.append(f"  {name:<{width}}  {100 * rec.valid_fraction(name):5.1f}%  {where}{extra}")
+    if rec.audio is None:
+        lines.append("audio:          none")
+    else:
+        source = meta.get("audio_file")
+        lines.append(f"audio:          {rec.audio.rate:.0f} Hz, {rec.audio.duration:.3f} s"
+                     + (f" ({source})" if source else ""))
+    if rec.labels:
+        tiers: dict[str, int] = {}
+        for label in rec.labels:
+            tiers[label.tier] = tiers.get(label.tier, 0) + 1
+        counts = ", ".join(f"{n} {tier}" for tier, n in tiers.items())
+        words = [lab.text for lab in rec.labels if lab.tier == rec.labels[0].tier]
+        text = " ".join(words[:12]) + (" ..." if len(words) > 12 else "")
+        lines.append(f"labels:         {counts}: {text}")
+    else:
+        lines.append("labels:         none")
+    if meta.get("sentence"):
+        lines.append(f"sentence:       {meta['sentence']}")
+    if meta.get("synthetic"):
+        lines.append("note:           synthetic data")
+    return lines
+
+
+def read_from_args(args, path):
+    from tonguevis.io import read_recording
+
+    return read_recording(path, sensor_map=args.sensors, format=args.format, **parse_options(args.option))
+
+
+def run(args) -> int:
+    rec = read_from_args(args, args.file)
+    print("\n".join(describe(rec)))
+    return 0
