@@ -90,7 +90,8 @@ def write_wav(audio: Audio, path: str | os.PathLike) -> None:
     if rate <= 0:
         raise RecordingError(f"cannot write audio at {audio.rate} Hz", path)
     samples = np.nan_to_num(np.asarray(audio.samples, dtype=np.float64).ravel())
-    ints = np.clip(np.round(samples * 32767.0), -32768, 32767).astype("<i2")
+    # Same full scale as the reader (32768) so a write-read round trip is exact to half a step.
+    ints = np.clip(np.round(samples * 32768.0), -32768, 32767).astype("<i2")
 
     def write(tmp: Path) -> None:
         with wave.open(str(tmp), "wb") as w:
