@@ -1,0 +1,58 @@
+"""Small hand-made recordings for the preprocessing tests."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tonguevis.io.recording import Audio, Recording
+
+
+def recording(sensors: dict, rate: float = 100.0, audio=None) -> Recording:
+    n = len(next(iter(sensors.values())))
+    return Recording(rate=rate, times=np.arange(n) / rate, sensors={k: np.asarray(v, float) for k, v in sensors.items()},
+                     audio=audio, metadata={"format": "test", "file": None, "original_unit": "m"})
+
+
+def random_rotations(rng, n: int) -> np.ndarray:
+    """(n, 3, 3) proper rotations from normalised random quaternions."""
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], axis=1)
+
+
+def syllable_train_recording(syllables=5, trains=3, rate=100.0, with_audio=True, seed=0,
+                             noise=5e-5, period=0.26):
+    """A tongue tip raised once per syllable (Gaussian bumps), trains separated by rest.
+
+    TT z = A * sum_k exp(-(t - r_k)^2 / (2 sigma^2)) with sigma = 50 ms: the
+    bumps barely overlap, so the maxima (releases) sit at r_k and the minima
+    (vowels) midway between.  Audio: a 150 Hz tone from 50 ms before the first
+    release to 150 ms after the last.  Returns (recording, true releases per
+    train, audio spans (start, end) per train).
+    """
+    rng = np.random.default_rng(seed)
+    amp, sigma = 0.008, 0.05
+    starts = [3.0 + k * (syllables * period + 1.5) for k in range(trains)]
+    releases = [[t0 + k * period for k in range(syllables)] for t0 in starts]
+    duration = releases[-1][-1] + 1.5
+    n = int(round(duration * rate))
+    t = np.arange(n) / rate
+    centres = np.concatenate(releases)
+    z = amp * np.exp(-((t[:, None] - centres[None, :]) ** 2) / (2 * sigma**2)).sum(axis=1)
+    tip = np.column_stack([np.zeros(n), np.zeros(n), z]) + rng.normal(0, noise, (n, 3))
+    spans = [(r[0] - 0.05, r[-1] + 0.15) for r in releases]
+    audio = None
+    if with_audio:
+        arate = 8000.0
+        ta = np.arange(int(round(duration * arate))) / arate
+        samples = rng.normal(0, 1e-4, ta.size)
+        for a, b in spans:
+            m = (ta >= a) & (ta < b)
+            samples[m] += 0.3 * np.sin(2 * np.pi * 150 * ta[m])
+        audio = Audio(samples=samples, rate=arate)
+    return recording({"TT": tip}, rate=rate, audio=audio), releases, spans

@@ -1,0 +1,36 @@
+"""``tonguevis syllables`` prints the production table, writes CSV, fails in one line."""
+
+import csv
+
+from tonguevis.cli import main
+from tonguevis.paths import DATA_DIR
+
+
+def test_syllables_on_the_demo(capsys, tmp_path):
+    out_csv = tmp_path / "p.csv"
+    assert main(["syllables", str(DATA_DIR / "spk1_ta.tsv"), "--csv", str(out_csv)]) == 0
+    text = capsys.readouterr().out
+    assert "head motion removed with REF1, REF2, REF3" in text
+    assert "productions found per train: 5, 5, 5, 5, 5" in text
+    body = [line for line in text.splitlines() if line[:5].strip().isdigit()]
+    assert len(body) == 15 and all(line.split()[1] in {"2", "3", "4"} for line in body)
+    rows = list(csv.DictReader(out_csv.open()))
+    assert len(rows) == 15 and set(rows[0]) == {"train", "index", "start", "end", "release", "vowel"}
+
+
+def test_syllables_all_and_kinematic_fallback(capsys, tmp_path):
+    assert main(["syllables", str(DATA_DIR / "spk3_la.tsv"), "--all", "--sensors", "paper"]) == 0
+    text = capsys.readouterr().out
+    assert "(25)" in text and "audio envelope" in text
+
+
+def test_syllables_errors_in_one_line(capsys, tmp_path):
+    assert main(["syllables", str(tmp_path / "missing.tsv")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "missing.tsv" in err
+    # without a sensor map the NDI channels are S0..S7: no TT
+    lone = tmp_path / "x.tsv"
+    lone.write_bytes((DATA_DIR / "spk1_ta.tsv").read_bytes())
+    assert main(["syllables", str(lone)]) == 2
+    err = capsys.readouterr().err
+    assert "tongue-tip" in err and err.count("\n") == 1

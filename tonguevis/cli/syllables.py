@@ -1,0 +1,69 @@
+"""``tonguevis syllables FILE``: the CV productions of a recording (§3.2).
+
+Reads the recording (any supported format), removes head motion when three or
+more head references (REF1, REF2, ...) are present, finds the syllable trains
+(from the audio when there is some, else from the tongue-tip motion) and
+prints one row per production: train, position in the train, start and end
+(release to release), consonant release and vowel times in seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+log = logging.getLogger("tonguevis")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", type=Path, help="the recording (NDI Wave TSV, Carstens .pos, EST .ema, ...)")
+    parser.add_argument("--sensors", metavar="MAP",
+                        help="sensor map: a JSON file or a preset (paper, haskins, mngu0) naming which "
+                             "channel is TT, JAW, REF1...; default: sensor_map.json beside FILE if any")
+    parser.add_argument("--csv", metavar="OUT", type=Path, help="also write the table to this CSV file")
+    parser.add_argument("--tip", default="TT", help="the tongue-tip sensor (default: TT)")
+    parser.add_argument("--all", action="store_true",
+                        help="every production; default: the 2nd to 4th of each train, as the paper")
+    parser.add_argument("--no-head-correction", action="store_true",
+                        help="use the positions as recorded even when head references exist")
+
+
+def run(args: argparse.Namespace) -> int:
+    from tonguevis.errors import RecordingError
+    from tonguevis.io import read_recording
+    from tonguevis.preprocess import correct_head, find_productions, find_trains
+    from tonguevis.preprocess._names import reference_names
+
+    sensor_map = args.sensors
+    if sensor_map is None:
+        beside = args.file.parent / "sensor_map.json"
+        if beside.exists():
+            sensor_map = beside
+    rec = read_recording(args.file, sensor_map=sensor_map)
+    if args.tip not in rec.sensors:
+        raise RecordingError(
+            f"no tongue-tip sensor {args.tip!r} (sensors: {', '.join(rec.sensor_names)}); name the "
+            "channels with --sensors MAP or pick another with --tip", args.file)
+    lines = [f"file: {args.file}"]
+    if sensor_map is not None:
+        lines.append(f"sensor map: {sensor_map}")
+    references = reference_names(rec.sensor_names)
+    if len(references) >= 3 and not args.no_head_correction:
+        rec = correct_head(rec, references)
+        lines.append(f"head motion removed with {', '.join(references)}")
+    source = "audio envelope" if rec.audio is not None and len(rec.audio.samples) else "tongue-tip motion"
+    trains = find_trains(rec, tip=args.tip)
+    table = find_productions(rec, tip=args.tip, keep=None if args.all else (2, 3, 4), trains=trains)
+    lines.append(f"trains: {len(trains)} (from the {source}); productions found per train: "
+                 f"{', '.join(map(str, table.counts)) or 'none'}")
+    lines.append(f"productions shown: {'all' if args.all else '2nd-4th of each train'} ({len(table)}); "
+                 "times in seconds, release to release")
+    print("\n".join(lines))
+    print(table.to_text())
+    for note in table.notes:
+        print(f"note: {note}")
+    if args.csv is not None:
+        table.to_csv(args.csv)
+        print(f"wrote {args.csv}")
+    return 0
