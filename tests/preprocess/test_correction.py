@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from tests.preprocess._synthetic import random_rotations, recording
 from tonguevis.errors import RecordingError
-from tonguevis.preprocess import correct_head, correct_jaw
+from tonguevis.preprocess import correct_head, correct_jaw, fit_similarity
 from tonguevis.preprocess._rigid import fit_rotations
 
 REST = {"TT": [0.0, 0.0, 0.0], "TD": [-0.02, 0.0, 0.005], "TL": [-0.01, 0.006, 0.003],
@@ -114,3 +114,22 @@ def test_head_correction_needs_three_references():
     line["TT"] = np.zeros((200, 3))
     with pytest.raises(RecordingError, match="collinear"):
         correct_head(recording(line))
+
+
+def test_head_correction_without_rest_uses_the_median_pose():
+    """No still interval: the head frame is the references' median pose; the motion is still removed."""
+    n = 400
+    t = np.arange(n) / 100.0
+    tongue = np.column_stack([0.01 * np.sin(6 * t), 0 * t, 0.008 * np.cos(7 * t)])  # never still
+    head = {"TT": tongue, **{r: np.tile(REST[r], (n, 1)) for r in ("REF1", "REF2", "REF3")}}
+    rotation = Rotation.from_rotvec(np.column_stack([0 * t, 0.05 * np.sin(2 * t), 0 * t]))
+    rec = recording(device_frame(head, rotation, np.zeros((n, 3))))
+    out = correct_head(rec)
+    assert out.metadata["head_corrected"]["rest_interval"] is None
+    # the result is the head-frame motion up to one fixed rigid transform G
+    for r in ("REF1", "REF2", "REF3"):
+        np.testing.assert_allclose(np.ptp(out.sensors[r], axis=0), 0, atol=1e-12)
+    refs = ("REF1", "REF2", "REF3")
+    g = fit_similarity(np.array([REST[r] for r in refs]), np.array([out.sensors[r][0] for r in refs]))
+    assert g.scale == pytest.approx(1.0)
+    np.testing.assert_allclose(out.sensors["TT"], g.apply(tongue), atol=1e-12)

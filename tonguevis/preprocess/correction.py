@@ -9,6 +9,8 @@ reference sensors onto their rest pose is applied to every sensor.
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from tonguevis.errors import RecordingError
@@ -16,6 +18,8 @@ from tonguevis.io.recording import Recording
 from tonguevis.preprocess._names import JAW, is_reference, reference_names
 from tonguevis.preprocess._rigid import fit_rotations
 from tonguevis.preprocess.rest import find_rest_interval, rest_pose
+
+log = logging.getLogger("tonguevis")
 
 
 def correct_jaw(rec: Recording, jaw: str = JAW, rest_interval=None, sensors=None) -> Recording:
@@ -66,7 +70,8 @@ def correct_head(rec: Recording, references=None, rest_interval=None) -> Recordi
 
     references : names of >= 3 non-collinear head sensors (default: every
     REF* sensor).  Their rest pose (mean over ``rest_interval``, detected when
-    None) defines the head frame, so a still head leaves the data unchanged.
+    None; the median pose over the whole recording when no rest is found)
+    defines the head frame, so a still head leaves the data unchanged.
     Every sensor, the references included, is moved by the frame's rigid fit
     (vectorised Kabsch over all frames).  Quaternion orientations (N, 4;
     w, x, y, z) are rotated too; other orientation forms are dropped because
@@ -83,8 +88,15 @@ def correct_head(rec: Recording, references=None, rest_interval=None) -> Recordi
         raise RecordingError(f"head correction needs >= 3 reference sensors, got "
                              f"{len(references)} ({', '.join(references) or 'none'})", file)
     if rest_interval is None:
-        rest_interval = find_rest_interval(rec)
-    pose = rest_pose(rec, rest_interval, sensors=references)
+        try:
+            rest_interval = find_rest_interval(rec)
+        except RecordingError as exc:
+            rest_interval = None
+            log.info("head correction: %s; the head frame is the references' median pose instead", exc)
+    if rest_interval is None:
+        pose = _median_pose(rec, references)
+    else:
+        pose = rest_pose(rec, rest_interval, sensors=references)
     spread = np.stack([pose[n] for n in references])
     singular = np.linalg.svd(spread - spread.mean(axis=0), compute_uv=False)
     if singular[1] < 1e-3 * max(singular[0], 1e-12):
@@ -96,9 +108,19 @@ def correct_head(rec: Recording, references=None, rest_interval=None) -> Recordi
     for name, q in rec.orientations.items():
         if q.ndim == 2 and q.shape[1] == 4:
             orientations[name] = _rotate_quaternions(rotation, q)
-    metadata = dict(rec.metadata, head_corrected={"references": references,
-                                                  "rest_interval": list(rest_interval)})
+    metadata = dict(rec.metadata, head_corrected={
+        "references": references, "rest_interval": None if rest_interval is None else list(rest_interval)})
     return rec.with_sensors(sensors, orientations=orientations, metadata=metadata)
+
+
+def _median_pose(rec: Recording, references) -> dict[str, np.ndarray]:
+    pose = {}
+    for name in references:
+        valid = rec.sensors[name][rec.valid(name)]
+        if len(valid) == 0:
+            raise RecordingError(f"head reference {name} has no valid sample", rec.metadata.get("file"))
+        pose[name] = np.median(valid, axis=0)
+    return pose
 
 
 def _rotate_quaternions(rotation: np.ndarray, q: np.ndarray) -> np.ndarray:

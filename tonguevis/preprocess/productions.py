@@ -206,6 +206,6 @@ def find_productions(rec: Recording, tip: str = "TT", keep=(2, 3, 4), trains=Non
                 vowel = float(times[between[np.nanargmin(height[between])]]) if between.size else np.nan
             if keep_all or index in keep:
                 table.productions.append(Production(number, index, release, stop, release, vowel))
-    for note in table.notes:
-        log.warning("%s: %s", file or "recording", note)
+    for note in table.notes:  # the table carries them; callers decide how loudly to report
+        log.info("%s: %s", file or "recording", note)
     return table
