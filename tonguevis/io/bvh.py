@@ -31,7 +31,9 @@ from pathlib import Path
 import numpy as np
 
 from tonguevis.errors import RecordingError
-from tonguevis.io._common import atomic_write, decode_text, parse_axes, read_bytes, regrid_dropped_frames, unit_scale
+from tonguevis.io._common import (
+    atomic_write, decode_text, format_rows, parse_axes, read_bytes, regrid_dropped_frames, unit_scale,
+)
 from tonguevis.io.recording import Recording
 from tonguevis.io.registry import RecordingFormat, register_format
 
@@ -265,10 +267,8 @@ def write_bvh(rec: Recording, path, unit: str = "mm") -> None:
             "\tEnd Site", "\t{", "\t\tOFFSET\t0.000000\t-1.000000\t0.000000", "\t}", "}",
         ]
     table = np.column_stack(columns) if columns else np.zeros((n, 0))
-    cells = np.char.mod("%.6f", table)
-    cells[np.isnan(table)] = "nan"
     lines += ["MOTION", f"Frames:\t{n}", f"Frame Time:\t{1.0 / rec.rate:.9f}"]
-    lines += ["\t".join(row) for row in cells.tolist()]
+    lines += format_rows(table, "\t", nan="nan")
     text = "\n".join(lines) + "\n"
     atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 

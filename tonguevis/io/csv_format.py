@@ -37,7 +37,7 @@ import numpy as np
 
 from tonguevis.errors import RecordingError
 from tonguevis.io._common import (
-    atomic_write, check_times, decode_text, dropped_frames, estimate_rate, parse_number_table,
+    atomic_write, check_times, decode_text, format_rows, dropped_frames, estimate_rate, parse_number_table,
     read_bytes, unit_scale,
 )
 from tonguevis.io.recording import Recording
@@ -229,11 +229,12 @@ def write_csv(rec: Recording, path, unit: str = "mm", layout: str = "wide") -> N
         stacked = np.stack([np.asarray(rec.sensors[k], float) / scale for k in names], axis=1) if s else np.zeros((n, 0, 3))
         table = np.column_stack([np.repeat(times, s), stacked.reshape(n * s, 3)])
         name_col = np.tile(np.array(names, dtype=object), n)
-    cells = np.char.mod("%.6f", table).astype(object)
-    cells[np.isnan(table)] = ""
-    if name_col is not None:
-        cells = np.column_stack([cells[:, :1], name_col, cells[:, 1:]])
-    buf.write("".join(",".join(row) + "\n" for row in cells.tolist()))
+    if name_col is None:
+        rows = format_rows(table, ",")
+    else:
+        rows = [f"{t},{name},{xyz}" for t, name, xyz in
+                zip(format_rows(table[:, :1], ","), name_col, format_rows(table[:, 1:], ","))]
+    buf.write("".join(row + "\n" for row in rows))
     text = buf.getvalue()
     atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from tonguevis.errors import RecordingError
 from tonguevis.io._common import (
-    atomic_write, check_times, decode_text, dropped_frames, estimate_rate, parse_axes,
+    atomic_write, check_times, format_rows, decode_text, dropped_frames, estimate_rate, parse_axes,
     parse_number_table, read_bytes, rotate_quaternions, split_lines, unit_scale,
 )
 from tonguevis.io.recording import Audio, Recording
@@ -266,9 +266,7 @@ def write_ndi_wave(rec: Recording, path, sensor_map=None, audio: bool = True) ->
         block[~ok, 2:] = np.nan
         columns += list(block.T)
     table = np.column_stack(columns) if n else np.zeros((0, len(header)))
-    cells = np.char.mod("%.6f", table)
-    cells[np.isnan(table)] = ""
-    lines = ["\t".join(header)] + ["\t".join(row) for row in cells.tolist()]
+    lines = ["\t".join(header)] + format_rows(table, "\t")
     text = "\n".join(lines) + "\n"
     atomic_write(path, lambda tmp: tmp.write_text(text, encoding="ascii"))
     if audio and rec.audio is not None:
