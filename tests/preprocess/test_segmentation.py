@@ -97,3 +97,22 @@ def test_missing_tip_raises():
     rec = recording({"TD": np.zeros((100, 3))})
     with pytest.raises(RecordingError, match="tongue-tip"):
         find_productions(rec)
+
+
+def test_short_gaps_in_the_tip_do_not_lose_productions():
+    rec, releases, _ = syllable_train_recording(trains=2)
+    rec.sensors["TT"][[int(releases[0][2] * 100) + 8, int(releases[1][1] * 100) + 5]] = np.nan
+    rec.sensors["TT"][int(releases[1][3] * 100) + 6: int(releases[1][3] * 100) + 9] = np.nan
+    table = find_productions(rec, keep=None)
+    assert table.counts == [5, 5]
+    np.testing.assert_allclose([p.start for p in table], np.concatenate(releases), atol=0.015)
+
+
+def test_noise_only_gives_no_productions_and_no_crash():
+    rng = np.random.default_rng(0)
+    rec = recording({"TT": rng.normal(0, 1e-4, (500, 3))})
+    table = find_productions(rec, keep=None, trains=[(1.0, 2.0)])
+    assert table.counts == [0] and len(table) == 0  # 0.1 mm noise has no 1 mm falls
+    nan_rec = recording({"TT": np.full((300, 3), np.nan)})
+    table = find_productions(nan_rec, trains=[(0.5, 1.5)])
+    assert len(table) == 0 and "too few valid" in table.notes[0]

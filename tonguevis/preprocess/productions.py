@@ -141,7 +141,8 @@ def _fill_gaps(values: np.ndarray) -> np.ndarray:
 
 
 def find_productions(rec: Recording, tip: str = "TT", keep=(2, 3, 4), trains=None, window: int = 9,
-                     min_prominence: float = 0.3, pad: float = 0.25, axis: int = 2) -> ProductionTable:
+                     min_prominence: float = 0.3, pad: float = 0.25, axis: int = 2,
+                     per_train: int = 5, min_fall: float = 0.001) -> ProductionTable:
     """Segment every train of ``rec`` into CV productions (release to release).
 
     tip : the most anterior tongue sensor; axis : its vertical coordinate (z).
@@ -150,10 +151,15 @@ def find_productions(rec: Recording, tip: str = "TT", keep=(2, 3, 4), trains=Non
     :func:`find_trains` when None.  The displacement is smoothed by a cubic
     Savitzky-Golay fit over ``window`` frames; a maximum counts as a release
     when the displacement then falls by ``min_prominence`` times the train's
-    range before rising above it again; the vowel is the lowest minimum
+    range, and by at least ``min_fall`` metres (1 mm: sensor noise is a few
+    tenths), before rising above it again; the vowel is the lowest minimum
     between two releases.  Each is timed at the zero crossing of the smoothed
     velocity (sub-frame, linear interpolation).  Releases are searched from
-    ``pad`` s before a train to its end.
+    ``pad`` s before a train to its end.  The last production of a train ends
+    at the train's end: the acoustic offset when the trains come from audio,
+    the end of tip motion otherwise.  A train with other than ``per_train``
+    productions gets a note in the table (positions still count from its
+    first production).
     """
     file = rec.metadata.get("file")
     if tip not in rec.sensors:
@@ -185,16 +191,16 @@ def find_productions(rec: Recording, tip: str = "TT", keep=(2, 3, 4), trains=Non
         if peaks.size:
             _, _, right_bases = peak_prominences(span, peaks)
             fall = span[peaks] - span[right_bases]
-            peaks = peaks[fall >= min_prominence * float(np.ptp(span))]
+            peaks = peaks[fall >= max(min_prominence * float(np.ptp(span)), min_fall)]
         inside_train = times[peaks + lo] <= end
         peaks = peaks[inside_train] + lo
         troughs = find_peaks(-span)[0] + lo
         vel = np.where(np.isfinite(velocity), velocity, 0.0)
         releases = [_zero_crossing(times, vel, k, falling=True) for k in peaks]
         table.counts.append(len(releases))
-        if len(releases) != 5:
+        if len(releases) != per_train:
             table.notes.append(f"train {number} ({begin:.2f}-{end:.2f} s): {len(releases)} productions, "
-                               "not 5; positions counted from its first")
+                               f"not {per_train}; positions counted from its first")
         for index, release in enumerate(releases, start=1):
             stop = releases[index] if index < len(releases) else max(end, release)
             inside = troughs[(times[troughs] > release) & (times[troughs] < stop)]
@@ -202,8 +208,8 @@ def find_productions(rec: Recording, tip: str = "TT", keep=(2, 3, 4), trains=Non
                 k = int(inside[np.argmin(height[inside])])
                 vowel = _zero_crossing(times, vel, k, falling=False)
             else:
-                between = np.flatnonzero((times > release) & (times < stop))
-                vowel = float(times[between[np.nanargmin(height[between])]]) if between.size else np.nan
+                between = np.flatnonzero((times > release) & (times < stop) & np.isfinite(height))
+                vowel = float(times[between[np.argmin(height[between])]]) if between.size else np.nan
             if keep_all or index in keep:
                 table.productions.append(Production(number, index, release, stop, release, vowel))
     for note in table.notes:  # the table carries them; callers decide how loudly to report
