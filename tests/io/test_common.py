@@ -83,3 +83,14 @@ def test_dropped_frames_and_regrid():
     np.testing.assert_array_equal(regular.sensors["A"][[0, 1, 2, 5, 6, 8]], rec.sensors["A"])
     assert regular.orientations["A"].shape == (9, 4)
     assert regrid_dropped_frames(regular) is regular
+
+
+def test_recording_on_uniform_grid_fills_the_real_gap():
+    from tests.conftest import shared_file
+    from tonguevis.io import read_recording
+
+    rec = read_recording(shared_file("ema", "ndi_wave", "Example3.tsv"))
+    regular = rec.on_uniform_grid()
+    assert regular.n_samples == rec.n_samples + 1
+    assert np.all(np.abs(np.diff(regular.times) - 0.01) < 1e-9)
+    assert regular.valid_fraction("S0") == pytest.approx(100 / 101)

@@ -103,6 +103,16 @@ class Recording:
         """A copy with other sensor arrays (and any other field changed)."""
         return replace(self, sensors=sensors, **changes)
 
+    def on_uniform_grid(self) -> "Recording":
+        """A copy whose frames are uniform in time: frames lost in gaps come back as NaN samples.
+
+        Frame k is at ``times[0] + k / rate``; returns ``self`` when nothing was
+        dropped (see ``metadata['dropped_frames']``).
+        """
+        from tonguevis.io._common import regrid_dropped_frames
+
+        return regrid_dropped_frames(self)
+
     def renamed(self, mapping: dict[str, str]) -> "Recording":
         """A copy with sensors renamed ``old -> new`` (others keep their names)."""
         rename = lambda d: {mapping.get(k, k): v for k, v in d.items()}  # noqa: E731
