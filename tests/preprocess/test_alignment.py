@@ -26,6 +26,11 @@ def test_transform_algebra():
     u = known_transform(2, 0.8)
     np.testing.assert_allclose((t @ u).apply(p), t.apply(u.apply(p)), atol=1e-12)
     assert t.apply(p[0]).shape == (3,)
+    assert t.apply(p.reshape(7, 1, 3)).shape == (7, 1, 3)
+    with pytest.raises(TonguevisError, match="proper rotation"):
+        SimilarityTransform(1.0, np.diag([1.0, -1.0, 1.0]), np.zeros(3))
+    with pytest.raises(TonguevisError, match="positive"):
+        SimilarityTransform(0.0, np.eye(3), np.zeros(3))
 
 
 @pytest.mark.parametrize("seed", range(5))

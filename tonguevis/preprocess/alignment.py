@@ -24,7 +24,7 @@ from tonguevis.errors import TonguevisError
 from tonguevis.preprocess._rigid import fit_rotations
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class SimilarityTransform:
     """p -> scale * rotation @ p + translation.
 
@@ -35,6 +35,20 @@ class SimilarityTransform:
     scale: float
     rotation: np.ndarray
     translation: np.ndarray
+
+    def __post_init__(self):
+        rotation = np.asarray(self.rotation, dtype=np.float64)
+        translation = np.asarray(self.translation, dtype=np.float64)
+        if rotation.shape != (3, 3) or translation.shape != (3,):
+            raise TonguevisError(f"a similarity needs a (3, 3) rotation and a (3,) translation, got "
+                                 f"{rotation.shape} and {translation.shape}")
+        if not (np.isfinite(self.scale) and self.scale > 0):
+            raise TonguevisError(f"a similarity needs a positive finite scale, got {self.scale}")
+        if not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-6) or np.linalg.det(rotation) < 0:
+            raise TonguevisError("the rotation of a similarity must be a proper rotation matrix")
+        object.__setattr__(self, "scale", float(self.scale))
+        object.__setattr__(self, "rotation", rotation)
+        object.__setattr__(self, "translation", translation)
 
     def apply(self, points) -> np.ndarray:
         """points (..., 3) -> transformed (..., 3)."""

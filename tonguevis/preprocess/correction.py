@@ -26,7 +26,8 @@ def correct_jaw(rec: Recording, jaw: str = JAW, rest_interval=None, sensors=None
     """Positions relative to the jaw: S <- S - (S_J - S_J^rest) for each frame.
 
     Applied to ``sensors`` (default: every sensor except the jaw itself and the
-    head references REF*).  ``rest_interval`` (start_s, end_s) gives S_J^rest;
+    head references REF*; pass ``sensors`` to leave out others that do not
+    ride on the jaw, such as an upper-lip coil).  ``rest_interval`` (start_s, end_s) gives S_J^rest;
     detected with :func:`find_rest_interval` when None.  Frames where the jaw
     is invalid become NaN in the corrected sensors.
     """
