@@ -95,3 +95,31 @@ def test_empty_file_of_each_extension(example, tmp_path):
     with pytest.raises(RecordingError) as info:
         read_recording(empty)
     assert str(empty) in str(info.value)
+
+
+TEXT_FORMATS = ["est_ascii", "ndi_wave", "bvh", "csv_wide", "csv_long"]
+
+
+@pytest.mark.parametrize("kind", TEXT_FORMATS)
+def test_truncated_last_line_loses_only_that_line(kind, tmp_path, caplog):
+    """A file cut inside its last number drops that sample with a warning; one merely
+    missing its final newline keeps everything."""
+    example = MAKERS[kind](tmp_path)
+    full = read_recording(example.path, **example.options)
+    data = example.path.read_bytes()
+    per_frame = 3 if kind == "csv_long" else 1  # the long layout has a line per sensor
+    example.path.write_bytes(data.rstrip(b"\n"))
+    whole = read_recording(example.path, **example.options)
+    assert whole.n_samples == full.n_samples
+    assert "truncated" not in caplog.text and "cut inside" not in caplog.text
+    example.path.write_bytes(data.rstrip()[:-2])
+    cut = read_recording(example.path, **example.options)
+    assert "dropped" in caplog.text
+    if per_frame == 1:
+        assert cut.n_samples == full.n_samples - 1
+        for name in full.sensors:
+            np.testing.assert_array_equal(cut.sensors[name], full.sensors[name][:-1])
+    else:  # the last sensor of the last frame becomes missing, the others stay
+        assert cut.n_samples == full.n_samples
+        last = full.sensor_names[-1]
+        assert not cut.valid(last)[-1] and cut.valid(full.sensor_names[0])[-1]

@@ -249,3 +249,27 @@ def format_rows(table: np.ndarray, sep: str, nan: str = "", fmt: str = "%.6f") -
         # "nan" appears nowhere else in %f output, so a plain replace is exact.
         lines = [line.replace("nan", nan) for line in lines]
     return lines
+
+
+def _decimals(cell: str) -> int:
+    cell = cell.strip()
+    return len(cell) - cell.index(".") - 1 if "." in cell else -1
+
+
+def unterminated_row_complete(row: Sequence[str], previous: Sequence[str] | None) -> bool:
+    """Whether a last line without a newline is whole rather than cut inside its last number.
+
+    Exporters write a column with a fixed number of decimals, so the last field
+    must parse and carry as many decimals as the same field one line above
+    (an empty field, or no line above, cannot be judged and counts as whole).
+    """
+    last = row[-1].strip() if row else ""
+    if not last:
+        return True
+    try:
+        float(last)
+    except ValueError:
+        return False
+    if previous is None or len(previous) < len(row) or not previous[len(row) - 1].strip():
+        return True
+    return _decimals(last) == _decimals(previous[len(row) - 1])

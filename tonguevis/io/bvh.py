@@ -33,6 +33,7 @@ import numpy as np
 from tonguevis.errors import RecordingError
 from tonguevis.io._common import (
     atomic_write, decode_text, format_rows, parse_axes, read_bytes, regrid_dropped_frames, unit_scale,
+    unterminated_row_complete,
 )
 from tonguevis.io.recording import Recording
 from tonguevis.io.registry import RecordingFormat, register_format
@@ -86,7 +87,7 @@ def _parse_node(tokens: _Tokens, name: str, nodes: list, depth: int) -> None:
     tok, line = tokens.next("CHANNELS or '}'")
     if tok.upper() == "CHANNELS":
         count = tokens.number("channel count")
-        if count != int(count) or not 0 <= count <= 64:
+        if not (0 <= count <= 64) or count != int(count):
             raise RecordingError(f"line {line}: impossible channel count {count}", tokens.path)
         for _ in range(int(count)):
             ch, ch_line = tokens.next("channel name")
@@ -147,6 +148,10 @@ def read_bvh(path, unit: str = "mm", rotations: str = "raw", axes=None) -> Recor
     if n_channels == 0:
         raise RecordingError("no node has channels", path)
     n_frames, partial = divmod(len(words), n_channels)
+    if not partial and n_frames > 1 and not text.endswith(("\n", "\r")) and not unterminated_row_complete(
+            words[len(words) - n_channels:], words[len(words) - 2 * n_channels:len(words) - n_channels]):
+        partial = n_channels  # the last number was cut: the last frame is incomplete
+        n_frames -= 1
     if partial:
         log.warning("%s: dropped a partial last frame (%d of %d values; file truncated?)", path, partial, n_channels)
     if n_frames > declared:

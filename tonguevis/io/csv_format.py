@@ -38,7 +38,7 @@ import numpy as np
 from tonguevis.errors import RecordingError
 from tonguevis.io._common import (
     atomic_write, check_times, decode_text, format_rows, dropped_frames, estimate_rate, parse_number_table,
-    read_bytes, unit_scale,
+    read_bytes, unit_scale, unterminated_row_complete,
 )
 from tonguevis.io.recording import Recording
 from tonguevis.io.registry import RecordingFormat, register_format
@@ -111,7 +111,8 @@ def read_csv(path, unit: str | None = None, rate: float | None = None) -> Record
     if not rows:
         raise RecordingError("header only: no data rows", path)
     ended = text.endswith(("\n", "\r"))
-    if len(rows[-1]) < len(header) or (not ended and not _row_parses(rows[-1], lower)):
+    previous = rows[-2] if len(rows) > 1 else None
+    if len(rows[-1]) < len(header) or (not ended and not unterminated_row_complete(rows[-1], previous)):
         log.warning("%s: dropped the incomplete last line %d (file truncated?)", path, numbers[-1])
         rows.pop()
         numbers.pop()
@@ -142,15 +143,6 @@ def read_csv(path, unit: str | None = None, rate: float | None = None) -> Record
 def _is_positive(value) -> bool:
     try:
         return value is not None and float(value) > 0 and np.isfinite(float(value))
-    except ValueError:
-        return False
-
-
-def _row_parses(row: list[str], lower: list[str]) -> bool:
-    cells = [c for c, h in zip(row, lower) if h != "sensor"]
-    try:
-        [float(c) for c in cells if c.strip()]
-        return True
     except ValueError:
         return False
 

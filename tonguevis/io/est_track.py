@@ -28,7 +28,7 @@ import numpy as np
 from tonguevis.errors import RecordingError
 from tonguevis.io._common import (
     check_times, dropped_frames, estimate_rate, parse_axes, parse_number_table, read_bytes,
-    unit_scale,
+    unit_scale, unterminated_row_complete,
 )
 from tonguevis.io.recording import Recording
 from tonguevis.io.registry import RecordingFormat, register_format
@@ -91,7 +91,7 @@ def _int_key(keys: dict, name: str, path, default=None) -> int:
     return value
 
 
-def _ascii_frames(data: bytes, offset: int, width: int, n_frames: int, path) -> np.ndarray:
+def _ascii_frames(data: bytes, offset: int, width: int, path) -> np.ndarray:
     lines = data[offset:].decode("ascii", errors="replace").splitlines()
     first_line = data[:offset].count(b"\n") + 1
     rows, numbers = [], []
@@ -100,19 +100,15 @@ def _ascii_frames(data: bytes, offset: int, width: int, n_frames: int, path) -> 
             rows.append(line.split())
             numbers.append(first_line + i)
     ended = data.endswith((b"\n", b"\r"))
-    if rows and (len(rows[-1]) < width or (not ended and len(rows) > n_frames)):
+    if rows and len(rows[-1]) < width:
         log.warning("%s: dropped the incomplete last line %d (file truncated?)", path, numbers[-1])
         rows.pop()
     for row, line_no in zip(rows, numbers):
-        if len(row) < width:
+        if len(row) != width:
             raise RecordingError(f"line {line_no} has {len(row)} fields, expected {width}", path)
-    rows = [r[:width] for r in rows]
-    if not ended and rows:
-        try:
-            parse_number_table(rows[-1:], path, numbers[len(rows) - 1])
-        except RecordingError:
-            log.warning("%s: dropped the unparseable unterminated last line", path)
-            rows.pop()
+    if not ended and rows and not unterminated_row_complete(rows[-1], rows[-2] if len(rows) > 1 else None):
+        log.warning("%s: dropped the unterminated last line %d, cut inside a number", path, numbers[len(rows) - 1])
+        rows.pop()
     return parse_number_table(rows, path, numbers[0] if numbers else first_line).reshape(len(rows), width)
 
 
@@ -148,7 +144,7 @@ def read_est_track(path, unit: str = "mm", axes=None) -> Recording:
         with np.errstate(invalid="ignore"):  # signalling-NaN payloads in damaged files
             table = np.frombuffer(body[: got * 4 * width], dtype=dtype).astype(np.float64).reshape(got, width)
     elif kind == "ascii":
-        table = _ascii_frames(data, offset, width + n_aux, n_frames, path)[:, :width]
+        table = _ascii_frames(data, offset, width + n_aux, path)[:, :width]
     else:
         raise RecordingError(f"unknown DataType {kind!r} (expected ascii or binary)", path)
     if table.shape[0] == 0:

@@ -32,7 +32,7 @@ import numpy as np
 from tonguevis.errors import RecordingError
 from tonguevis.io._common import (
     atomic_write, check_times, format_rows, decode_text, dropped_frames, estimate_rate, parse_axes,
-    parse_number_table, read_bytes, rotate_quaternions, split_lines, unit_scale,
+    parse_number_table, read_bytes, rotate_quaternions, split_lines, unit_scale, unterminated_row_complete,
 )
 from tonguevis.io.recording import Audio, Recording
 from tonguevis.io.registry import RecordingFormat, register_format
@@ -134,10 +134,9 @@ def read_ndi_wave(path, axes=None, audio=True, rate: float | None = None) -> Rec
             raise RecordingError(f"line {line_no} has {len(fields)} fields, the header has {ncols}", path)
         rows.append(fields)
     if truncated is None and not ended and rows:
-        # An unterminated last line may be cut inside a number: keep it only if it parses.
-        try:
-            parse_number_table(rows[-1:], path, body[len(rows) - 1][0])
-        except RecordingError:
+        # An unterminated last line may be cut inside a number: keep it only if it is whole.
+        previous = rows[-2] if len(rows) > 1 else None
+        if not unterminated_row_complete(rows[-1], previous):
             truncated = body[len(rows) - 1][0]
             rows.pop()
     if truncated is not None:
