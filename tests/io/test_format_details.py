@@ -121,6 +121,11 @@ Frame Time: 0.01
     again = read_recording(tmp_path / "again.bvh")
     assert again.metadata["rotation_orders"] == {"TT": "ZXY"}
     np.testing.assert_allclose(again.orientations["TT"], raw.orientations["TT"])
+    # a sensor map renames the per-sensor rotation order too, so it still round-trips
+    mapped = read_recording(path, sensor_map={"TD": "TT"})
+    assert mapped.metadata["rotation_orders"] == {"TD": "ZXY"}
+    write_recording(mapped, tmp_path / "mapped.bvh")
+    assert "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation" in (tmp_path / "mapped.bvh").read_text()
 
 
 def test_bvh_bad_input(tmp_path):

@@ -23,6 +23,9 @@ PRESET_DIR = Path(__file__).resolve().parents[1] / "presets"
 
 CANONICAL_NAMES = ("TT", "TB", "TD", "TBK", "TL", "TR", "JAW")
 
+#: Metadata entries keyed by sensor name, renamed together with the sensors.
+PER_SENSOR_METADATA = ("rotation_orders", "orientation_channels")
+
 
 class SensorMap(dict):
     """A sensor map (canonical name -> file channel) whose ``optional`` names may be absent.
@@ -132,7 +135,12 @@ def apply_sensor_map(
             "channels already carry them; map them too",
             path,
         )
-    return rec.renamed(rename)
+    renamed = rec.renamed(rename)
+    renamed.metadata = dict(rec.metadata)
+    for key in PER_SENSOR_METADATA:
+        if isinstance(rec.metadata.get(key), dict):
+            renamed.metadata[key] = {rename.get(k, k): v for k, v in rec.metadata[key].items()}
+    return renamed
 
 
 def inverse_channel(name: str, mapping: dict[str, Any] | None) -> Any:
