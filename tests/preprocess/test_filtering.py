@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from scipy.signal import savgol_filter
 
 from tests.preprocess._synthetic import recording
@@ -111,3 +113,24 @@ def test_bad_parameters_raise():
         derivative(rec, 3)
     with pytest.raises(TonguevisError, match="no sensor"):
         smooth(rec, sensors=["TD"])
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    data=st.lists(st.floats(-1e3, 1e3, allow_nan=False), min_size=3, max_size=60),
+    mask_seed=st.integers(0, 2**16),
+    half=st.integers(1, 6),
+    order=st.integers(0, 4),
+    deriv=st.integers(0, 2),
+)
+def test_nan_aware_savgol_property(data, mask_seed, half, order, deriv):
+    """Any data, any gaps, any window/order: the batched fit equals the per-sample loop."""
+    window = 2 * half + 1
+    assume(order < window and deriv <= order)
+    y = np.array(data)
+    y[np.random.default_rng(mask_seed).random(len(y)) < 0.25] = np.nan
+    ours = savgol(y, window, order, deriv=deriv, delta=0.01)
+    ref = reference_savgol(y, window, order, deriv=deriv, delta=0.01)
+    np.testing.assert_array_equal(np.isnan(ours), np.isnan(ref))
+    scale = (np.nanmax(np.abs(y)) if np.isfinite(y).any() else 1.0) + 1.0
+    np.testing.assert_allclose(ours, ref, atol=1e-6 * scale / 0.01**deriv, rtol=1e-6)
