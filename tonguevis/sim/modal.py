@@ -125,15 +125,15 @@ def solve_modes(
     resid = np.linalg.norm(k_phi - (mff @ vecs) * vals, axis=0) / np.maximum(np.linalg.norm(k_phi, axis=0), 1e-300)
     if np.any(vals <= sigma) or np.any(~np.isfinite(vals)):
         raise ModelError(f"spurious eigenvalues below the shift σ={sigma}: {vals[vals <= sigma][:5]}")
-    if resid.max() > RESIDUAL_TOLERANCE:
-        raise ModelError(
-            f"modal basis failed its residual check: max ‖Kφ-λMφ‖/‖Kφ‖ = {resid.max():.2e} "
-            f"> {RESIDUAL_TOLERANCE:.0e} (mode {int(resid.argmax())})"
-        )
     if vals[0] <= 1e-8 * max(vals[-1], 1.0):
         raise ModelError(
             "the anchored mesh has a (near) zero-energy mode: the anchors do not hold it "
             f"(λ₁ = {vals[0]:.3g}); use at least three non-collinear anchor nodes"
+        )
+    if resid.max() > RESIDUAL_TOLERANCE:
+        raise ModelError(
+            f"modal basis failed its residual check: max ‖Kφ-λMφ‖/‖Kφ‖ = {resid.max():.2e} "
+            f"> {RESIDUAL_TOLERANCE:.0e} (mode {int(resid.argmax())})"
         )
     info = {"solve_s": time.perf_counter() - t0, "max_residual": float(resid.max()), "shift": sigma}
     report(progress, 4, 4, "done")

@@ -179,12 +179,20 @@ class TongueModel:
         return self.displacements(np.asarray(q)[None, :], warping=warping)[0]
 
     def volume_change(self, displacements: np.ndarray) -> np.ndarray:
-        """(F,) relative volume change (V - V_rest)/V_rest for (F, n, 3) displacements."""
+        """(F,) relative volume change (V - V_rest)/V_rest for (F, n, 3) displacements.
+
+        The volume of a closed tet mesh is the flux of x/3 through its
+        boundary, V = ⅙ Σ_faces p0 · (p1 × p2), which touches only the surface
+        (about a fifth of the work of summing every tet); a test checks it
+        against the tet sum.
+        """
         d = np.asarray(displacements)
+        faces = self.surface_faces
         out = np.empty(len(d))
         for start in range(0, len(d), CHUNK_FRAMES):
             pts = self.mesh.points[None] + d[start : start + CHUNK_FRAMES]
-            out[start : start + len(pts)] = signed_tet_volumes(pts, self.mesh.tets).sum(axis=1)
+            p0, p1, p2 = (pts[:, faces[:, k]] for k in range(3))
+            out[start : start + len(pts)] = np.einsum("fki,fki->f", p0, np.cross(p1, p2)) / 6.0
         return out / self.rest_volume - 1.0
 
     def energy(self, q: np.ndarray) -> np.ndarray:

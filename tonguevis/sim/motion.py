@@ -70,3 +70,135 @@ class Motion:
     def deformed_points(self, i: int) -> np.ndarray:
         """(n, 3) deformed node positions at frame ``i``, metres."""
         return self.model.mesh.points + self.displacement(i)
+
+    # ------------------------------------------------------------------ files
+    def save(self, path) -> None:
+        """Write the motion as ``.npz`` (no pickle; temporary file, then rename).
+
+        The model is stored by its mesh, anchors, sensor landmarks and material,
+        so :meth:`load` rebuilds it (the modal basis comes from the cache or is
+        solved again, deterministically).
+        """
+        import json
+        import os
+        import tempfile
+        from pathlib import Path
+
+        path = Path(path)
+        model = self.model
+        meta = {
+            "metadata": self.metadata,
+            "sensor_names": list(self.sensor_names),
+            "warping": bool(self.warping),
+            "material": model.material.as_dict(),
+            "landmark_sensors": {k: int(v) for k, v in model.landmarks.sensors.items()},
+            "format": "tonguevis-motion",
+            "version": 1,
+        }
+        fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=".tmp")
+        os.close(fd)
+        try:
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(
+                    fh,
+                    times=self.times,
+                    q=self.q,
+                    sensor_nodes=self.sensor_nodes,
+                    targets=self.targets,
+                    sensor_residual=self.sensor_residual,
+                    energy=self.energy,
+                    volume_change=self.volume_change,
+                    converged=self.converged,
+                    points=model.mesh.points,
+                    tets=model.mesh.tets,
+                    anchors=model.anchors,
+                    meta=np.array(json.dumps(meta, default=_json_default)),
+                )
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+
+    @classmethod
+    def load(cls, path) -> "Motion":
+        """Read a motion written by :meth:`save`; a bad file raises SimulationError."""
+        import json
+        import zipfile
+        from types import SimpleNamespace
+
+        from tonguevis.errors import SimulationError
+        from tonguevis.mesh.tetmesh import TetMesh
+        from tonguevis.sim.material import Material
+        from tonguevis.sim.model import TongueModel
+
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                meta = json.loads(str(data["meta"]))
+                if meta.get("format") != "tonguevis-motion":
+                    raise SimulationError("not a tonguevis motion file", path)
+                arrays = {k: np.array(data[k]) for k in data.files if k != "meta"}
+        except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
+            raise SimulationError(f"cannot read motion file: {exc}", path) from exc
+        landmarks = SimpleNamespace(sensors=meta["landmark_sensors"], anchors=arrays["anchors"])
+        mesh = TetMesh(arrays["points"], arrays["tets"], metadata={"file": str(path)})
+        model = TongueModel(mesh, landmarks, Material(**meta["material"]))
+        return cls(
+            times=arrays["times"], q=arrays["q"], model=model, warping=meta["warping"],
+            sensor_names=meta["sensor_names"], sensor_nodes=arrays["sensor_nodes"],
+            targets=arrays["targets"], sensor_residual=arrays["sensor_residual"],
+            energy=arrays["energy"], volume_change=arrays["volume_change"],
+            converged=arrays["converged"].astype(bool), metadata=meta["metadata"],
+        )
+
+    def to_vtk_series(self, folder, frames=None, progress=None) -> "Path":
+        """Write ``motion.pvd`` + one ``.vtu`` per frame (ParaView); returns the .pvd path.
+
+        Point data: displacement (m) and its magnitude; field time = the frame's time (s).
+        """
+        import os
+        import tempfile
+        from pathlib import Path
+        from xml.sax.saxutils import quoteattr
+
+        import meshio
+
+        from tonguevis._progress import report
+
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        idx = np.arange(self.n_frames) if frames is None else np.arange(self.n_frames)[frames]
+        entries = []
+        mesh = self.model.mesh
+        for k, i in enumerate(idx):
+            disp = self.displacement(int(i))
+            name = f"frame_{int(i):05d}.vtu"
+            meshio.write(
+                folder / name,
+                meshio.Mesh(
+                    mesh.points + disp, [("tetra", mesh.tets)],
+                    point_data={"displacement": disp, "displacement_mm": 1e3 * np.linalg.norm(disp, axis=1)},
+                ),
+            )
+            entries.append(f'    <DataSet timestep="{self.times[i]:.6f}" file={quoteattr(name)}/>')
+            report(progress, k + 1, len(idx), "writing VTK")
+        pvd = folder / "motion.pvd"
+        text = (
+            '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
+            + "\n".join(entries)
+            + "\n  </Collection>\n</VTKFile>\n"
+        )
+        fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        os.replace(tmp, pvd)
+        return pvd
+
+
+def _json_default(obj):
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (np.floating,)):
+        return float(obj)
+    return str(obj)

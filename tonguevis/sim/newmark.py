@@ -181,17 +181,7 @@ def _solve_frame(q_pred, b, a_inv, bn, phi_s, w_s, c, q_start, settings):
             return qdd, True, it
         # ∂(R̃ᵀμ)/∂w: R̃(w)ᵀ = R̃(-w), so it is -∂g/∂w at (-w, μ).
         _, _, dgt = rotate_accumulated_jacobian(-w, mult.reshape(-1, 3))
-        coupling = np.einsum("sim,sij,sjn->mn", phi_s, -dgt, w_s)
-        kkt = np.zeros((m + n_c, m + n_c))
-        kkt[:m, :m] = np.diag(a_diag) - bn * coupling
-        kkt[:m, m:] = -force_map.T
-        kkt[m:, :m] = bn * jac
-        rhs = np.concatenate([-r_stat, r_con])
-        try:
-            delta = np.linalg.solve(kkt, rhs)
-        except np.linalg.LinAlgError:
-            delta = np.linalg.lstsq(kkt, rhs, rcond=None)[0]
-        d_qdd, d_mult = delta[:m], delta[m:]
+        d_qdd, d_mult = _newton_step(a_inv, bn, phi_s, w_s, -dgt, jac, force_map, r_stat, r_con)
         dw = np.abs(w_s @ (bn * d_qdd)).max()
         t = min(1.0, MAX_ROTATION_STEP / dw) if dw > 0 else 1.0
         while True:
@@ -206,6 +196,35 @@ def _solve_frame(q_pred, b, a_inv, bn, phi_s, w_s, c, q_start, settings):
         (qdd, mult), r_stat, r_con, jac, force_map, w, merit = trial, rs, rc, jac_t, fm_t, w_t, trial_merit
     done = np.max(np.abs(r_con)) < settings.tolerance and np.max(np.abs(bn * r_stat)) < settings.tolerance
     return qdd, bool(done), settings.max_iterations
+
+
+def _newton_step(a_inv, bn, phi_s, w_s, coupling_blocks, jac, force_map, r_stat, r_con):
+    """Solve the frame's Newton system with only 3S × 3S dense solves.
+
+        T Δq̈ - Gᵀ Δμ = -r_stat,   β J Δq̈ = r_con,   T = A - β Φ_sᵀ X W_s,
+
+    with A diagonal and X block diagonal (one 3×3 block per sensor,
+    ``coupling_blocks`` (S, 3, 3)).  T⁻¹ comes from the Woodbury identity in
+    the form that never inverts X (which may be singular):
+    T⁻¹ = A⁻¹ - A⁻¹U C (I + V A⁻¹ U C)⁻¹ V A⁻¹, U = Φ_sᵀ, C = -βX, V = W_s.
+    """
+    n_c = jac.shape[0]
+    u = phi_s.reshape(n_c, -1).T  # (m, 3S)
+    v = w_s.reshape(n_c, -1)  # (3S, m)
+    c = np.zeros((n_c, n_c))
+    for k, block in enumerate(coupling_blocks):
+        c[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = -bn * block
+    ainv_u_c = (a_inv[:, None] * u) @ c  # (m, 3S)
+    core = np.eye(n_c) + (v * a_inv) @ u @ c
+
+    def t_inv(y):
+        ay = a_inv[:, None] * y
+        return ay - ainv_u_c @ _solve_small(core, v @ ay)
+
+    sol = t_inv(np.column_stack([force_map.T, r_stat]))  # T⁻¹ [Gᵀ, r_stat]
+    tg, tr = sol[:, :n_c], sol[:, n_c]
+    d_mult = _solve_small(bn * jac @ tg, r_con + bn * jac @ tr)
+    return tg @ d_mult - tr, d_mult
 
 
 def _solve_small(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
