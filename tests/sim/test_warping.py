@@ -2,15 +2,12 @@
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from tonguevis.mesh.structured import box_mesh
-from tonguevis.sim.material import Material
-from tonguevis.sim.model import TongueModel
+from tests.sim._models import bar_model as _bar_model
 from tonguevis.sim.rotation import accumulated_rotation_matrix, rotate_accumulated, rotate_accumulated_jacobian
 from tonguevis.sim.warp_kernels import rotate_accumulated_warp
 
@@ -52,14 +49,6 @@ def test_warp_kernel_equals_numpy_reference():
     d = rng.normal(size=(3, 500, 3)) * 0.01
     np.testing.assert_allclose(rotate_accumulated_warp(w, d), rotate_accumulated(w, d), rtol=0, atol=1e-10 * 0.01)
     assert np.abs(rotate_accumulated_warp(w, d) - rotate_accumulated(w, d)).max() < 1e-10
-
-
-def _bar_model(nx=12, n=2, length=0.12, height=0.02):
-    mesh = box_mesh(nx, n, n, (length, height, height))
-    clamped = np.flatnonzero(mesh.points[:, 0] < 1e-12)
-    tip = int(np.argmin(np.linalg.norm(mesh.points - [length, height / 2, height], axis=1)))
-    landmarks = SimpleNamespace(sensors={"TT": tip}, anchors=clamped)
-    return TongueModel(mesh, landmarks, Material(young=6912.0, poisson=0.3))
 
 
 def test_warping_turns_an_infinitesimal_rotation_into_an_exact_rotation():
