@@ -1,0 +1,94 @@
+"""Off-screen pictures of segmentations (pyvista, no Qt): target | approximation | error.
+
+One row per result: the target shape coloured by partition, the approximated
+shape (on the split mesh, so rigid pieces show their gaps) coloured by
+partition, and the local error sqrt(e_E) in mm on the target shape.  The
+camera looks at the right side of the tongue (from −y: x anterior to the
+right of the picture, z up), which is also the bar's bending plane.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from tonguevis.analysis.segmentation.result import SegmentationResult
+
+PALETTE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+           "#bcbd22", "#17becf", "#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94"]
+
+
+def _grid(points: np.ndarray, tets: np.ndarray):
+    import pyvista as pv
+
+    cells = np.hstack([np.full((len(tets), 1), 4), tets]).ravel()
+    types = np.full(len(tets), pv.CellType.TETRA, dtype=np.uint8)
+    return pv.UnstructuredGrid(cells, types, np.asarray(points, dtype=np.float64))
+
+
+def _partition_colours(labels: np.ndarray) -> np.ndarray:
+    from matplotlib.colors import to_rgb
+
+    table = np.array([to_rgb(PALETTE[i % len(PALETTE)]) for i in range(int(labels.max()) + 1)])
+    return (255 * table[labels]).astype(np.uint8)
+
+
+def render_png(results: SegmentationResult | Sequence[SegmentationResult], path: str | os.PathLike,
+               titles: Sequence[str] | None = None, frame: int | None = None,
+               panel_size: tuple[int, int] = (520, 400), exaggeration: float = 1.0) -> Path:
+    """Write a PNG with one row (target | approximation | error) per result.
+
+    frame : target frame to show (default: each result's peak frame).
+    exaggeration : factor on the displacements (1 = true scale).
+    """
+    import pyvista as pv
+
+    if isinstance(results, SegmentationResult):
+        results = [results]
+    rows = len(results)
+    plotter = pv.Plotter(off_screen=True, shape=(rows, 3), window_size=(3 * panel_size[0], rows * panel_size[1]),
+                         border=False)
+    plotter.set_background("white")
+    for row, result in enumerate(results):
+        shown = result.peak_frame if frame is None else int(frame)
+        target = result.target[shown]
+        colours = _partition_colours(result.labels)
+        title = titles[row] if titles is not None else ""
+        summary = (f"{result.mode} modes, {result.n_partitions} partitions, "
+                   f"relative e_G {100 * result.relative_error:.2g} %")
+        deformed = _grid(result.points + exaggeration * target, result.tets)
+        deformed.cell_data["colour"] = colours
+        approx = _grid(result.points[result.split_nodes] + exaggeration * result.approximation[shown],
+                       result.split_tets)
+        approx.cell_data["colour"] = colours
+        errors = _grid(result.points + exaggeration * target, result.tets)
+        errors.cell_data["local error (mm, rms)"] = 1000.0 * np.sqrt(result.element_errors)
+        panels = [
+            (deformed, "colour", f"{title}\ntarget, coloured by partition".strip()),
+            (approx, "colour", f"approximation\n{summary}"),
+            (errors, "local error (mm, rms)", "local error sqrt(e_E)"),
+        ]
+        for column, (grid, scalars, caption) in enumerate(panels):
+            plotter.subplot(row, column)
+            if scalars == "colour":
+                plotter.add_mesh(grid, scalars=scalars, rgb=True, show_edges=False, lighting=True)
+            else:
+                plotter.add_mesh(grid, scalars=scalars, cmap="viridis", show_edges=False,
+                                 scalar_bar_args={"title": scalars, "color": "black", "vertical": False,
+                                                  "width": 0.6, "position_x": 0.2, "position_y": 0.04})
+            plotter.add_text(caption, font_size=9, color="black", position="upper_left")
+            plotter.view_xz()  # from -y (the right side): x anterior to the right, z up
+            plotter.camera.zoom(1.2)
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.tmp.png")
+    try:
+        plotter.screenshot(str(tmp))
+        os.replace(tmp, path)
+    finally:
+        plotter.close()
+        if tmp.exists():
+            tmp.unlink()
+    return path
