@@ -42,8 +42,8 @@ def check_recording(rec, n_expected=None):
     for key in REQUIRED_METADATA:
         assert key in rec.metadata, key
     if rec.audio is not None:
-        assert rec.audio.samples.ndim == 1 and rec.audio.rate > 0
-        assert np.all(np.abs(rec.audio.samples) <= 1.0 + 1e-9)
+        # float audio (MVIEW) may exceed [-1, 1]; only shape, type and rate are promised
+        assert rec.audio.samples.ndim == 1 and rec.audio.samples.dtype == np.float64 and rec.audio.rate > 0
 
 
 def test_reader_returns_truth_in_metres(example):

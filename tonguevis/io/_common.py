@@ -83,8 +83,12 @@ def estimate_rate(times: np.ndarray, default: float | None = None, path=None) ->
         if default is None:
             raise RecordingError("cannot tell the sample rate from fewer than two frames", path)
         return float(default)
-    # Rounded to 1e-6 Hz so that a clock of 0.01 s steps reads as 100 Hz, not 99.99999999999991.
-    return float(np.round(1.0 / np.median(steps), 6))
+    rate = 1.0 / float(np.median(steps))
+    if not np.isfinite(rate) or rate <= 0:
+        raise RecordingError(f"impossible sample rate {rate} Hz from the time column", path)
+    # Rounded to 9 significant digits so that a clock of 0.01 s steps reads as 100 Hz,
+    # not 99.99999999999991.
+    return float(f"{rate:.9g}")
 
 
 def dropped_frames(times: np.ndarray, rate: float) -> list[tuple[float, int]]:

@@ -127,7 +127,11 @@ def read_csv(path, unit: str | None = None, rate: float | None = None) -> Record
     else:
         times, sensors, extra = _wide(header, rows, numbers, scale, path)
     if rate is None:
-        rate = float(keys["rate"]) if _is_positive(keys.get("rate")) else estimate_rate(times, path=path)
+        stated = float(keys["rate"]) if _is_positive(keys.get("rate")) else None
+        rate = estimate_rate(times, default=stated, path=path) if len(times) > 1 or stated is None else stated
+        if stated is not None and abs(stated - rate) > 0.01 * rate:
+            log.warning("%s: '# rate: %s' disagrees with the time column (%.6g Hz); using the times",
+                        path, keys["rate"], rate)
     metadata = {
         "format": "csv",
         "file": str(path),

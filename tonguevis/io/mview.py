@@ -15,7 +15,8 @@ first (audio) channel, ``SENTENCE``, ``WORDS`` and ``PHONES`` (struct arrays of
   ``metadata['extra_channels']``.
 * Sensors must share one rate and length; channels that do not are skipped
   with a warning.
-* v7.3 files (HDF5) are read with h5py.
+* v5 files are read by :mod:`tonguevis.io.matv5` (scipy's loadmat can crash on damaged
+  files); v7.3 files (HDF5) with h5py.
 """
 
 from __future__ import annotations
@@ -45,57 +46,52 @@ def channel_name(value) -> str:
     return str(value)
 
 
-# ---------------------------------------------------------------- MAT v5 (scipy)
-def _v5_text(value) -> str:
-    arr = np.asarray(value)
-    if arr.size == 0:
-        return ""
-    if arr.dtype.kind in "US":
-        return "".join(str(x) for x in arr.ravel())
-    if arr.dtype == object:
-        return _v5_text(arr.ravel()[0])
-    raise ValueError(f"expected text, found {arr.dtype}")
+# ---------------------------------------------------------------- MAT v5 (our defensive reader)
+def _text(value) -> str:
+    """MATLAB text (a str from either reader) or '' for an empty/missing value."""
+    return value if isinstance(value, str) else ""
 
 
-def _v5_labels(value, text_field: str, time_field: str) -> list[tuple[str, np.ndarray]]:
-    arr = np.asarray(value)
-    if arr.size == 0 or arr.dtype.names is None:
+def _tier(value, text_field: str, time_field: str) -> list[tuple[str, np.ndarray]]:
+    """[(label, times)] from a struct array of labels (list of dicts); [] when empty or absent."""
+    if not isinstance(value, list):
         return []
-    return [(_v5_text(item[text_field]), np.asarray(item[time_field], dtype=float).ravel())
-            for item in arr.ravel()]
+    out = []
+    for item in value:
+        if not isinstance(item, dict):
+            continue
+        times = item.get(time_field)
+        out.append((_text(item.get(text_field)),
+                    np.asarray(times, dtype=float).ravel() if isinstance(times, np.ndarray) else np.zeros(0)))
+    return out
 
 
-def _load_v5(path: Path, variable: str | None) -> list[dict[str, Any]]:
-    import scipy.io
-
-    try:
-        mat = scipy.io.loadmat(str(path), squeeze_me=False, struct_as_record=True)
-    except MemoryError:
-        raise
-    except Exception as exc:  # scipy raises many types (MatReadError, zlib.error, ValueError ...)
-        raise RecordingError(f"not a readable MAT v5 file ({type(exc).__name__}: {exc})", path) from None
-    candidates = {k: v for k, v in mat.items() if not k.startswith("__")
-                  and isinstance(v, np.ndarray) and v.dtype.names
-                  and all(f in v.dtype.names for f in REQUIRED_FIELDS)}
-    struct = _pick(candidates, variable, path, list(k for k in mat if not k.startswith("__")))
-    fields = struct.dtype.names
+def _normalise(elements: list, path) -> list[dict[str, Any]]:
+    """Channel dicts (name, srate, signal, sentence, words, phones, labels) from struct elements."""
     channels = []
-    for item in struct.ravel():
-        ch = {"name": _v5_text(item["NAME"]),
-              "srate": np.asarray(item["SRATE"], dtype=float).ravel(),
-              "signal": np.asarray(item["SIGNAL"])}
-        if "SENTENCE" in fields:
-            ch["sentence"] = _v5_text(item["SENTENCE"]) if np.asarray(item["SENTENCE"]).dtype.kind in "USO" else ""
-        for tier in ("WORDS", "PHONES"):
-            if tier in fields:
-                ch[tier.lower()] = _v5_labels(item[tier], "LABEL", "OFFS")
-        if "LABELS" in fields:
-            arr = np.asarray(item["LABELS"])
-            if arr.size and arr.dtype.names and {"NAME", "OFFSET", "VALUE"} <= set(arr.dtype.names):
-                ch["labels"] = [(_v5_text(x["NAME"]), np.array([np.asarray(x["OFFSET"], float).ravel()[0],
-                                                               np.asarray(x["VALUE"], float).ravel()[0]]))
-                                for x in arr.ravel()]
-        channels.append(ch)
+    for item in elements:
+        if not isinstance(item, dict):
+            raise RecordingError("MVIEW struct element is not a struct", path)
+        name, srate, signal = item.get("NAME"), item.get("SRATE"), item.get("SIGNAL")
+        if not isinstance(name, str) or not isinstance(srate, np.ndarray) or not isinstance(signal, np.ndarray):
+            raise RecordingError("MVIEW channel lacks a text NAME or a numeric SRATE/SIGNAL", path)
+        if srate.dtype.kind not in "fiub":
+            raise RecordingError(f"channel {name!r} has a non-numeric SRATE", path)
+        # LABELS hold OFFSET and VALUE (the duration), both in ms.
+        raw_labels = item.get("LABELS") if isinstance(item.get("LABELS"), list) else []
+        labels = []
+        for lab in raw_labels:
+            if isinstance(lab, dict) and isinstance(lab.get("OFFSET"), np.ndarray) and isinstance(lab.get("VALUE"), np.ndarray):
+                off, dur = np.asarray(lab["OFFSET"], float).ravel(), np.asarray(lab["VALUE"], float).ravel()
+                if off.size and dur.size:
+                    labels.append((_text(lab.get("NAME")), np.array([off[0], dur[0]])))
+        channels.append({
+            "name": name, "srate": srate.astype(float).ravel(), "signal": signal,
+            "sentence": _text(item.get("SENTENCE")),
+            "words": _tier(item.get("WORDS"), "LABEL", "OFFS"),
+            "phones": _tier(item.get("PHONES"), "LABEL", "OFFS"),
+            "labels": labels,
+        })
     return channels
 
 
@@ -109,6 +105,15 @@ def _pick(candidates: dict, variable: str | None, path, names: list[str]):
             "no MVIEW struct array (fields NAME, SRATE, SIGNAL) in this MAT file "
             f"(variables: {', '.join(names) or 'none'})", path)
     return next(iter(candidates.values()))
+
+
+def _load_v5(path: Path, variable: str | None) -> list[dict[str, Any]]:
+    from tonguevis.io.matv5 import MatStruct, read_mat5
+
+    variables = read_mat5(path)
+    candidates = {k: v for k, v in variables.items() if isinstance(v, MatStruct)
+                  and all(f in v.fields for f in REQUIRED_FIELDS)}
+    return _normalise(_pick(candidates, variable, path, list(variables)), path)
 
 
 # ---------------------------------------------------------------- MAT v7.3 (h5py)
@@ -147,13 +152,6 @@ def _h5_struct(group, f) -> list[dict[str, Any]]:
     return [{k: _h5_value(group[k], f) for k in fields}]
 
 
-def _h5_labels(value, text_field: str, time_field: str) -> list[tuple[str, np.ndarray]]:
-    if not isinstance(value, list):
-        return []
-    return [(str(item.get(text_field, "")), np.asarray(item.get(time_field, []), dtype=float).ravel())
-            for item in value]
-
-
 def _load_v73(path: Path, variable: str | None) -> list[dict[str, Any]]:
     import h5py
 
@@ -176,18 +174,7 @@ def _channels_v73(f, path, variable) -> list[dict[str, Any]]:
     groups = {k: f[k] for k in f.keys() if not k.startswith("#") and isinstance(f[k], h5py.Group)
               and all(fld in f[k] for fld in REQUIRED_FIELDS)}
     group = _pick(groups, variable, path, [k for k in f.keys() if not k.startswith("#")])
-    channels = []
-    for item in _h5_struct(group, f):
-        if not isinstance(item["NAME"], str) or not isinstance(item["SIGNAL"], np.ndarray):
-            raise RecordingError("MVIEW NAME is not text or SIGNAL not a matrix", path)
-        ch = {"name": item["NAME"], "srate": np.asarray(item["SRATE"], dtype=float).ravel(),
-              "signal": item["SIGNAL"], "sentence": item.get("SENTENCE", "")}
-        if not isinstance(ch["sentence"], str):
-            ch["sentence"] = ""
-        for tier in ("WORDS", "PHONES"):
-            ch[tier.lower()] = _h5_labels(item.get(tier), "LABEL", "OFFS")
-        channels.append(ch)
-    return channels
+    return _normalise(_h5_struct(group, f), path)
 
 
 # ---------------------------------------------------------------- common

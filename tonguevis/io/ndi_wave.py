@@ -177,7 +177,8 @@ def read_ndi_wave(path, axes=None, audio=True, rate: float | None = None) -> Rec
             quats = table[:, block["q_cols"]]
             quats[~ok] = np.nan
             orientations[name] = rotate_quaternions(quats, A)
-        status_all.append(np.where(np.isfinite(status), status, -1).astype(np.int64))
+        plausible = np.isfinite(status) & (np.abs(status) < 2**31)
+        status_all.append(np.where(plausible, status, -1).astype(np.int64))
     if isinstance(audio, (str, bytes)) or hasattr(audio, "__fspath__"):
         wav_path = Path(audio)
         if not wav_path.exists():
