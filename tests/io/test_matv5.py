@@ -32,6 +32,7 @@ def _same(ours, ref):
         np.testing.assert_array_equal(ours, ref)
 
 
+@pytest.mark.filterwarnings("ignore:Casting complex values to real")  # scipy, mat_dtype=True
 @pytest.mark.parametrize("compress", [False, True])
 def test_equals_scipy_on_many_classes(tmp_path, compress):
     labels = np.zeros((1, 2), dtype=[("LABEL", "O"), ("OFFS", "O")])
@@ -48,9 +49,11 @@ def test_equals_scipy_on_many_classes(tmp_path, compress):
     scipy.io.savemat(str(path), variables, do_compression=compress)
     ours = read_mat5(path)
     ref = scipy.io.loadmat(str(path), squeeze_me=False, struct_as_record=True, mat_dtype=True)
+    # loadmat(mat_dtype=True) drops imaginary parts (a scipy quirk): compare complex without it
+    plain = scipy.io.loadmat(str(path), squeeze_me=False, struct_as_record=True)
     assert set(ours) == set(variables)
     for name in variables:
-        _same(ours[name], ref[name])
+        _same(ours[name], plain[name] if name == "complex" else ref[name])
 
 
 def test_equals_scipy_on_the_real_mview_file():

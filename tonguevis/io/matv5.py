@@ -88,7 +88,7 @@ class _Reader:
         flags, p = self.numbers(body, 0, "array flags")
         if flags.size < 1:
             self.fail("array flags missing")
-        cls, complex_ = int(flags[0]) & 0xFF, bool(int(flags[0]) & 0x800)
+        cls, complex_, logical = int(flags[0]) & 0xFF, bool(int(flags[0]) & 0x800), bool(int(flags[0]) & 0x200)
         dims, p = self.numbers(body, p, "dimensions")
         if dims.size < 2 or np.any(dims < 0):
             self.fail(f"impossible array dimensions {dims.tolist()}")
@@ -113,7 +113,7 @@ class _Reader:
                 self.fail(f"array {name or '?'} of shape {shape} holds {real.size} values")
             if cls == MX_CHAR:
                 return name, _chars(real, shape), nxt
-            target = np.dtype(_CLASS_DTYPES[cls])
+            target = np.dtype(bool if logical else _CLASS_DTYPES[cls])
             if complex_:
                 target = np.result_type(target, np.complex64)
             return name, real.astype(target).reshape(shape, order="F"), nxt
