@@ -1,0 +1,85 @@
+"""``tonguevis energy PATHS... --csv OUT [--png OUT]``: energy-time curves of productions (§6.3).
+
+PATHS are recordings or folders (walked recursively).  Each recording is
+simulated on the tongue model, cut into CV productions (the 2nd-4th of each
+train unless ``--all``), and every production's elastic energy U = ½ qᵀΛq is
+written in long format: one row per frame with the columns
+``recording,production,time_s,time_norm,energy_J`` then
+``speaker,syllable,trial,train,index,recording_time_s,frame``.  ``time_s`` is
+seconds since the production's consonant release, ``time_norm`` the same
+divided by the production's duration.  Speaker, syllable and trial come from
+file names like ``spk1_ta.tsv`` or ``spk1/ta_2.tsv``, or from ``--labels TABLE``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+log = logging.getLogger("tonguevis")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("paths", nargs="+", type=Path, metavar="PATH", help="recordings or folders of recordings")
+    parser.add_argument("--sensors", metavar="MAP",
+                        help="sensor map (JSON file or preset) for every recording; default: "
+                             "sensor_map.json beside each recording if any")
+    parser.add_argument("--csv", metavar="OUT", type=Path, required=True, help="long-format CSV of the curves")
+    parser.add_argument("--png", metavar="OUT", type=Path, help="also plot the curves (absolute and normalised time)")
+    parser.add_argument("--summary", metavar="OUT", type=Path,
+                        help="also write per-group statistics (peak, time of peak, area) as CSV")
+    parser.add_argument("--labels", metavar="TABLE", type=Path,
+                        help="CSV with columns file,speaker,syllable[,trial] overriding the names")
+    parser.add_argument("--group-by", default="speaker,syllable",
+                        help="grouping for the plot and summary, from speaker,syllable,trial,recording "
+                             "(default: speaker,syllable)")
+    parser.add_argument("--all", action="store_true", help="every production, not only the 2nd-4th of each train")
+    parser.add_argument("--mesh", type=Path, help="tongue mesh (default: the shipped model)")
+    parser.add_argument("--modes", type=int, default=100, help="modal basis size (default: 100)")
+    parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
+                        help="sensor nodes: snapped to each speaker's layout, or the paper's fixed rule")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def load_model(mesh: Path | None):
+    """The tongue model: ``mesh`` when given, else the shipped default."""
+    from tonguevis.sim import TongueModel
+
+    return TongueModel.from_mesh(mesh) if mesh is not None else TongueModel.default()
+
+
+def run(args: argparse.Namespace) -> int:
+    from tonguevis._progress import tqdm_progress
+    from tonguevis.analysis.corpus import CorpusError, corpus_energy_curves, load_corpus
+    from tonguevis.analysis.energy import GROUP_KEYS, summarize, write_curves_csv, write_summary_csv
+
+    by = tuple(k.strip() for k in args.group_by.split(",") if k.strip())
+    bad = [k for k in by if k not in GROUP_KEYS]
+    if bad or not by:
+        raise CorpusError(f"--group-by {args.group_by!r}: choose from {', '.join(GROUP_KEYS)}")
+    corpus = load_corpus(args.paths, table=args.labels)
+    if not len(corpus):
+        raise CorpusError(f"no recordings found in {', '.join(map(str, args.paths))}")
+    model = load_model(args.mesh)
+    with tqdm_progress("energy curves", disable=args.quiet) as progress:
+        result = corpus_energy_curves(corpus, model=model, sensor_map=args.sensors, modes=args.modes,
+                                      keep=None if args.all else (2, 3, 4), keep_motions=False,
+                                      landmarks=args.landmarks, progress=progress)
+    write_curves_csv(result.curves, args.csv)
+    print(f"{len(corpus)} recording(s), {len(result.curves)} production curves -> {args.csv}")
+    summaries = summarize(result.curves, by) if result.curves else []
+    for g in summaries:
+        m, s = g.mean, g.std
+        print(f"  {' '.join(map(str, g.key)):<16} n={g.n:<3} peak {1e3 * m['peak_J']:.3f} ± {1e3 * s['peak_J']:.3f} mJ "
+              f"at {m['peak_time_norm']:.2f} ± {s['peak_time_norm']:.2f} (normalised), "
+              f"area {1e3 * m['area_Js']:.4f} ± {1e3 * s['area_Js']:.4f} mJ·s")
+    if args.summary is not None:
+        write_summary_csv(summaries, by, args.summary)
+        print(f"wrote {args.summary}")
+    if args.png is not None:
+        from tonguevis.analysis.energy_plot import save_energy_png
+
+        save_energy_png(result.curves, args.png, by, title="Elastic energy per production")
+        print(f"wrote {args.png}")
+    return 0
