@@ -82,3 +82,29 @@ def test_frames_that_do_not_converge_are_flagged(bar):
     res = integrate(lam, phi_s, w_s, targets, settings)
     assert not res.converged.all()
     assert res.converged[0]  # the rest frame needs no iteration
+
+
+@pytest.mark.parametrize("warping", [True, False])
+def test_compiled_integrator_equals_the_numpy_reference(warping):
+    from tonguevis.sim.newmark_warp import integrate_warp
+
+    model = bar_model(sensors=("TT", "TD", "TL", "TR"))
+    nodes = [model.landmarks.sensors[s] for s in ("TT", "TD", "TL", "TR")]
+    lam, phi_s, w_s = sensor_rows(model, nodes, 24)
+    _, tip = _raise_and_rest(0.04, frames=200)
+    targets = np.zeros((200, 4, 3))
+    targets[:, 0] = tip[:, 0]
+    targets[:, 2, 2] = 0.3 * tip[:, 0, 2]
+    targets[60:70, 1] = np.nan  # a lost sensor for a while
+    settings = _settings(model, warping)
+    ref = integrate(lam, phi_s, w_s, targets, settings)
+    fast = integrate_warp(lam, phi_s, w_s, targets, settings)
+    scale = np.abs(ref.q).max()
+    assert np.abs(fast.q - ref.q).max() < 1e-10 * scale
+    assert np.abs(fast.qd - ref.qd).max() < 1e-8 * np.abs(ref.qd).max()
+    np.testing.assert_array_equal(fast.converged, ref.converged)
+    np.testing.assert_array_equal(fast.iterations, ref.iterations)
+    np.testing.assert_allclose(fast.residual, ref.residual, atol=1e-12, equal_nan=True)
+    # Several trials in one launch give the same as one at a time.
+    both = integrate_warp(lam, phi_s, w_s, np.stack([targets, 0.5 * targets]), settings)
+    np.testing.assert_allclose(both[0].q, fast.q, rtol=0, atol=1e-15 * scale)

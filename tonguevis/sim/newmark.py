@@ -101,6 +101,10 @@ def integrate(
     residual = np.full((n_frames, n_sensors), np.nan)
     converged = np.zeros(n_frames, dtype=bool)
     iterations = np.zeros(n_frames, dtype=np.int64)
+    n_c = 3 * n_sensors
+    phi2 = phi_s.reshape(n_c, m)
+    q_full = (phi2 * a_inv) @ phi2.T  # Φ_s A⁻¹ Φ_sᵀ
+    p_full = (w_s.reshape(n_c, m) * a_inv) @ phi2.T  # W_s A⁻¹ Φ_sᵀ
     every = max(1, n_frames // 100)
     for i in range(n_frames):
         q_pred = q + h * qd + bn * qdd
@@ -112,8 +116,11 @@ def integrate(
             qdd_k = free_qdd
             converged[i] = True
         else:
+            rows = (3 * np.flatnonzero(valid)[:, None] + np.arange(3)).ravel()
+            blocks = np.ix_(rows, rows)
             qdd_k, converged[i], iterations[i] = _solve_frame(
-                q_pred, b, a_inv, bn, phi_s[valid], w_s[valid], targets[i, valid], q, settings
+                q_pred, b, a_inv, bn, phi_s[valid], w_s[valid], q_full[blocks], p_full[blocks],
+                targets[i, valid], q, settings,
             )
         q = q_pred + bn * qdd_k
         qd = qd_pred + 0.5 * h * qdd_k
@@ -127,7 +134,16 @@ def integrate(
     return IntegrationResult(out_q, out_qd, out_qdd, residual, converged, iterations)
 
 
-def _solve_frame(q_pred, b, a_inv, bn, phi_s, w_s, c, q_start, settings):
+def _blocks(blocks: np.ndarray) -> np.ndarray:
+    """(S, 3, 3) blocks -> (3S, 3S) block-diagonal matrix."""
+    n = 3 * len(blocks)
+    out = np.zeros((n, n))
+    idx = np.arange(n).reshape(-1, 3)
+    out[idx[:, :, None], idx[:, None, :]] = blocks
+    return out
+
+
+def _solve_frame(q_pred, b, a_inv, bn, phi_s, w_s, q_mat, p_mat, c, q_start, settings):
     """Newton's method for one frame; returns (q̈, converged, iterations).
 
     Unknowns q̈ and the sensor forces μ (3S) of
@@ -138,93 +154,82 @@ def _solve_frame(q_pred, b, a_inv, bn, phi_s, w_s, c, q_start, settings):
     Lagrange multiplier) adds ∂R̃/∂w terms that push energy into the modes
     with most curl at the sensors; in trials on the ArtiSynth tongue that fed
     a growing oscillation across syllables and let Newton settle on
-    large-rotation branches.  The iteration starts at the previous frame's q,
-    takes full Newton steps (the Jacobian includes ∂R̃/∂w on both equations),
-    caps the change of the sensor rotations per step, and backtracks on the
-    residual norm, never accepting a step that raises it.
+    large-rotation branches.
+
+    The iteration starts at the previous frame's q with the forces of the
+    linearised problem there, then takes full Newton steps (∂R̃/∂w on both
+    equations), caps the change of the sensor rotations per step and
+    backtracks on the residual norm, never accepting a step that raises it.
+    Every product with the m modes is folded into the constant 3S × 3S
+    matrices Q = Φ_s A⁻¹ Φ_sᵀ and P = W_s A⁻¹ Φ_sᵀ (``q_mat``, ``p_mat``):
+    with y = β X W_s Δq̈ + R̃ᵀΔμ the Newton system
+        (A - β Φ_sᵀ X W_s) Δq̈ - Φ_sᵀ R̃ᵀ Δμ = -r_stat,   β (R̃ Φ_s + D W_s) Δq̈ = r_con
+    becomes Δq̈ = A⁻¹(Φ_sᵀ y - r_stat) and two 3S × 3S solves, where D = ∂g/∂w
+    and X = ∂(R̃ᵀμ)/∂w (both block diagonal).
     """
     c = c.ravel()
-    m = len(b)
-    n_c = len(c)
-    qdd = (q_start - q_pred) / bn
+    n_c, m = len(c), len(b)
+    n_s = n_c // 3
+    phi2 = phi_s.reshape(n_c, m)
+    ws2 = w_s.reshape(n_c, m)
     a_diag = 1.0 / a_inv
+    eye3 = np.broadcast_to(np.eye(3), (n_s, 3, 3))
 
     def evaluate(qdd_, mult_):
         q = q_pred + bn * qdd_
         d = phi_s @ q
         if settings.warping:
             w = w_s @ q
-            g, rot, dg_dw = rotate_accumulated_jacobian(w, d)
-            jac = (rot @ phi_s + dg_dw @ w_s).reshape(n_c, m)
-            force_map = (rot @ phi_s).reshape(n_c, m)  # G = R̃_s Φ_s
+            g, rot, dg = rotate_accumulated_jacobian(w, d)
         else:
-            g, jac, force_map = d, phi_s.reshape(n_c, m), phi_s.reshape(n_c, m)
-            w = None
-        r_stat = a_diag * qdd_ - b - force_map.T @ mult_
+            w, g, rot, dg = np.zeros_like(d), d, eye3, np.zeros((n_s, 3, 3))
+        rt_mu = np.einsum("sji,sj->si", rot, mult_.reshape(-1, 3)).ravel()
+        r_stat = a_diag * qdd_ - b - phi2.T @ rt_mu
         r_con = c - g.ravel()
-        return r_stat, r_con, jac, force_map, w
+        return r_stat, r_con, _blocks(rot), _blocks(dg), w
 
-    # Forces of the linearised problem at the start point (exact if linear).
-    _, r_con, jac, force_map, _ = evaluate(qdd, np.zeros(n_c))
-    ga = force_map * a_inv
-    rhs = r_con + bn * (jac @ qdd) - bn * (jac @ (a_inv * b))
-    mult = _solve_small(bn * (jac * a_inv) @ force_map.T, rhs)
-    qdd = a_inv * (b + force_map.T @ mult)
+    qdd = (q_start - q_pred) / bn
+    _, r_con, rot, dg, w = evaluate(qdd, np.zeros(n_c))
+    # Forces of the linearised problem at the start point (exact if linear): β J A⁻¹ Gᵀ μ = ...
+    h_mat = rot @ q_mat + dg @ p_mat  # J A⁻¹ Φ_sᵀ
+    jac_times = lambda v: rot @ (phi2 @ v) + dg @ (ws2 @ v)  # noqa: E731
+    rhs = r_con + bn * (jac_times(qdd) - jac_times(a_inv * b))
+    mult = _solve_small(bn * h_mat @ rot.T, rhs)
+    qdd = a_inv * (b + phi2.T @ (rot.T @ mult))
     if not settings.warping:
         return qdd, True, 1
-    del ga
 
-    r_stat, r_con, jac, force_map, w = evaluate(qdd, mult)
+    r_stat, r_con, rot, dg, w = evaluate(qdd, mult)
     merit = np.hypot(np.linalg.norm(bn * r_stat), np.linalg.norm(r_con))
     for it in range(1, settings.max_iterations + 1):
         if np.max(np.abs(r_con)) < settings.tolerance and np.max(np.abs(bn * r_stat)) < settings.tolerance:
             return qdd, True, it
-        # ∂(R̃ᵀμ)/∂w: R̃(w)ᵀ = R̃(-w), so it is -∂g/∂w at (-w, μ).
+        # X = ∂(R̃ᵀμ)/∂w; R̃(w)ᵀ = R̃(-w), so X = -∂g/∂w at (-w, μ).
         _, _, dgt = rotate_accumulated_jacobian(-w, mult.reshape(-1, 3))
-        d_qdd, d_mult = _newton_step(a_inv, bn, phi_s, w_s, -dgt, jac, force_map, r_stat, r_con)
-        dw = np.abs(w_s @ (bn * d_qdd)).max()
+        x_mat = _blocks(-dgt)
+        ar = a_inv * r_stat
+        rho_w, rho_p = ws2 @ ar, phi2 @ ar
+        e_mat = np.eye(n_c) - bn * x_mat @ p_mat
+        sol = _solve_small(e_mat, np.column_stack([rot.T, bn * x_mat @ rho_w]))
+        e_rt, e_x = sol[:, :n_c], sol[:, n_c]
+        h_mat = rot @ q_mat + dg @ p_mat
+        d_mult = _solve_small(bn * h_mat @ e_rt, r_con + bn * (rot @ rho_p + dg @ rho_w) + bn * h_mat @ e_x)
+        y = e_rt @ d_mult - e_x
+        d_qdd = a_inv * (phi2.T @ y - r_stat)
+        dw = np.abs(bn * (p_mat @ y - rho_w)).max()  # = |W_s β Δq̈|
         t = min(1.0, MAX_ROTATION_STEP / dw) if dw > 0 else 1.0
         while True:
             trial = (qdd + t * d_qdd, mult + t * d_mult)
-            rs, rc, jac_t, fm_t, w_t = evaluate(*trial)
+            rs, rc, rot_t, dg_t, w_t = evaluate(*trial)
             trial_merit = np.hypot(np.linalg.norm(bn * rs), np.linalg.norm(rc))
             if trial_merit < merit or t < 1e-4:
                 break
             t *= 0.5
         if trial_merit >= merit:  # never accept a step that raises the residual
             return qdd, False, it
-        (qdd, mult), r_stat, r_con, jac, force_map, w, merit = trial, rs, rc, jac_t, fm_t, w_t, trial_merit
+        (qdd, mult), r_stat, r_con, rot, dg, w, merit = trial, rs, rc, rot_t, dg_t, w_t, trial_merit
     done = np.max(np.abs(r_con)) < settings.tolerance and np.max(np.abs(bn * r_stat)) < settings.tolerance
     return qdd, bool(done), settings.max_iterations
-
-
-def _newton_step(a_inv, bn, phi_s, w_s, coupling_blocks, jac, force_map, r_stat, r_con):
-    """Solve the frame's Newton system with only 3S × 3S dense solves.
-
-        T Δq̈ - Gᵀ Δμ = -r_stat,   β J Δq̈ = r_con,   T = A - β Φ_sᵀ X W_s,
-
-    with A diagonal and X block diagonal (one 3×3 block per sensor,
-    ``coupling_blocks`` (S, 3, 3)).  T⁻¹ comes from the Woodbury identity in
-    the form that never inverts X (which may be singular):
-    T⁻¹ = A⁻¹ - A⁻¹U C (I + V A⁻¹ U C)⁻¹ V A⁻¹, U = Φ_sᵀ, C = -βX, V = W_s.
-    """
-    n_c = jac.shape[0]
-    u = phi_s.reshape(n_c, -1).T  # (m, 3S)
-    v = w_s.reshape(n_c, -1)  # (3S, m)
-    c = np.zeros((n_c, n_c))
-    for k, block in enumerate(coupling_blocks):
-        c[3 * k : 3 * k + 3, 3 * k : 3 * k + 3] = -bn * block
-    ainv_u_c = (a_inv[:, None] * u) @ c  # (m, 3S)
-    core = np.eye(n_c) + (v * a_inv) @ u @ c
-
-    def t_inv(y):
-        ay = a_inv[:, None] * y
-        return ay - ainv_u_c @ _solve_small(core, v @ ay)
-
-    sol = t_inv(np.column_stack([force_map.T, r_stat]))  # T⁻¹ [Gᵀ, r_stat]
-    tg, tr = sol[:, :n_c], sol[:, n_c]
-    d_mult = _solve_small(bn * jac @ tg, r_con + bn * jac @ tr)
-    return tg @ d_mult - tr, d_mult
 
 
 def _solve_small(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
