@@ -16,7 +16,6 @@ from tests.analysis.segmentation_support import (
 )
 from tonguevis.analysis.segmentation import SegmentationTarget, TetGraph, make_fitter
 from tonguevis.analysis.segmentation.greedy import grow_partitions
-from tonguevis.sim.assembly import assemble_stiffness
 
 
 def _wavy_frames(points: np.ndarray, n_frames: int, seed: int = 0) -> np.ndarray:
@@ -64,17 +63,6 @@ def test_one_ring_and_boundary_match_plain_loops(small_bar):
     outside_nodes = set(tets[np.setdiff1d(np.arange(len(tets)), members)].ravel().tolist())
     expected = sorted(set(tets[members].ravel().tolist()) & outside_nodes)
     assert graph.boundary_nodes(members).tolist() == expected
-
-
-def test_block_csr_assembly_equals_global_stiffness(small_bar):
-    points, tets = small_bar
-    target = SegmentationTarget.frame(np.zeros_like(points))
-    fitter = make_fitter(points, tets, target, "constraint", [], poisson=0.3)
-    values = fitter._assemble(np.arange(len(tets)), None)
-    import scipy.sparse as sp
-
-    k = sp.csr_matrix((values, fitter._indices, fitter._indptr), shape=(3 * len(points),) * 2)
-    assert abs(k - assemble_stiffness(points, tets, 1.0, 0.3)).max() < 1e-12 * abs(k).max()
 
 
 @pytest.mark.parametrize("mode", ["rigid", "constraint"])

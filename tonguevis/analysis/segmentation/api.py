@@ -148,12 +148,13 @@ def autoseed(fitter: LocalFitter, n_partitions: int | None, threshold: float | N
              progress: ProgressCallback | None = None) -> tuple[np.ndarray, np.ndarray, Evaluation, list]:
     """Autoseeding (§5.3): one partition, then seed the worst element and regrow, until done.
 
-    The first partition spans the mesh.  Each step seeds a new partition at the
-    element of largest e_E (eq. 14) and reruns Algorithm 5.1 from all seeds;
-    the existing partitions are reseeded at their central tet (centroid
-    nearest the partition's), so regrowth starts from where each partition
-    is, not from a corner where a new seed would be squeezed.  (The paper leaves
-    the existing seeds open.)  Returns labels, seeds, the evaluation and the
+    The first partition spans the mesh; its seed is its central tet (centroid
+    nearest the mesh's; the paper leaves it open, and a corner seed could
+    share a uniform region with the next seed and squeeze it).  Each step
+    seeds a new partition at the element of largest e_E (eq. 14) and reruns
+    Algorithm 5.1 from all seeds.  The seeds persist between steps, so the
+    regrowth repeats many earlier proposals, which the fitter's memo returns
+    without solving.  Returns labels, seeds, the evaluation and the
     [(partitions, relative e_G)] history.
     """
     if n_partitions is None and threshold is None:
@@ -175,7 +176,6 @@ def autoseed(fitter: LocalFitter, n_partitions: int | None, threshold: float | N
     while n_current < limit and n_current < k:
         if threshold is not None and evaluation.relative_error <= threshold:
             break
-        seeds = [graph.central(np.flatnonzero(labels == p), fitter.points) for p in range(n_current)]
         order = np.argsort(-evaluation.element_errors, kind="stable")
         taken = set(seeds)
         seeds.append(int(next(t for t in order if int(t) not in taken)))
