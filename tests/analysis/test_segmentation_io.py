@@ -55,6 +55,19 @@ def test_load_rejects_other_and_broken_files(tmp_path, small_result):
         SegmentationResult.load(broken)
 
 
+def test_partition_rows_add_up(small_result):
+    mesh, _, result = small_result
+    rows = result.partition_rows()
+    assert [r["partition"] for r in rows] == list(range(result.n_partitions))
+    assert sum(r["tets"] for r in rows) == mesh.n_tets
+    assert sum(r["volume_cm3"] for r in rows) == pytest.approx(1e6 * mesh.volume)
+    for row in rows:
+        assert (row["rms_error_mm"] / 1000) ** 2 == pytest.approx(result.partition_errors[row["partition"]])
+        assert result.labels[row["seed"]] == row["partition"]
+    # the left seed's partition lies left of the right one's
+    assert rows[0]["centroid_m"][0] < rows[1]["centroid_m"][0]
+
+
 def test_vtu_export_has_the_fields(tmp_path, small_result):
     import meshio
 

@@ -76,7 +76,7 @@ def segment(
     n_partitions: int | None = None,
     threshold: float | None = DEFAULT_THRESHOLD,
     constrained_nodes: Sequence[int] | None = None,
-    adjust: bool | None = None,
+    adjust: bool = False,
     max_adjust_evaluations: int | None = None,
     poisson: float | None = None,
     progress: ProgressCallback | None = None,
@@ -94,7 +94,10 @@ def segment(
         (default 0.05, the paper's "5 percent e_G"), whichever comes first.
     constrained_nodes : nodes whose fit must equal the target (constraint
         modes); ``None`` = the model's anchors, ``[]`` = none.
-    adjust : run the post-segmentation adjustment (default: with autoseeding).
+    adjust : run the post-segmentation adjustment (§5.3: "extra refinement can
+        be performed"); off by default since with constraint modes every
+        tried move costs two sparse factorisations.
+    max_adjust_evaluations : moves tried at most (default 5000 rigid, 60 constraint).
     progress : ``progress(done, total, message)``, may raise Cancelled.
     """
     started = time.perf_counter()
@@ -118,8 +121,6 @@ def segment(
     if len(seed_tets) < int(labels.max()) + 1:  # unreachable components got partitions
         extra = [int(np.flatnonzero(labels == p)[0]) for p in range(len(seed_tets), int(labels.max()) + 1)]
         seed_tets = np.concatenate([seed_tets, extra]).astype(np.int64)
-    if adjust is None:
-        adjust = automatic
     if adjust and labels.max() > 0:
         budget = max_adjust_evaluations if max_adjust_evaluations is not None else DEFAULT_ADJUST_EVALUATIONS[mode]
         labels, trace = adjust_boundaries(fitter, labels, seed_tets, evaluation.element_errors, budget,

@@ -77,6 +77,26 @@ class SegmentationResult:
         """The frame of largest weight (the energy peak of a production)."""
         return int(np.argmax(self.frame_weights))
 
+    def partition_rows(self) -> list[dict[str, Any]]:
+        """One dict per partition: ``partition``, ``tets``, ``volume_cm3``,
+        ``rms_error_mm`` (sqrt of e_P), ``seed`` (tet) and ``centroid_m`` (3 floats)."""
+        from tonguevis.mesh.tetmesh import signed_tet_volumes
+
+        volumes = np.abs(signed_tet_volumes(self.points, self.tets))
+        centres = self.points[self.tets].mean(axis=1)
+        rows = []
+        for p in range(self.n_partitions):
+            inside = self.labels == p
+            rows.append({
+                "partition": p,
+                "tets": int(inside.sum()),
+                "volume_cm3": float(1e6 * volumes[inside].sum()),
+                "rms_error_mm": float(1000 * np.sqrt(self.partition_errors[p])),
+                "seed": int(self.seeds[p]) if p < len(self.seeds) else -1,
+                "centroid_m": np.average(centres[inside], axis=0, weights=volumes[inside]).tolist(),
+            })
+        return rows
+
     def nodal_approximation(self) -> np.ndarray:
         """(F, n, 3) approximation per mesh node, averaging the partitions' copies (m).
 

@@ -1,0 +1,139 @@
+"""``tonguevis segment FILE``: deformation segmentation of a simulated recording (§5).
+
+Simulates the recording on the tongue model, takes a target (the frame at
+``--time``, a production with ``--production K``, by default the frame of peak
+elastic energy), segments it with rigid or constraint modes from automatic
+seeds (to ``--threshold`` or to ``--seeds N`` partitions) or from given seed
+tets, and writes a VTU (partition and element error per cell; target and
+approximation per node), optionally a PNG and the full result as ``.npz``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+log = logging.getLogger("tonguevis")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", type=Path, help="the recording (NDI Wave TSV, Carstens .pos, EST .ema, ...)")
+    parser.add_argument("--sensors", metavar="MAP",
+                        help="sensor map (JSON file or preset); default: sensor_map.json beside FILE if any")
+    parser.add_argument("--mesh", metavar="PATH", type=Path,
+                        help="tongue mesh to use instead of ours (TetGen .node/.ele, VTU, Gmsh, .npz)")
+    parser.add_argument("--axes", metavar="MAP",
+                        help="axis mapping of --mesh into x anterior, y left, z up, e.g. -x,-z,-y "
+                             "for the ArtiSynth tongue")
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument("--production", metavar="K", type=int,
+                       help="segment production K (1-based, as listed by 'tonguevis syllables')")
+    which.add_argument("--time", metavar="T", type=float, help="segment the frame nearest T seconds")
+    parser.add_argument("--peak", action="store_true",
+                        help="with --production: only its frame of peak energy (default: the whole "
+                             "production, frames weighted by energy, eq. 5)")
+    parser.add_argument("--modes", choices=("rigid", "constraint"), default="constraint",
+                        help="local modes: rigid (eq. 9) or constraint (eq. 13; default)")
+    parser.add_argument("--seeds", default="auto", metavar="auto|N",
+                        help="auto: add partitions until --threshold; N: autoseed exactly N partitions")
+    parser.add_argument("--seed-tets", metavar="T1,T2,...",
+                        help="seed tets (0-based) for Algorithm 5.1 instead of autoseeding")
+    parser.add_argument("--threshold", type=float, default=0.05,
+                        help="autoseeding stops when |u~ - u|^2 <= THRESHOLD |u|^2 (default 0.05)")
+    parser.add_argument("--adjust", action="store_true",
+                        help="post-segmentation adjustment: move interface tets while the error falls")
+    parser.add_argument("--no-anchors", action="store_true",
+                        help="constraint modes without the anchors as constrained nodes")
+    parser.add_argument("--modal-modes", type=int, default=100, metavar="M",
+                        help="modes of the simulation (default 100)")
+    parser.add_argument("--out", type=Path, required=True, metavar="OUT.vtu", help="VTU file to write")
+    parser.add_argument("--png", type=Path, metavar="OUT.png", help="also render a picture (off screen)")
+    parser.add_argument("--save", type=Path, metavar="OUT.npz", help="also save the whole result")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _seeding(args) -> dict:
+    from tonguevis.analysis.segmentation import SegmentationError
+
+    if args.seed_tets:
+        try:
+            tets = [int(t) for t in args.seed_tets.split(",") if t.strip()]
+        except ValueError as exc:
+            raise SegmentationError(f"--seed-tets wants comma-separated tet numbers, got {args.seed_tets!r}") from exc
+        return {"seeds": tets}
+    if args.seeds == "auto":
+        return {"seeds": "auto", "threshold": args.threshold}
+    try:
+        count = int(args.seeds)
+    except ValueError as exc:
+        raise SegmentationError(f"--seeds wants 'auto' or a partition count, got {args.seeds!r}") from exc
+    return {"seeds": "auto", "n_partitions": count, "threshold": None}
+
+
+def _target(args, rec, motion):
+    from tonguevis.analysis.segmentation import (
+        SegmentationError,
+        frame_target,
+        peak_energy_target,
+        production_target,
+    )
+
+    if args.time is not None:
+        return frame_target(motion, time=args.time)
+    if args.production is None:
+        return peak_energy_target(motion)
+    from tonguevis.preprocess import correct_head, find_productions
+    from tonguevis.preprocess._names import reference_names
+
+    references = reference_names(rec.sensor_names)
+    timing = correct_head(rec, references) if len(references) >= 3 else rec
+    table = find_productions(timing)
+    if not 1 <= args.production <= len(table):
+        raise SegmentationError(f"production {args.production} asked, the recording has {len(table)} "
+                                "(see 'tonguevis syllables')", args.file)
+    production = table[args.production - 1]
+    return peak_energy_target(motion, production) if args.peak else production_target(motion, production)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tonguevis._progress import tqdm_progress
+    from tonguevis.analysis.segmentation import segment
+    from tonguevis.io import read_recording
+    from tonguevis.sim import TongueModel, simulate
+
+    seeding = _seeding(args)
+    sensor_map = args.sensors
+    if sensor_map is None and (args.file.parent / "sensor_map.json").exists():
+        sensor_map = args.file.parent / "sensor_map.json"
+    rec = read_recording(args.file, sensor_map=sensor_map)
+    if args.mesh is not None:
+        model = TongueModel.from_mesh(args.mesh, axes=args.axes)
+    else:
+        model = TongueModel.default()
+    with tqdm_progress("simulating", disable=args.quiet) as progress:
+        motion = simulate(rec, model, modes=args.modal_modes, progress=progress)
+    target = _target(args, rec, motion)
+    with tqdm_progress(f"segmenting ({args.modes} modes)", disable=args.quiet) as progress:
+        result = segment(model, target, args.modes, constrained_nodes=[] if args.no_anchors else None,
+                         adjust=args.adjust, progress=progress, **seeding)
+    result.metadata["recording"] = str(args.file)
+    result.to_vtu(args.out)
+    lines = [f"target: {target.description}",
+             f"{result.n_partitions} partitions with {args.modes} modes in {result.metadata['seconds']:.2f} s; "
+             f"relative global error {100 * result.relative_error:.2f} % (|u~ - u|^2 / |u|^2)",
+             "partition  tets  volume_cm3  rms_error_mm  seed_tet"]
+    for row in result.partition_rows():
+        lines.append(f"{row['partition']:9d} {row['tets']:5d} {row['volume_cm3']:11.2f} "
+                     f"{row['rms_error_mm']:13.3f} {row['seed']:9d}")
+    lines.append(f"wrote {args.out}")
+    if args.save is not None:
+        result.save(args.save)
+        lines.append(f"wrote {args.save}")
+    if args.png is not None:
+        from tonguevis.analysis.segmentation.render import render_png
+
+        render_png(result, args.png, titles=[f"{args.file.name}: {target.description}"])
+        lines.append(f"wrote {args.png}")
+    print("\n".join(lines))
+    return 0
