@@ -19,6 +19,9 @@ Layout (one header line, then one tab-separated row per frame)::
   The samples are not re-gridded.
 * A WAV with the same stem (``x.tsv`` -> ``x.wav``) is attached as ``rec.audio``,
   its first sample at AudioTime 0.
+* ``metadata['ndi_status']`` is the (N, S) int status of every sample (-1 where
+  empty), columns in the order of ``metadata['ndi_ids']``; ``metadata['meas_id']``
+  the (N,) MeasId column.
 """
 
 from __future__ import annotations
