@@ -92,3 +92,12 @@ def test_warp_and_numpy_reconstruction_agree_on_a_model():
     fast = model.displacements(q, warping=True, use_warp=True)
     ref = model.displacements(q, warping=True, use_warp=False)
     assert np.abs(fast - ref).max() < 1e-10
+
+
+def test_float32_rendering_path_is_close_to_float64():
+    model = _bar_model(nx=6)
+    q = np.random.default_rng(5).normal(size=(4, 8)) * 2e-3
+    d64 = model.displacements(q)
+    d32 = model.displacements(q, dtype=np.float32)
+    assert d32.dtype == np.float32
+    assert np.abs(d32 - d64).max() < 1e-5 * np.abs(d64).max()

@@ -50,8 +50,18 @@ def _build():
             wd = wp.cross(wi, di)
             out[i] = di + a * wd + b * wp.cross(wi, wd)
 
+        @wp.kernel
+        def warp_rotate32(w: wp.array(dtype=wp.vec3f), d: wp.array(dtype=wp.vec3f), out: wp.array(dtype=wp.vec3f)):
+            # Rendering precision: coefficients in float64, vectors in float32.
+            i = wp.tid()
+            wi = wp.vec3d(w[i])
+            di = wp.vec3d(d[i])
+            a, b = coefficients(wp.length(wi))
+            wd = wp.cross(wi, di)
+            out[i] = wp.vec3f(di + a * wd + b * wp.cross(wi, wd))
+
         _wp = wp
-        _kernel = warp_rotate
+        _kernel = {np.dtype(np.float64): (warp_rotate, wp.vec3d), np.dtype(np.float32): (warp_rotate32, wp.vec3f)}
 
 
 def warp_device() -> str:
@@ -61,17 +71,28 @@ def warp_device() -> str:
 
 
 def rotate_accumulated_warp(w: np.ndarray, d: np.ndarray, device: str | None = None) -> np.ndarray:
-    """R̃(w) d for (..., 3) float64 arrays, computed by the warp kernel."""
+    """R̃(w) d for (..., 3) arrays, computed by the warp kernel.
+
+    float32 inputs (both) stay float32 (for rendering); anything else is float64.
+    """
     _build()
     wp = _wp
     shape = np.shape(d)
-    w2 = np.ascontiguousarray(np.reshape(w, (-1, 3)), dtype=np.float64)
-    d2 = np.ascontiguousarray(np.reshape(d, (-1, 3)), dtype=np.float64)
+    dtype = np.dtype(np.float32) if np.asarray(d).dtype == np.float32 and np.asarray(w).dtype == np.float32 else np.dtype(np.float64)
+    kernel, vec = _kernel[dtype]
+    w2 = np.ascontiguousarray(np.reshape(w, (-1, 3)), dtype=dtype)
+    d2 = np.ascontiguousarray(np.reshape(d, (-1, 3)), dtype=dtype)
     if len(d2) == 0:
-        return np.zeros(shape)
+        return np.zeros(shape, dtype=dtype)
     dev = device or wp.get_preferred_device()
-    wa = wp.array(w2, dtype=wp.vec3d, device=dev)
-    da = wp.array(d2, dtype=wp.vec3d, device=dev)
-    out = wp.empty(len(d2), dtype=wp.vec3d, device=dev)
-    wp.launch(_kernel, dim=len(d2), inputs=[wa, da], outputs=[out], device=dev)
+    on_cpu = str(dev) == "cpu"
+    # On the CPU warp can wrap NumPy memory without copying.
+    wa = wp.array(w2, dtype=vec, device=dev, copy=not on_cpu)
+    da = wp.array(d2, dtype=vec, device=dev, copy=not on_cpu)
+    out_np = np.empty_like(d2)
+    out = wp.array(out_np, dtype=vec, device=dev, copy=False) if on_cpu else wp.empty(len(d2), dtype=vec, device=dev)
+    wp.launch(kernel, dim=len(d2), inputs=[wa, da], outputs=[out], device=dev)
+    if on_cpu:
+        wp.synchronize_device(dev)
+        return out_np.reshape(shape)
     return out.numpy().reshape(shape)

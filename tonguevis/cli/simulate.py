@@ -1,0 +1,59 @@
+"""``tonguevis simulate FILE``: drive the tongue model with a recording and summarise the motion."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from tonguevis.cli._common import (
+    add_model_arguments, add_recording_arguments, load_model_args, read_recording_args, simulate_args,
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_recording_arguments(parser)
+    add_model_arguments(parser)
+    parser.add_argument("--out", type=Path, metavar="DIR",
+                        help="write motion.npz and a VTK series (motion.pvd + .vtu frames) for ParaView here")
+
+
+def summary(motion) -> list[str]:
+    """The lines ``tonguevis simulate`` prints."""
+    res = np.nanmax(motion.sensor_residual) if np.isfinite(motion.sensor_residual).any() else float("nan")
+    peak = int(np.argmax(motion.energy))
+    end = motion.displacement(motion.n_frames - 1)
+    meta = motion.metadata
+    unconverged = len(meta.get("unconverged_frames", []))
+    lines = [
+        f"model: {motion.model.mesh.n_nodes} nodes, {motion.model.mesh.n_tets} tets, {motion.q.shape[1]} modes, "
+        f"{'modal warping' if motion.warping else 'linear'}; sensor nodes: {meta['landmarks']}",
+        "driving sensors: " + ", ".join(f"{n}->node {int(k)}" for n, k in zip(motion.sensor_names, motion.sensor_nodes)),
+        f"alignment: scale {meta['alignment_scale']:.3f}, rest fit RMS {1e3 * meta['alignment_rms_m']:.2f} mm"
+        + (" (midsagittal)" if meta.get("midsagittal_alignment") else ""),
+        f"frames: {motion.n_frames} ({motion.times[-1] - motion.times[0]:.2f} s); "
+        f"Newton iterations per frame: {meta['newton_iterations_mean']:.2f}; unconverged frames: {unconverged}",
+        f"max sensor residual: {1e3 * res:.2e} mm",
+        f"max volume change: {100 * np.abs(motion.volume_change).max():.2f} % "
+        f"(mean {100 * np.abs(motion.volume_change).mean():.2f} %)",
+        f"energy peak: {1e3 * motion.energy[peak]:.3f} mJ at {motion.times[peak]:.2f} s",
+        f"drift at the end: {1e3 * np.linalg.norm(end, axis=1).max():.3f} mm (largest node displacement, last frame)",
+    ]
+    if meta.get("ignored_sensors"):
+        lines.append("ignored (no landmark on the model): " + ", ".join(meta["ignored_sensors"]))
+    return lines
+
+
+def run(args: argparse.Namespace) -> int:
+    recording = read_recording_args(args)
+    model = load_model_args(args)
+    motion = simulate_args(args, recording, model)
+    lines = summary(motion)
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        motion.save(args.out / "motion.npz")
+        pvd = motion.to_vtk_series(args.out / "vtk")
+        lines.append(f"wrote {args.out / 'motion.npz'} and {pvd}")
+    print("\n".join(lines))
+    return 0 if not motion.metadata.get("unconverged_frames") else 1
