@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import pytest
 
-from tonguevis.io import FORMATS, RecordingError, detect_format, read_recording, supported_formats, write_recording
+from tonguevis.io import (
+    FORMATS, RecordingError, detect_format, read_recording, registered_formats, supported_formats, write_recording,
+)
 from tests.io.synthetic import make_recording
 
 
 def test_every_format_registers_reader_and_sniffer():
-    supported_formats()  # registers everything
+    formats = registered_formats()
+    assert formats == FORMATS and "csv" in supported_formats()
     assert set(FORMATS) == {"ndi_wave", "carstens", "est_track", "mview", "bvh", "csv"}
     assert {n for n, f in FORMATS.items() if f.write} == {"ndi_wave", "bvh", "csv"}
     for fmt in FORMATS.values():

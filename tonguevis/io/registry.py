@@ -59,6 +59,12 @@ def _ensure_registered() -> None:
         importlib.import_module(f"tonguevis.io.{module}")
 
 
+def registered_formats() -> dict[str, RecordingFormat]:
+    """Every registered format by name (importing the format modules first)."""
+    _ensure_registered()
+    return dict(FORMATS)
+
+
 def supported_formats() -> str:
     """One line per format: name, extensions and what it reads/writes."""
     _ensure_registered()
