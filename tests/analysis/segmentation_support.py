@@ -184,3 +184,22 @@ def reference_greedy(points, tets, seeds, frames, weights, fit_function):
         members[best] = members[best] + best_ring
         labels[best_ring] = best
     return labels
+
+
+def box_model():
+    """A 60 x 40 x 30 mm block 'tongue' (tip at +x) anchored on the back of its floor, with
+    TT, TD, TL, TR on its top: small and fast enough to simulate a demo recording in a test."""
+    from types import SimpleNamespace
+
+    from tonguevis.mesh.tetmesh import TetMesh
+    from tonguevis.sim.model import TongueModel
+
+    points, tets = bar_mesh(6, 4, 3, length=0.06, width=0.04, height=0.03)
+
+    def node(x, y, z):
+        return int(np.argmin(np.linalg.norm(points - [x, y, z], axis=1)))
+
+    sensors = {"TT": node(0.05, 0.02, 0.03), "TD": node(0.03, 0.02, 0.03),
+               "TL": node(0.04, 0.03, 0.03), "TR": node(0.04, 0.01, 0.03)}
+    anchors = np.flatnonzero((points[:, 2] < 1e-9) & (points[:, 0] < 0.025))
+    return TongueModel(TetMesh(points, tets), SimpleNamespace(sensors=sensors, anchors=anchors))

@@ -18,7 +18,8 @@ log = logging.getLogger("tonguevis")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", type=Path, help="the recording (NDI Wave TSV, Carstens .pos, EST .ema, ...)")
+    parser.add_argument("file", type=Path,
+                        help="the recording (NDI Wave TSV, Carstens .pos, EST .ema, ...) or a saved motion (.npz)")
     parser.add_argument("--sensors", metavar="MAP",
                         help="sensor map (JSON file or preset); default: sensor_map.json beside FILE if any")
     parser.add_argument("--mesh", metavar="PATH", type=Path,
@@ -47,6 +48,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="constraint modes without the anchors as constrained nodes")
     parser.add_argument("--modal-modes", type=int, default=100, metavar="M",
                         help="modes of the simulation (default 100)")
+    parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
+                        help="sensor nodes: the speaker's own layout (default) or the paper's placement rule")
     parser.add_argument("--out", type=Path, required=True, metavar="OUT.vtu", help="VTU file to write")
     parser.add_argument("--png", type=Path, metavar="OUT.png", help="also render a picture (off screen)")
     parser.add_argument("--save", type=Path, metavar="OUT.npz", help="also save the whole result")
@@ -86,6 +89,10 @@ def _target(args, rec, motion):
     from tonguevis.preprocess import correct_head, find_productions
     from tonguevis.preprocess._names import reference_names
 
+    if rec is None:
+        raise SegmentationError("--production needs the recording to find the productions: give the "
+                                "recording itself, or keep it where the saved motion says it was", args.file)
+
     references = reference_names(rec.sensor_names)
     timing = correct_head(rec, references) if len(references) >= 3 else rec
     table = find_productions(timing)
@@ -96,23 +103,51 @@ def _target(args, rec, motion):
     return peak_energy_target(motion, production) if args.peak else production_target(motion, production)
 
 
+def load_model(mesh: Path | None, axes: str | None):
+    """The tongue model: ours, or one built on ``--mesh``."""
+    from tonguevis.sim import TongueModel
+
+    if mesh is None:
+        return TongueModel.default()
+    return TongueModel.from_mesh(mesh, axes=axes)
+
+
+def _recording(path: Path, sensors):
+    from tonguevis.io import read_recording
+
+    if sensors is None and (path.parent / "sensor_map.json").exists():
+        sensors = path.parent / "sensor_map.json"
+    return read_recording(path, sensor_map=sensors)
+
+
+def _motion(args):
+    """(recording or None, motion): a saved motion is loaded, a recording simulated."""
+    from tonguevis._progress import tqdm_progress
+    from tonguevis.sim import simulate
+    from tonguevis.sim.motion import Motion
+
+    if args.file.suffix.lower() == ".npz":
+        motion = Motion.load(args.file)
+        source = motion.metadata.get("recording", {})
+        source = source.get("file") if isinstance(source, dict) else source
+        rec = None
+        if args.production is not None and source and Path(source).exists():
+            rec = _recording(Path(source), args.sensors)
+        return rec, motion
+    rec = _recording(args.file, args.sensors)
+    model = load_model(args.mesh, args.axes)
+    with tqdm_progress("simulating", disable=args.quiet) as progress:
+        motion = simulate(rec, model, modes=args.modal_modes, landmarks=args.landmarks, progress=progress)
+    return rec, motion
+
+
 def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
     from tonguevis.analysis.segmentation import segment
-    from tonguevis.io import read_recording
-    from tonguevis.sim import TongueModel, simulate
 
     seeding = _seeding(args)
-    sensor_map = args.sensors
-    if sensor_map is None and (args.file.parent / "sensor_map.json").exists():
-        sensor_map = args.file.parent / "sensor_map.json"
-    rec = read_recording(args.file, sensor_map=sensor_map)
-    if args.mesh is not None:
-        model = TongueModel.from_mesh(args.mesh, axes=args.axes)
-    else:
-        model = TongueModel.default()
-    with tqdm_progress("simulating", disable=args.quiet) as progress:
-        motion = simulate(rec, model, modes=args.modal_modes, progress=progress)
+    rec, motion = _motion(args)
+    model = motion.model
     target = _target(args, rec, motion)
     with tqdm_progress(f"segmenting ({args.modes} modes)", disable=args.quiet) as progress:
         result = segment(model, target, args.modes, constrained_nodes=[] if args.no_anchors else None,
