@@ -1,0 +1,158 @@
+"""Off-screen rendering of a :class:`~tonguevis.analysis.morph.Morph` to PNG or MP4 (pyvista, no Qt).
+
+The elements are coloured by the CDF of their source–target difference
+(eq. 14): blue where the two shapes agree, red where they differ most, with
+the colours spread evenly over the mesh.  A PNG is a strip of snapshots from
+source (t = 0) to target (t = 1), like Fig. 15; an MP4 plays the morph forward
+and back with one large oblique view and the three small orthogonal views
+(top, front, lateral) following.  MP4 frames are piped to ffmpeg by
+imageio-ffmpeg.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from tonguevis.analysis.morph import Morph, play_schedule
+
+COLORMAP = "coolwarm"  # blue = low difference, red = high
+SCALAR_BAR = "difference percentile (eq. 14, CDF)"
+#: Camera directions (from the focal point towards the camera) and up vectors, our frame
+#: (x anterior, y left, z up).
+_BAR_ARGS = {"title": SCALAR_BAR, "vertical": False, "fmt": "%.2f", "position_x": 0.15, "position_y": 0.03,
+             "width": 0.7, "height": 0.07, "title_font_size": 12, "label_font_size": 11, "n_labels": 5}
+VIEWS = {
+    "oblique": ((0.9, -1.2, 0.7), (0, 0, 1)),
+    "top": ((0, 0, 1), (1, 0, 0)),
+    "front": ((1, 0, 0), (0, 0, 1)),
+    "lateral": ((0, -1, 0), (0, 0, 1)),
+}
+
+
+def _grid(morph: Morph):
+    import pyvista as pv
+
+    mesh = morph.model.mesh
+    cells = np.hstack([np.full((mesh.n_tets, 1), 4), mesh.tets]).ravel()
+    grid = pv.UnstructuredGrid(cells, np.full(mesh.n_tets, pv.CellType.TETRA, dtype=np.uint8),
+                               mesh.points.astype(np.float64))
+    grid.cell_data["difference"] = morph.element_colour
+    return grid.extract_surface(pass_pointid=True, algorithm="dataset_surface")
+
+
+def _place_camera(plotter, view: str, centre, radius: float, zoom: float = 1.0) -> None:
+    direction, up = VIEWS[view]
+    d = np.asarray(direction, float)
+    d /= np.linalg.norm(d)
+    plotter.camera.focal_point = tuple(centre)
+    plotter.camera.position = tuple(np.asarray(centre) + 4.0 * radius * d)
+    plotter.camera.up = up
+    plotter.reset_camera_clipping_range()
+    plotter.camera.zoom(zoom)
+
+
+def _bounds(morph: Morph, ts) -> tuple[np.ndarray, float]:
+    """Centre and radius covering every frame of the morph (fixed camera while it plays)."""
+    pts = morph.model.mesh.points[None] + morph.displacements(ts)
+    lo, hi = pts.reshape(-1, 3).min(0), pts.reshape(-1, 3).max(0)
+    return 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
+
+
+def _atomic(path: Path, write) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=path.suffix)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def render_png(morph: Morph, path, steps=(0.0, 0.25, 0.5, 0.75, 1.0), view: str = "oblique",
+               size=(1500, 460), title: str | None = None) -> Path:
+    """A strip of snapshots at blend parameters ``steps`` (t = 0 source, 1 target) written as PNG."""
+    import pyvista as pv
+
+    path = Path(path)
+    surface = _grid(morph)
+    point_ids = surface.point_data["vtkOriginalPointIds"]
+    disp = morph.displacements(np.asarray(steps, float))
+    centre, radius = _bounds(morph, np.asarray(steps, float))
+    plotter = pv.Plotter(off_screen=True, shape=(1, len(steps)), window_size=size, border=False)
+    try:
+        for k, t in enumerate(steps):
+            plotter.subplot(0, k)
+            shown = surface.copy()
+            shown.points = morph.model.mesh.points[point_ids] + disp[k][point_ids]
+            plotter.add_mesh(shown, scalars="difference", cmap=COLORMAP, clim=(0, 1), show_edges=False,
+                             show_scalar_bar=(k == len(steps) // 2), scalar_bar_args=_BAR_ARGS)
+            name = {0.0: morph.labels[0] + " (t = 0)", 1.0: morph.labels[1] + " (t = 1)"}.get(float(t), f"t = {t:.2f}")
+            plotter.add_text(name, font_size=9, position="upper_left")
+            _place_camera(plotter, view, centre, radius)
+        if title:
+            plotter.subplot(0, 0)
+            plotter.add_text(title, font_size=8, position="lower_left")
+        _atomic(path, lambda tmp: plotter.screenshot(tmp))
+    finally:
+        plotter.close()
+    return path
+
+
+def render_mp4(morph: Morph, path, n_frames: int = 60, fps: int = 30, back: bool = True,
+               size=(1280, 720), title: str | None = None, progress=None) -> Path:
+    """Play the morph forward (and back) to an MP4: one oblique view and the top/front/lateral views."""
+    import imageio_ffmpeg
+    import pyvista as pv
+
+    from tonguevis._progress import report
+
+    path = Path(path)
+    ts = play_schedule(n_frames, back=back)
+    disp = morph.displacements(ts, dtype=np.float32)
+    centre, radius = _bounds(morph, ts[: n_frames])
+    surface = _grid(morph)
+    point_ids = surface.point_data["vtkOriginalPointIds"]
+    rest = morph.model.mesh.points[point_ids]
+    plotter = pv.Plotter(off_screen=True, shape="1|3", window_size=size, border=False)
+    shown = []
+    try:
+        for k, view in enumerate(("oblique", "top", "front", "lateral")):
+            plotter.subplot(k)
+            mesh = surface.copy()
+            shown.append(mesh)
+            plotter.add_mesh(mesh, scalars="difference", cmap=COLORMAP, clim=(0, 1),
+                             show_scalar_bar=(k == 0), scalar_bar_args=_BAR_ARGS)
+            plotter.add_text(view, font_size=8, position="upper_left")
+            _place_camera(plotter, view, centre, radius, zoom=1.0 if k == 0 else 1.6)
+        plotter.subplot(0)
+        label = plotter.add_text("", font_size=10, position="upper_right")
+        plotter.add_text(f"{morph.labels[0]} (t = 0)  →  {morph.labels[1]} (t = 1)"
+                         + (f"\n{title}" if title else ""), font_size=8, position="upper_edge")
+
+        def write(tmp):
+            writer = imageio_ffmpeg.write_frames(tmp, size, fps=fps, macro_block_size=8, quality=7,
+                                                 output_params=["-f", "mp4"])
+            writer.send(None)
+            try:
+                for f, t in enumerate(ts):
+                    for mesh in shown:
+                        mesh.points[:] = rest + disp[f][point_ids]
+                    label.SetText(3, f"t = {t:.2f}")
+                    plotter.render()
+                    image = plotter.screenshot(return_img=True)
+                    if image.shape[1] != size[0] or image.shape[0] != size[1]:
+                        raise RuntimeError(f"rendered {image.shape[1]}x{image.shape[0]}, expected {size}")
+                    writer.send(np.ascontiguousarray(image[:, :, :3]))
+                    report(progress, f + 1, len(ts), "rendering the morph")
+            finally:
+                writer.close()
+
+        _atomic(path, write)
+    finally:
+        plotter.close()
+    return path
