@@ -64,3 +64,21 @@ def test_map_values_can_be_ids_digit_strings_or_default_names(tmp_path):
     for value in (3, "3", "S3"):
         mapped = read_recording(tmp_path / "b.tsv", sensor_map={"TT": value})
         assert mapped.sensor_names == ["TT", "S9"]
+
+
+def test_a_sensor_map_beside_the_file_is_used_unless_one_is_given(tmp_path):
+    """Corpus folders carry their channel names in sensor_map.json."""
+    import json
+
+    import numpy as np
+
+    from tonguevis.io import Recording, read_recording, write_recording
+
+    rec = Recording(rate=100.0, times=np.arange(5) / 100.0,
+                    sensors={"S1": np.zeros((5, 3)), "S2": np.ones((5, 3)) * 0.01})
+    path = tmp_path / "take.csv"
+    write_recording(rec, path)
+    assert sorted(read_recording(path).sensors) == ["S1", "S2"]
+    (tmp_path / "sensor_map.json").write_text(json.dumps({"TT": "S1"}))
+    assert sorted(read_recording(path).sensors) == ["S2", "TT"]
+    assert sorted(read_recording(path, sensor_map={}).sensors) == ["S1", "S2"]

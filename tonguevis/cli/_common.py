@@ -25,18 +25,10 @@ def add_model_arguments(parser: argparse.ArgumentParser, modes: int = 100) -> No
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def sensor_map_for(path: Path, sensors):
-    """The sensor map to use: the one given, else ``sensor_map.json`` beside the file, else None."""
-    if sensors is not None:
-        return sensors
-    beside = Path(path).parent / "sensor_map.json"
-    return beside if beside.exists() else None
-
-
 def read_recording_args(args):
     from tonguevis.io import read_recording
 
-    return read_recording(args.file, sensor_map=sensor_map_for(args.file, args.sensors))
+    return read_recording(args.file, sensor_map=args.sensors)
 
 
 def load_model_args(args):

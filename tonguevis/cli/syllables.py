@@ -35,12 +35,8 @@ def run(args: argparse.Namespace) -> int:
     from tonguevis.preprocess import correct_head, find_productions, find_trains
     from tonguevis.preprocess._names import reference_names
 
-    sensor_map = args.sensors
-    if sensor_map is None:
-        beside = args.file.parent / "sensor_map.json"
-        if beside.exists():
-            sensor_map = beside
-    rec = read_recording(args.file, sensor_map=sensor_map)
+    rec = read_recording(args.file, sensor_map=args.sensors)
+    sensor_map = rec.metadata.get("sensor_map")
     if args.tip not in rec.sensors:
         raise RecordingError(
             f"no tongue-tip sensor {args.tip!r} (sensors: {', '.join(rec.sensor_names)}); name the "

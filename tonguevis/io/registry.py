@@ -123,6 +123,9 @@ _MALFORMED = (
 )
 
 
+SENSOR_MAP_BESIDE = "sensor_map.json"
+
+
 def read_recording(
     path: str | os.PathLike,
     sensor_map: dict | str | os.PathLike | None = None,
@@ -137,7 +140,9 @@ def read_recording(
     sensor_map : None, a dict, a JSON file or a preset name (see
         :func:`tonguevis.io.sensor_map.load_sensor_map`) from canonical names
         (TT, TB, TD, TBK, TL, TR, JAW, REF1, ...) to the channel as the file
-        names it; unmapped channels keep the reader's default names.
+        names it; unmapped channels keep the reader's default names.  When
+        None and a ``sensor_map.json`` lies beside the file (as in a corpus
+        folder), that map is used; pass ``{}`` to read the raw channel names.
     format : force a format by name instead of detecting it.
     **format_options : passed to the reader (e.g. ``axes=`` for NDI Wave,
         ``channels=`` for headerless Carstens AG500, ``audio=False``).
@@ -157,7 +162,10 @@ def read_recording(
             raise RecordingError("no such file", path)
     else:
         fmt = detect_format(path)
-    mapping = load_sensor_map(sensor_map) if sensor_map is not None else None
+    if sensor_map is None and (path.parent / SENSOR_MAP_BESIDE).is_file():
+        sensor_map = path.parent / SENSOR_MAP_BESIDE
+        log.info("%s: using the sensor map %s beside it", path, sensor_map)
+    mapping = load_sensor_map(sensor_map) if sensor_map else None
     try:
         rec = fmt.read(path, **format_options)
     except RecordingError:
