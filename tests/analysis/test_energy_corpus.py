@@ -119,7 +119,7 @@ def test_cli_energy_writes_long_csv_and_png(tmp_path, monkeypatch):
     from tonguevis.cli import energy as energy_cli
     from tonguevis.cli import main
 
-    monkeypatch.setattr(energy_cli, "load_model", lambda mesh: box_tongue())
+    monkeypatch.setattr(energy_cli, "load_model", lambda args: box_tongue())
     out, png, summary = tmp_path / "e.csv", tmp_path / "e.png", tmp_path / "s.csv"
     code = main(["energy", str(DATA_DIR / "spk1_ta.tsv"), "--csv", str(out), "--png", str(png),
                  "--summary", str(summary), "--modes", str(MODES), "--landmarks", "rule", "--quiet"])

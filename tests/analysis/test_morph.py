@@ -179,3 +179,32 @@ def test_cli_morph_bad_arguments(saved_motions, tmp_path, capsys):
     assert code == 2 and ".mp4 or .png" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["morph", "a.npz", "b.npz@1", "--out", str(tmp_path / "m.png")])
+
+
+def test_cdf_colour_equals_rank_reference_with_ties():
+    from scipy.stats import rankdata
+
+    rng = np.random.default_rng(11)
+    for _ in range(100):
+        values = rng.integers(0, 15, rng.integers(1, 50)).astype(float)
+        np.testing.assert_allclose(cdf_colour(values), (rankdata(values) - 0.5) / len(values))
+
+
+def test_cli_morph_simulates_a_recording_once(tmp_path, monkeypatch, capsys):
+    from tonguevis.cli import main
+    from tonguevis.cli import morph as morph_cli
+    from tonguevis.paths import DATA_DIR
+
+    monkeypatch.setattr(morph_cli, "load_model", lambda args: box_tongue())
+    calls = []
+    real = morph_cli._motion
+    monkeypatch.setattr(morph_cli, "_motion", lambda *a: calls.append(a[0]) or real(*a))
+    out = tmp_path / "m.png"
+    rec = DATA_DIR / "spk1_la.tsv"
+    code = main(["morph", f"{rec}@5.55", f"{rec}@5.70", "--out", str(out), "--modes", str(MODES),
+                 "--landmarks", "rule", "--quiet"])
+    assert code == 0, capsys.readouterr().err
+    assert calls == [rec]
+    text = capsys.readouterr().out
+    assert "spk1_la @ 5.55 s" in text and "spk1_la @ 5.70 s" in text
+    assert out.stat().st_size > 20_000

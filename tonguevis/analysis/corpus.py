@@ -79,10 +79,9 @@ def _trial(value, path) -> int:
 
 def recording_extensions() -> tuple[str, ...]:
     """File extensions of every registered recording reader (``.tsv``, ``.pos``, ...)."""
-    from tonguevis.io import registry
+    from tonguevis.io.registry import registered_formats
 
-    registry._ensure_registered()
-    return tuple(sorted({ext for f in registry.FORMATS.values() if f.read is not None for ext in f.extensions}))
+    return tuple(sorted({ext for f in registered_formats().values() if f.read is not None for ext in f.extensions}))
 
 
 def find_recordings(paths: Iterable[str | os.PathLike], extensions: Sequence[str] | None = None) -> list[Path]:

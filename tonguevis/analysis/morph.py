@@ -45,12 +45,19 @@ def cdf_colour(values: np.ndarray) -> np.ndarray:
     For distinct values the result is exactly {½/N, 1½/N, ...}: uniform, in the
     same order as the values.
     """
-    from scipy.stats import rankdata
-
-    values = np.asarray(values, dtype=np.float64)
-    if values.size == 0:
+    values = np.asarray(values, dtype=np.float64).ravel()
+    n = values.size
+    if n == 0:
         return values.copy()
-    return (rankdata(values, method="average") - 0.5) / values.size
+    order = np.argsort(values, kind="stable")
+    ordered = values[order]
+    # Tie groups: runs of equal values in sorted order share the mean of their 1-based ranks.
+    starts = np.flatnonzero(np.concatenate([[True], ordered[1:] != ordered[:-1]]))
+    ends = np.append(starts[1:], n)  # exclusive
+    mean_rank = 0.5 * (starts + 1 + ends)  # mean of ranks starts+1 .. ends
+    ranks = np.empty(n)
+    ranks[order] = np.repeat(mean_rank, ends - starts)
+    return (ranks - 0.5) / n
 
 
 def play_schedule(n_frames: int, back: bool = True) -> np.ndarray:

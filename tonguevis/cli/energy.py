@@ -21,6 +21,8 @@ log = logging.getLogger("tonguevis")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from tonguevis.cli._common import add_model_arguments
+
     parser.add_argument("paths", nargs="+", type=Path, metavar="PATH", help="recordings or folders of recordings")
     parser.add_argument("--sensors", metavar="MAP",
                         help="sensor map (JSON file or preset) for every recording; default: "
@@ -35,18 +37,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="grouping for the plot and summary, from speaker,syllable,trial,recording "
                              "(default: speaker,syllable)")
     parser.add_argument("--all", action="store_true", help="every production, not only the 2nd-4th of each train")
-    parser.add_argument("--mesh", type=Path, help="tongue mesh (default: the shipped model)")
-    parser.add_argument("--modes", type=int, default=100, help="modal basis size (default: 100)")
-    parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
-                        help="sensor nodes: snapped to each speaker's layout, or the paper's fixed rule")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_model_arguments(parser)
 
 
-def load_model(mesh: Path | None):
+def load_model(args):
     """The tongue model: ``mesh`` when given, else the shipped default."""
-    from tonguevis.sim import TongueModel
+    from tonguevis.cli._common import load_model_args
 
-    return TongueModel.from_mesh(mesh) if mesh is not None else TongueModel.default()
+    return load_model_args(args)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,11 +59,12 @@ def run(args: argparse.Namespace) -> int:
     corpus = load_corpus(args.paths, table=args.labels)
     if not len(corpus):
         raise CorpusError(f"no recordings found in {', '.join(map(str, args.paths))}")
-    model = load_model(args.mesh)
+    model = load_model(args)
     with tqdm_progress("energy curves", disable=args.quiet) as progress:
         result = corpus_energy_curves(corpus, model=model, sensor_map=args.sensors, modes=args.modes,
                                       keep=None if args.all else (2, 3, 4), keep_motions=False,
-                                      landmarks=args.landmarks, progress=progress)
+                                      landmarks=args.landmarks, warping=not args.linear,
+                                      progress=progress)
     write_curves_csv(result.curves, args.csv)
     print(f"{len(corpus)} recording(s), {len(result.curves)} production curves -> {args.csv}")
     summaries = summarize(result.curves, by) if result.curves else []

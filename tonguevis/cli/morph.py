@@ -30,6 +30,8 @@ def _frame_spec(text: str) -> tuple[Path, float]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from tonguevis.cli._common import add_model_arguments
+
     parser.add_argument("source", type=_frame_spec, metavar="SOURCE@TIME", help="source shape (t = 0)")
     parser.add_argument("target", type=_frame_spec, metavar="TARGET@TIME", help="target shape (t = 1)")
     parser.add_argument("--out", type=Path, required=True, metavar="MP4|PNG", help="output video or image")
@@ -37,18 +39,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fps", type=int, default=30, help="MP4 frame rate (default 30)")
     parser.add_argument("--one-way", action="store_true", help="MP4 plays source → target only (default: and back)")
     parser.add_argument("--sensors", metavar="MAP", help="sensor map for recordings (default: sensor_map.json beside)")
-    parser.add_argument("--mesh", type=Path, help="tongue mesh for recordings (default: the shipped model)")
-    parser.add_argument("--modes", type=int, default=100, help="modal basis size for recordings (default 100)")
-    parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
-                        help="sensor nodes for recordings: each speaker's layout or the paper's rule")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_model_arguments(parser)
 
 
-def load_model(mesh: Path | None):
+def load_model(args):
     """The tongue model recordings are simulated on: ``mesh`` when given, else the shipped default."""
-    from tonguevis.sim import TongueModel
+    from tonguevis.cli._common import load_model_args
 
-    return TongueModel.from_mesh(mesh) if mesh is not None else TongueModel.default()
+    return load_model_args(args)
 
 
 def _motion(path: Path, model, args, progress):
@@ -61,7 +59,8 @@ def _motion(path: Path, model, args, progress):
     if sensor_map is None and (path.parent / "sensor_map.json").is_file():
         sensor_map = path.parent / "sensor_map.json"
     rec = read_recording(path, sensor_map=sensor_map)
-    return simulate(rec, model=model, modes=args.modes, landmarks=args.landmarks, progress=progress)
+    return simulate(rec, model=model, modes=args.modes, landmarks=args.landmarks, warping=not args.linear,
+                    progress=progress)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -87,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     with tqdm_progress("simulating", disable=args.quiet) as progress:
         for path in (src_path, tgt_path):
             if path not in motions:
-                model = model or load_model(args.mesh)
+                model = model or load_model(args)
                 motions[path] = _motion(path, model, args, progress)
     morph = morph_between(motions[src_path], src_time, motions[tgt_path], tgt_time)
     src, tgt = motions[src_path], motions[tgt_path]
