@@ -143,3 +143,23 @@ def test_target_columns_reproduce_weighted_frame_errors(small_bar):
     direct = sum(w * np.sum((matrix @ u.ravel()) ** 2) for w, u in zip(target.weights, frames))
     reduced = sum(np.sum((matrix @ y.ravel()) ** 2) for y in target.columns)
     assert reduced == pytest.approx(direct, rel=1e-9)
+
+
+def test_zero_boundary_shortcut_matches_a_real_solve(small_bar):
+    """Whole mesh, boundary = constrained nodes where the target is zero (anchors): ũ = 0 without a solve."""
+    points, tets = small_bar
+    frames = _wavy_frames(points, 2, seed=11)
+    constrained = np.array([0, 7, 19, 25])
+    frames[:, constrained] = 0.0
+    target = SegmentationTarget.sequence(frames, np.array([1.0, 2.0]))
+    fitter = make_fitter(points, tets, target, "constraint", constrained)
+    everything = np.arange(len(tets))
+
+    def fit(p, t, m, f):
+        return reference_constraint_fit(p, t, m, f, constrained)
+
+    expected = reference_error(points, tets, everything, frames, target.weights, fit)
+    assert fitter.error(everything) == pytest.approx(expected, rel=1e-9)
+    assert fitter.n_factorisations == 0
+    nodes, approx = fitter.approximate(everything, frames)
+    np.testing.assert_allclose(approx, fit(points, tets, everything, frames)[1], atol=1e-15)

@@ -29,6 +29,7 @@ matrix give the solution without them.  With no boundary at all, ``ũ = 0``
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -36,11 +37,13 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from tonguevis.analysis.segmentation.fitter import LocalFitter
+from tonguevis.analysis.segmentation.fitter import CORES, LocalFitter, worker_pool
 from tonguevis.sim.assembly import assemble_stiffness
 
 SHIFT = 1e-9
 SYSTEM_CACHE = 4  # factorisations kept (each up to ~100 MB for a whole 1,800-node tongue)
+#: SuperLU releases the GIL: a many-column solve is split over this many threads.
+SOLVE_THREADS = CORES
 
 
 @dataclass
@@ -65,7 +68,13 @@ class InteriorSystem:
         if self.solve is None:
             return np.zeros((c, len(self.interior), 3))
         y_a = np.transpose(values[:, self.around, :], (1, 2, 0)).reshape(-1, c)
-        x = self.solve(-(self.k_ia @ y_a))
+        rhs = -(self.k_ia @ y_a)
+        if SOLVE_THREADS > 1 and c >= 4 and len(self.interior) >= 300:
+            blocks = np.array_split(np.arange(c), SOLVE_THREADS)
+            x = np.concatenate(list(worker_pool("tonguevis-solve", SOLVE_THREADS).map(lambda b: self.solve(np.ascontiguousarray(rhs[:, b])), blocks)),
+                               axis=1)
+        else:
+            x = self.solve(rhs)
         return np.transpose(x.reshape(len(self.interior), 3, c), (2, 0, 1))
 
     def error(self, values: np.ndarray) -> float:
@@ -107,6 +116,7 @@ class ConstraintFitter(LocalFitter):
     """Constraint-mode fit of tet sets (eq. 13); see the module notes."""
 
     mode = "constraint"
+    threads = CORES
 
     def __init__(self, *args, poisson: float = 0.49, **kwargs):
         self.poisson = float(poisson)
@@ -120,6 +130,7 @@ class ConstraintFitter(LocalFitter):
                                    minlength=len(self.points))
         self._interior_memo: dict[bytes, float] = {}
         self._systems: OrderedDict[bytes, InteriorSystem] = OrderedDict()
+        self._lock = threading.Lock()  # the system cache is shared by the fitting threads
         self.n_factorisations = 0
 
     def interior_nodes(self, members: np.ndarray) -> np.ndarray:
@@ -140,10 +151,11 @@ class ConstraintFitter(LocalFitter):
         mask = np.zeros(len(self.points), dtype=bool)
         mask[interior] = True
         key = np.packbits(mask).tobytes()
-        found = self._systems.get(key)
-        if found is not None:
-            self._systems.move_to_end(key)
-            return found
+        with self._lock:
+            found = self._systems.get(key)
+            if found is not None:
+                self._systems.move_to_end(key)
+                return found
         rows = self._stiffness[_dofs(interior)]
         coupled = np.zeros(len(self.points), dtype=bool)
         coupled[rows.indices // 3] = True
@@ -162,11 +174,12 @@ class ConstraintFitter(LocalFitter):
             if solve is None:
                 shift = SHIFT * k_ii.diagonal().mean()
                 solve = _refined(_factorise(k_ii + shift * sp.identity(k_ii.shape[0], format="csc")).solve, k_ii)
-            self.n_factorisations += 1
         found = InteriorSystem(interior, around, solve, k_ia, self._lumped[interior])
-        self._systems[key] = found
-        if len(self._systems) > SYSTEM_CACHE:
-            self._systems.popitem(last=False)
+        with self._lock:
+            self.n_factorisations += solve is not None
+            self._systems[key] = found
+            if len(self._systems) > SYSTEM_CACHE:
+                self._systems.popitem(last=False)
         return found
 
     def _compute_error(self, members: np.ndarray, base: np.ndarray | None) -> float:
@@ -176,9 +189,19 @@ class ConstraintFitter(LocalFitter):
         key = np.packbits(mask).tobytes()
         found = self._interior_memo.get(key)
         if found is None:
-            found = self.system(interior).error(self.columns)
+            if self._still_boundary(members, mask, self.columns):  # ũ_I = 0, nothing to solve
+                y = self.columns[:, interior, :]
+                found = float(np.einsum("cpi,cpi,p->", y, y, self._lumped[interior]))
+            else:
+                found = self.system(interior).error(self.columns)
             self._interior_memo[key] = found
         return found
+
+    def _still_boundary(self, members: np.ndarray, interior_mask: np.ndarray, values: np.ndarray) -> bool:
+        """Whether the target is zero on every non-internal node of the set (e.g. the whole
+        mesh with the anchors as its only boundary): then the fit is zero."""
+        nodes = self.graph.nodes_of(members)
+        return not np.any(values[:, nodes[~interior_mask[nodes]], :])
 
     def approximate(self, members: np.ndarray, displacements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Nodes (p,) of the set and its constraint-mode fit (F, p, 3), m, of each frame."""
@@ -186,5 +209,11 @@ class ConstraintFitter(LocalFitter):
         interior = self.interior_nodes(members)
         fit = np.array(displacements[:, nodes, :], dtype=np.float64, copy=True)
         if len(interior):
-            fit[:, np.searchsorted(nodes, interior), :] = self.system(interior).fit(displacements)
+            mask = np.zeros(len(self.points), dtype=bool)
+            mask[interior] = True
+            where = np.searchsorted(nodes, interior)
+            if self._still_boundary(members, mask, displacements):
+                fit[:, where, :] = 0.0
+            else:
+                fit[:, where, :] = self.system(interior).fit(displacements)
         return nodes, fit

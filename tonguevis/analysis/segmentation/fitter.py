@@ -10,6 +10,10 @@ change is never computed twice.
 
 from __future__ import annotations
 
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from tonguevis.analysis.segmentation.graph import TetGraph, set_key
@@ -26,6 +30,8 @@ class LocalFitter:
     """
 
     mode = "base"
+    #: threads for independent fits (SuperLU releases the GIL; rigid fits are too quick to bother)
+    threads = 1
 
     def __init__(self, points: np.ndarray, tets: np.ndarray, graph: TetGraph, target: SegmentationTarget,
                  constrained: np.ndarray | None = None):
@@ -81,12 +87,33 @@ class LocalFitter:
             self.n_computed += 1
         return found
 
+    def errors(self, jobs: list[tuple[np.ndarray, np.ndarray | None]]) -> list[float]:
+        """:meth:`error` of several (members, base) pairs; threaded when the fitter allows it."""
+        if self.threads > 1 and len(jobs) > 1:
+            return list(worker_pool("tonguevis-fit", self.threads).map(lambda job: self.error(*job), jobs))
+        return [self.error(*job) for job in jobs]
+
     def _compute_error(self, members: np.ndarray, base: np.ndarray | None) -> float:  # pragma: no cover
         raise NotImplementedError
 
     def approximate(self, members: np.ndarray, displacements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Nodes (p,) of the set and the fit (F, p, 3), m, of each (F, n, 3) frame."""
         raise NotImplementedError  # pragma: no cover
+
+
+_POOLS: dict[str, ThreadPoolExecutor] = {}
+_POOLS_LOCK = threading.Lock()
+#: CPU cores worth using (the benchmarks' machine has 2).
+CORES = max(1, min(2, os.cpu_count() or 1))
+
+
+def worker_pool(name: str, workers: int) -> ThreadPoolExecutor:
+    """A process-wide thread pool per purpose (separate pools, so nested use cannot deadlock)."""
+    with _POOLS_LOCK:
+        pool = _POOLS.get(name)
+        if pool is None:
+            pool = _POOLS[name] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix=name)
+        return pool
 
 
 def _volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:

@@ -57,15 +57,15 @@ def grow_partitions(fitter: LocalFitter, seeds, progress: ProgressCallback | Non
     assigned = int((labels != UNASSIGNED).sum())
     report(progress, assigned, k, message)
     while assigned < k:
-        for i, proposal in enumerate(proposals):
-            if proposal is None:
-                ring = graph.one_ring(members[i], labels)
-                if len(ring):
-                    candidate = np.concatenate([members[i], ring])
-                    error = fitter.error(candidate, base=members[i]) / fitter.volume(candidate)
-                else:
-                    error = np.inf
-                proposals[i] = (ring, error)
+        pending = [i for i, proposal in enumerate(proposals) if proposal is None]
+        rings = {i: graph.one_ring(members[i], labels) for i in pending}
+        jobs = [(i, np.concatenate([members[i], rings[i]])) for i in pending if len(rings[i])]
+        errors = fitter.errors([(candidate, members[i]) for i, candidate in jobs])  # independent: threaded
+        for (i, candidate), error in zip(jobs, errors):
+            proposals[i] = (rings[i], error / fitter.volume(candidate))
+        for i in pending:
+            if not len(rings[i]):
+                proposals[i] = (rings[i], np.inf)
         errors = np.array([p[1] for p in proposals])
         if not np.isfinite(errors).any():
             # Nothing touches the unassigned tets: a separate component.
