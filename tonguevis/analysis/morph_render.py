@@ -33,7 +33,9 @@ VIEWS = {
 }
 
 
-def _grid(morph: Morph):
+def morph_surface(morph: Morph):
+    """The boundary surface of the morph's mesh at rest (PolyData) with cell data "difference"
+    (the CDF colour of the tet each face belongs to) and point data "vtkOriginalPointIds" (mesh nodes)."""
     import pyvista as pv
 
     mesh = morph.model.mesh
@@ -44,7 +46,8 @@ def _grid(morph: Morph):
     return grid.extract_surface(pass_pointid=True, algorithm="dataset_surface")
 
 
-def _place_camera(plotter, view: str, centre, radius: float, zoom: float = 1.0) -> None:
+def place_camera(plotter, view: str, centre, radius: float, zoom: float = 1.0) -> None:
+    """Point the current renderer's camera at ``centre`` from the direction of ``VIEWS[view]``."""
     direction, up = VIEWS[view]
     d = np.asarray(direction, float)
     d /= np.linalg.norm(d)
@@ -55,7 +58,7 @@ def _place_camera(plotter, view: str, centre, radius: float, zoom: float = 1.0) 
     plotter.camera.zoom(zoom)
 
 
-def _bounds(morph: Morph, ts) -> tuple[np.ndarray, float]:
+def morph_bounds(morph: Morph, ts) -> tuple[np.ndarray, float]:
     """Centre and radius covering every frame of the morph (fixed camera while it plays)."""
     pts = morph.model.mesh.points[None] + morph.displacements(ts)
     lo, hi = pts.reshape(-1, 3).min(0), pts.reshape(-1, 3).max(0)
@@ -79,10 +82,10 @@ def render_png(morph: Morph, path, steps=(0.0, 0.25, 0.5, 0.75, 1.0), view: str 
     import pyvista as pv
 
     path = Path(path)
-    surface = _grid(morph)
+    surface = morph_surface(morph)
     point_ids = surface.point_data["vtkOriginalPointIds"]
     disp = morph.displacements(np.asarray(steps, float))
-    centre, radius = _bounds(morph, np.asarray(steps, float))
+    centre, radius = morph_bounds(morph, np.asarray(steps, float))
     plotter = pv.Plotter(off_screen=True, shape=(1, len(steps)), window_size=size, border=False)
     try:
         for k, t in enumerate(steps):
@@ -93,7 +96,7 @@ def render_png(morph: Morph, path, steps=(0.0, 0.25, 0.5, 0.75, 1.0), view: str 
                              show_scalar_bar=(k == len(steps) // 2), scalar_bar_args=_BAR_ARGS)
             name = {0.0: morph.labels[0] + " (t = 0)", 1.0: morph.labels[1] + " (t = 1)"}.get(float(t), f"t = {t:.2f}")
             plotter.add_text(name, font_size=9, position="upper_left")
-            _place_camera(plotter, view, centre, radius)
+            place_camera(plotter, view, centre, radius)
         if title:
             plotter.subplot(0, 0)
             plotter.add_text(title, font_size=8, position="lower_left")
@@ -114,8 +117,8 @@ def render_mp4(morph: Morph, path, n_frames: int = 60, fps: int = 30, back: bool
     path = Path(path)
     ts = play_schedule(n_frames, back=back)
     disp = morph.displacements(ts, dtype=np.float32)
-    centre, radius = _bounds(morph, ts[: n_frames])
-    surface = _grid(morph)
+    centre, radius = morph_bounds(morph, ts[: n_frames])
+    surface = morph_surface(morph)
     point_ids = surface.point_data["vtkOriginalPointIds"]
     rest = morph.model.mesh.points[point_ids]
     plotter = pv.Plotter(off_screen=True, shape="1|3", window_size=size, border=False)
@@ -128,7 +131,7 @@ def render_mp4(morph: Morph, path, n_frames: int = 60, fps: int = 30, back: bool
             plotter.add_mesh(mesh, scalars="difference", cmap=COLORMAP, clim=(0, 1),
                              show_scalar_bar=(k == 0), scalar_bar_args=_BAR_ARGS)
             plotter.add_text(view, font_size=8, position="upper_left")
-            _place_camera(plotter, view, centre, radius, zoom=1.0 if k == 0 else 1.6)
+            place_camera(plotter, view, centre, radius, zoom=1.0 if k == 0 else 1.6)
         plotter.subplot(0)
         label = plotter.add_text("", font_size=10, position="upper_right")
         plotter.add_text(f"{morph.labels[0]} (t = 0)  →  {morph.labels[1]} (t = 1)"

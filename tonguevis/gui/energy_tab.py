@@ -1,0 +1,217 @@
+"""The Energy tab: overlaid energy-time curves of productions, grouped and filtered (§6.3, Fig. 14).
+
+Shows :class:`~tonguevis.analysis.energy.EnergyCurve` objects (one per
+production) coloured by group (speaker × syllable by default) with a legend.
+Lists on the left choose the recordings, speakers and syllables shown.
+Hovering a curve names its production; clicking a point selects that frame:
+the tab emits :attr:`EnergyTab.frameSelected` (recording name, time in s on the
+recording's clock) and, when the clicked recording is the one the app shows
+(``current_recording``), moves the shared :class:`~tonguevis.appstate.AppState`
+there so the 3D views follow.  The picked frame can be sent to the Morph tab
+as its source or target (:attr:`EnergyTab.morphEndPicked`).
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import numpy as np
+from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
+from matplotlib.figure import Figure
+from PySide6 import QtCore, QtWidgets
+
+from tonguevis.analysis.energy import EnergyCurve
+from tonguevis.analysis.energy_plot import plot_energy_curves
+
+UNIT_SCALE = 1e3  # the axis shows mJ
+
+
+class EnergyTab(QtWidgets.QWidget):
+    """Energy curves of many productions; ``set_curves`` fills it.
+
+    state : the shared AppState (optional); current_recording : callable
+    returning the name of the recording the 3D views show (optional).
+    """
+
+    frameSelected = QtCore.Signal(str, float)
+    morphEndPicked = QtCore.Signal(str, str, float)  # "source"/"target", recording, time (s)
+
+    def __init__(self, state=None, current_recording: Callable[[], str | None] | None = None, parent=None):
+        super().__init__(parent)
+        self.state = state
+        self.current_recording = current_recording or (lambda: None)
+        self.curves: list[EnergyCurve] = []
+        self.lines: list = []  # matplotlib Line2D per shown curve
+        self.shown: list[EnergyCurve] = []
+        self.picked: tuple[EnergyCurve, int] | None = None
+
+        self.recordings = self._list("Recordings")
+        self.speakers = self._list("Speakers")
+        self.syllables = self._list("Syllables")
+        self.normalised = QtWidgets.QCheckBox("normalised time")
+        self.normalised.setToolTip("0 = the consonant release, 1 = the next release; unticked: seconds")
+        self.normalised.setChecked(True)
+        self.normalised.toggled.connect(self.redraw)
+        self.group_by = QtWidgets.QComboBox()
+        for text, keys in (("speaker × syllable", ("speaker", "syllable")), ("speaker", ("speaker",)),
+                           ("syllable", ("syllable",)), ("recording", ("recording",))):
+            self.group_by.addItem(text, keys)
+        self.group_by.currentIndexChanged.connect(self.redraw)
+
+        self.figure = Figure(figsize=(6, 4), layout="constrained")
+        self.canvas = FigureCanvasQTAgg(self.figure)
+        self.axes = self.figure.add_subplot(1, 1, 1)
+        self.marker = None
+        self.hover_label = QtWidgets.QLabel("Hover a curve to see its production; click to show that frame.")
+        self.pick_label = QtWidgets.QLabel("No frame picked.")
+        self.to_source = QtWidgets.QPushButton("Morph source ←")
+        self.to_target = QtWidgets.QPushButton("Morph target ←")
+        for button, which in ((self.to_source, "source"), (self.to_target, "target")):
+            button.setEnabled(False)
+            button.setToolTip(f"use the picked frame as the morph's {which} (t = {0 if which == 'source' else 1})")
+            button.clicked.connect(lambda _=False, w=which: self._send_morph_end(w))
+        self.canvas.mpl_connect("motion_notify_event", self._on_motion)
+        self.canvas.mpl_connect("button_press_event", self._on_click)
+
+        side = QtWidgets.QVBoxLayout()
+        for title, widget in (("Recordings", self.recordings), ("Speakers", self.speakers),
+                              ("Syllables", self.syllables)):
+            side.addWidget(QtWidgets.QLabel(title))
+            side.addWidget(widget)
+        side.addWidget(self.normalised)
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(QtWidgets.QLabel("colour by"))
+        row.addWidget(self.group_by)
+        side.addLayout(row)
+        main = QtWidgets.QVBoxLayout()
+        main.addWidget(self.canvas, 1)
+        main.addWidget(self.hover_label)
+        picks = QtWidgets.QHBoxLayout()
+        picks.addWidget(self.pick_label, 1)
+        picks.addWidget(self.to_source)
+        picks.addWidget(self.to_target)
+        main.addLayout(picks)
+        layout = QtWidgets.QHBoxLayout(self)
+        side_widget = QtWidgets.QWidget()
+        side_widget.setLayout(side)
+        side_widget.setMaximumWidth(230)
+        layout.addWidget(side_widget)
+        layout.addLayout(main, 1)
+        self.redraw()
+
+    def _list(self, title: str) -> QtWidgets.QListWidget:
+        widget = QtWidgets.QListWidget()
+        widget.setToolTip(f"{title}: tick the ones to show")
+        widget.setObjectName(title.lower())
+        widget.itemChanged.connect(lambda _item: self.redraw())
+        return widget
+
+    # ------------------------------------------------------------------ data
+    def set_curves(self, curves: Sequence[EnergyCurve]) -> None:
+        """Show these curves (all ticked); replaces what was there."""
+        self.curves = list(curves)
+        for widget, key in ((self.recordings, "recording"), (self.speakers, "speaker"), (self.syllables, "syllable")):
+            widget.blockSignals(True)
+            widget.clear()
+            for value in sorted({str(getattr(c, key)) for c in self.curves}):
+                item = QtWidgets.QListWidgetItem(f"/{value}/" if key == "syllable" else value)
+                item.setData(QtCore.Qt.UserRole, value)
+                item.setFlags(item.flags() | QtCore.Qt.ItemIsUserCheckable)
+                item.setCheckState(QtCore.Qt.Checked)
+                widget.addItem(item)
+            widget.blockSignals(False)
+        self.picked = None
+        self.redraw()
+
+    def ticked(self, widget: QtWidgets.QListWidget) -> set[str]:
+        return {widget.item(i).data(QtCore.Qt.UserRole) for i in range(widget.count())
+                if widget.item(i).checkState() == QtCore.Qt.Checked}
+
+    def set_ticked(self, widget: QtWidgets.QListWidget, values) -> None:
+        """Tick exactly ``values`` in a list (for scripts and tests)."""
+        widget.blockSignals(True)
+        for i in range(widget.count()):
+            item = widget.item(i)
+            item.setCheckState(QtCore.Qt.Checked if item.data(QtCore.Qt.UserRole) in values else QtCore.Qt.Unchecked)
+        widget.blockSignals(False)
+        self.redraw()
+
+    def visible_curves(self) -> list[EnergyCurve]:
+        recs, spks, syls = self.ticked(self.recordings), self.ticked(self.speakers), self.ticked(self.syllables)
+        return [c for c in self.curves if c.recording in recs and c.speaker in spks and c.syllable in syls]
+
+    # ------------------------------------------------------------------ drawing
+    def redraw(self, *_args) -> None:
+        ax = self.axes
+        ax.clear()
+        self.shown = self.visible_curves()
+        plot_energy_curves(ax, self.shown, by=self.group_by.currentData(), normalised=self.normalised.isChecked())
+        self.lines = list(ax.get_lines())
+        if not self.shown:
+            ax.text(0.5, 0.5, "no curves: add recordings or tick some", ha="center", va="center",
+                    transform=ax.transAxes, color="0.4")
+        self.marker = ax.plot([], [], "o", ms=9, mfc="none", mec="k", mew=1.5)[0]
+        self._draw_pick()
+        self.canvas.draw_idle()
+
+    def _x(self, curve: EnergyCurve) -> np.ndarray:
+        return curve.time_norm if self.normalised.isChecked() else curve.time_s
+
+    def curve_at(self, xdata: float, ydata: float, tolerance_px: float = 6.0) -> tuple[EnergyCurve, int] | None:
+        """The shown curve and frame nearest a data point, within ``tolerance_px`` pixels, else None."""
+        if not self.shown or xdata is None or ydata is None:
+            return None
+        to_px = self.axes.transData.transform
+        target = to_px((xdata, ydata))
+        best, best_d = None, tolerance_px
+        for curve in self.shown:
+            pts = to_px(np.column_stack([self._x(curve), curve.energy * UNIT_SCALE]))
+            d = np.hypot(pts[:, 0] - target[0], pts[:, 1] - target[1])
+            k = int(np.argmin(d))
+            if d[k] <= best_d:
+                best, best_d = (curve, k), d[k]
+        return best
+
+    @staticmethod
+    def describe(curve: EnergyCurve, k: int) -> str:
+        return (f"{curve.speaker} /{curve.syllable}/ trial {curve.trial}, production {curve.production} "
+                f"({curve.recording}): t = {curve.times[k]:.3f} s ({curve.time_s[k] * 1e3:.0f} ms after the "
+                f"release, {curve.time_norm[k]:.2f} normalised), U = {curve.energy[k] * 1e3:.4f} mJ")
+
+    def _on_motion(self, event) -> None:
+        hit = self.curve_at(event.xdata, event.ydata) if event.inaxes is self.axes else None
+        self.hover_label.setText(self.describe(*hit) if hit else "")
+
+    def _on_click(self, event) -> None:
+        if event.inaxes is not self.axes:
+            return
+        hit = self.curve_at(event.xdata, event.ydata)
+        if hit:
+            self.pick(*hit)
+
+    def pick(self, curve: EnergyCurve, k: int) -> None:
+        """Select frame ``k`` of ``curve``: mark it, emit frameSelected, move the app's time if it is shown."""
+        self.picked = (curve, k)
+        self._draw_pick()
+        self.canvas.draw_idle()
+        t = float(curve.times[k])
+        self.pick_label.setText("Picked: " + self.describe(curve, k))
+        self.to_source.setEnabled(True)
+        self.to_target.setEnabled(True)
+        self.frameSelected.emit(curve.recording, t)
+        if self.state is not None and self.current_recording() == curve.recording:
+            self.state.set_time(t, source=self)
+
+    def _draw_pick(self) -> None:
+        if self.marker is None:
+            return
+        if self.picked and self.picked[0] in self.shown:
+            curve, k = self.picked
+            self.marker.set_data([self._x(curve)[k]], [curve.energy[k] * UNIT_SCALE])
+        else:
+            self.marker.set_data([], [])
+
+    def _send_morph_end(self, which: str) -> None:
+        if self.picked:
+            curve, k = self.picked
+            self.morphEndPicked.emit(which, curve.recording, float(curve.times[k]))
