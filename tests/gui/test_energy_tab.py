@@ -101,3 +101,21 @@ def test_absolute_time_axis(tab, curves):
     x = tab.lines[0].get_xdata()
     np.testing.assert_allclose(x, curves[0].time_s)
     assert "seconds" in tab.axes.get_xlabel() or "(s)" in tab.axes.get_xlabel()
+
+
+def test_add_recordings_simulates_in_the_background(qtbot):
+    from tests.analysis.energy_support import MODES, box_tongue
+    from tonguevis.gui.energy_tab import EnergyTab
+    from tonguevis.paths import DATA_DIR
+
+    widget = EnergyTab(model_provider=box_tongue, simulate_options={"modes": MODES, "landmarks": "rule"})
+    qtbot.addWidget(widget)
+    loaded = []
+    widget.motionsLoaded.connect(loaded.append)
+    with qtbot.waitSignal(widget.motionsLoaded, timeout=90_000):
+        widget.load_paths([DATA_DIR / "spk2_ka.tsv"])
+    assert list(loaded[0]) == ["spk2_ka"]
+    assert len(widget.curves) == 15 and {c.speaker for c in widget.curves} == {"spk2"}
+    assert len(widget.lines) == 15 and widget.add_button.isEnabled()
+    widget.load_paths([DATA_DIR / "missing.tsv"])
+    assert "Cannot add" in widget.hover_label.text()

@@ -35,11 +35,17 @@ class EnergyTab(QtWidgets.QWidget):
 
     frameSelected = QtCore.Signal(str, float)
     morphEndPicked = QtCore.Signal(str, str, float)  # "source"/"target", recording, time (s)
+    motionsLoaded = QtCore.Signal(dict)  # recording name -> Motion, after "Add recordings"
 
-    def __init__(self, state=None, current_recording: Callable[[], str | None] | None = None, parent=None):
+    def __init__(self, state=None, current_recording: Callable[[], str | None] | None = None, parent=None,
+                 model_provider: Callable[[], object] | None = None, simulate_options: dict | None = None):
         super().__init__(parent)
         self.state = state
         self.current_recording = current_recording or (lambda: None)
+        self.model_provider = model_provider
+        self.simulate_options = dict(simulate_options or {})
+        self.motions: dict = {}
+        self._worker: _CorpusWorker | None = None
         self.curves: list[EnergyCurve] = []
         self.lines: list = []  # matplotlib Line2D per shown curve
         self.shown: list[EnergyCurve] = []
@@ -73,7 +79,15 @@ class EnergyTab(QtWidgets.QWidget):
         self.canvas.mpl_connect("motion_notify_event", self._on_motion)
         self.canvas.mpl_connect("button_press_event", self._on_click)
 
+        self.add_button = QtWidgets.QPushButton("Add recordings…")
+        self.add_button.setToolTip("simulate recordings or folders of recordings and add their production curves")
+        self.add_button.clicked.connect(self._ask_paths)
+        self.progress = QtWidgets.QProgressBar()
+        self.progress.setVisible(False)
+
         side = QtWidgets.QVBoxLayout()
+        side.addWidget(self.add_button)
+        side.addWidget(self.progress)
         for title, widget in (("Recordings", self.recordings), ("Speakers", self.speakers),
                               ("Syllables", self.syllables)):
             side.addWidget(QtWidgets.QLabel(title))
@@ -122,6 +136,60 @@ class EnergyTab(QtWidgets.QWidget):
             widget.blockSignals(False)
         self.picked = None
         self.redraw()
+
+    def add_curves(self, curves: Sequence[EnergyCurve], motions: dict | None = None) -> None:
+        """Add curves (replacing earlier ones of the same recordings) and their motions."""
+        names = {c.recording for c in curves}
+        self.set_curves([c for c in self.curves if c.recording not in names] + list(curves))
+        if motions:
+            self.motions.update(motions)
+            self.motionsLoaded.emit(dict(self.motions))
+
+    # ------------------------------------------------------------------ loading in the background
+    def _ask_paths(self) -> None:
+        files, _ = QtWidgets.QFileDialog.getOpenFileNames(self, "Recordings to add")
+        if files:
+            self.load_paths(files)
+
+    def load_paths(self, paths) -> None:
+        """Simulate the recordings (files or folders) in a worker thread, then add their curves."""
+        from tonguevis.analysis.corpus import load_corpus
+        from tonguevis.errors import TonguevisError
+
+        if self._worker is not None and self._worker.isRunning():
+            return
+        try:
+            corpus = load_corpus(paths)
+        except (TonguevisError, OSError) as exc:
+            self.hover_label.setText(f"Cannot add: {exc}")
+            return
+        self._worker = _CorpusWorker(corpus, self.model_provider, self.simulate_options, self)
+        self._worker.progressed.connect(self._on_progress)
+        self._worker.done.connect(self._on_loaded)
+        self._worker.failed.connect(lambda message: self._finish(f"Cannot add: {message}"))
+        self.add_button.setEnabled(False)
+        self.progress.setVisible(True)
+        self._worker.start()
+
+    def _on_progress(self, done: int, total: int, message: str) -> None:
+        self.progress.setRange(0, max(total, 1))
+        self.progress.setValue(done)
+        self.progress.setFormat(message)
+
+    def _on_loaded(self, result) -> None:
+        self.add_curves(result.curves, result.motions)
+        self._finish(f"Added {len(result.curves)} production curves from {len(result.motions)} recording(s).")
+
+    def _finish(self, message: str) -> None:
+        self.add_button.setEnabled(True)
+        self.progress.setVisible(False)
+        self.hover_label.setText(message)
+
+    def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
+        if self._worker is not None:
+            self._worker.cancel = True
+            self._worker.wait(60_000)
+        super().closeEvent(event)
 
     def ticked(self, widget: QtWidgets.QListWidget) -> set[str]:
         return {widget.item(i).data(QtCore.Qt.UserRole) for i in range(widget.count())
@@ -215,3 +283,37 @@ class EnergyTab(QtWidgets.QWidget):
         if self.picked:
             curve, k = self.picked
             self.morphEndPicked.emit(which, curve.recording, float(curve.times[k]))
+
+
+class _CorpusWorker(QtCore.QThread):
+    """Simulates a corpus off the GUI thread; ``cancel`` stops it between progress reports."""
+
+    progressed = QtCore.Signal(int, int, str)
+    done = QtCore.Signal(object)
+    failed = QtCore.Signal(str)
+
+    def __init__(self, corpus, model_provider, options, parent=None):
+        super().__init__(parent)
+        self.corpus, self.model_provider, self.options = corpus, model_provider, options
+        self.cancel = False
+
+    def _progress(self, done: int, total: int, message: str = "") -> None:
+        from tonguevis.errors import Cancelled
+
+        if self.cancel:
+            raise Cancelled("closed")
+        self.progressed.emit(done, total, message)
+
+    def run(self) -> None:
+        from tonguevis.analysis.corpus import corpus_energy_curves
+        from tonguevis.errors import Cancelled, TonguevisError
+
+        try:
+            model = self.model_provider() if self.model_provider else None
+            result = corpus_energy_curves(self.corpus, model=model, progress=self._progress, **self.options)
+        except Cancelled:
+            return
+        except (TonguevisError, OSError) as exc:
+            self.failed.emit(str(exc))
+            return
+        self.done.emit(result)
