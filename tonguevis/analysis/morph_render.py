@@ -95,11 +95,11 @@ def render_png(morph: Morph, path, steps=(0.0, 0.25, 0.5, 0.75, 1.0), view: str 
             plotter.add_mesh(shown, scalars="difference", cmap=COLORMAP, clim=(0, 1), show_edges=False,
                              show_scalar_bar=(k == len(steps) // 2), scalar_bar_args=_BAR_ARGS)
             name = {0.0: morph.labels[0] + " (t = 0)", 1.0: morph.labels[1] + " (t = 1)"}.get(float(t), f"t = {t:.2f}")
-            plotter.add_text(name, font_size=9, position="upper_left")
+            plotter.add_text(name, font_size=10, position="upper_edge")
             place_camera(plotter, view, centre, radius)
         if title:
             plotter.subplot(0, 0)
-            plotter.add_text(title, font_size=8, position="lower_left")
+            plotter.add_text(title, font_size=9, position=(10, 10))
         _atomic(path, lambda tmp: plotter.screenshot(tmp))
     finally:
         plotter.close()

@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     gap = 1e3 * np.linalg.norm(morph.source_displacement - morph.target_displacement, axis=1)
     print(f"node distance source-target: max {gap.max():.2f} mm, mean {gap.mean():.2f} mm; "
           f"element difference (eq. 14) median {np.median(diff):.3g} 1/m, max {diff.max():.3g} 1/m")
-    title = "q(t) = (1-t) q_source + t q_target; colour: percentile of the source-target difference"
+    title = "q(t) = (1-t) q_source + t q_target"
     if suffix == ".png":
         render_png(morph, args.out, title=title)
     else:
