@@ -174,9 +174,9 @@ def main(argv=None) -> int:
                     print(f"    {line}")
         figures["survey"] = survey
         if args.survey_png:
-            from tonguevis.analysis.segmentation.render import render_png
+            from tonguevis.analysis.segmentation.render import render_grid
 
-            render_png([r for _, r in rows], args.survey_png, titles=[n for n, _ in rows])
+            render_grid([r for _, r in rows], args.survey_png, titles=[n for n, _ in rows])
             print(f"wrote {args.survey_png}")
     if args.json:
         args.json.write_text(json.dumps(figures, indent=1, default=float))

@@ -21,7 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", type=Path,
                         help="the recording (NDI Wave TSV, Carstens .pos, EST .ema, ...) or a saved motion (.npz)")
     parser.add_argument("--sensors", metavar="MAP",
-                        help="sensor map (JSON file or preset); default: sensor_map.json beside FILE if any")
+                        help="sensor map: a preset (paper, haskins, mngu0) or a JSON file of name -> channel "
+                             "(default: sensor_map.json beside the file, if there is one)")
     parser.add_argument("--mesh", metavar="PATH", type=Path,
                         help="tongue mesh to use instead of ours (TetGen .node/.ele, VTU, Gmsh, .npz)")
     parser.add_argument("--axes", metavar="MAP",
@@ -50,6 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="modes of the simulation (default 100)")
     parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
                         help="sensor nodes: the speaker's own layout (default) or the paper's placement rule")
+    parser.add_argument("--linear", action="store_true", help="linear modal model (no modal warping)")
     parser.add_argument("--out", type=Path, required=True, metavar="OUT.vtu", help="VTU file to write")
     parser.add_argument("--png", type=Path, metavar="OUT.png", help="also render a picture (off screen)")
     parser.add_argument("--save", type=Path, metavar="OUT.npz", help="also save the whole result")
@@ -104,20 +106,18 @@ def _target(args, rec, motion):
 
 
 def load_model(mesh: Path | None, axes: str | None):
-    """The tongue model: ours, or one built on ``--mesh``."""
-    from tonguevis.sim import TongueModel
+    """The tongue model: ours, or one built on ``--mesh`` (a hook the tests replace)."""
+    from types import SimpleNamespace
 
-    if mesh is None:
-        return TongueModel.default()
-    return TongueModel.from_mesh(mesh, axes=axes)
+    from tonguevis.cli._common import load_model_args
+
+    return load_model_args(SimpleNamespace(mesh=mesh, axes=axes))
 
 
 def _recording(path: Path, sensors):
     from tonguevis.io import read_recording
 
-    if sensors is None and (path.parent / "sensor_map.json").exists():
-        sensors = path.parent / "sensor_map.json"
-    return read_recording(path, sensor_map=sensors)
+    return read_recording(path, sensor_map=sensors)  # a sensor_map.json beside the file is used by default
 
 
 def _motion(args):
@@ -137,7 +137,8 @@ def _motion(args):
     rec = _recording(args.file, args.sensors)
     model = load_model(args.mesh, args.axes)
     with tqdm_progress("simulating", disable=args.quiet) as progress:
-        motion = simulate(rec, model, modes=args.modal_modes, landmarks=args.landmarks, progress=progress)
+        motion = simulate(rec, model, modes=args.modal_modes, warping=not args.linear, landmarks=args.landmarks,
+                          progress=progress)
     return rec, motion
 
 

@@ -82,7 +82,32 @@ def render_png(results: SegmentationResult | Sequence[SegmentationResult], path:
             plotter.add_text(caption, font_size=9, color="black", position="upper_left")
             plotter.view_xz()  # from -y (the right side): x anterior to the right, z up
             plotter.camera.zoom(1.2)
-    path = Path(path)
+    return _write(plotter, Path(path))
+
+
+def render_grid(results: Sequence[SegmentationResult], path: str | os.PathLike, titles: Sequence[str],
+                columns: int = 4, panel_size: tuple[int, int] = (420, 320)) -> Path:
+    """Write a PNG with one panel per result: its peak target shape coloured by partition
+    (the Fig. 18 layout: a row per speaker, a column per syllable)."""
+    import pyvista as pv
+
+    rows = -(-len(results) // columns)
+    plotter = pv.Plotter(off_screen=True, shape=(rows, columns),
+                         window_size=(columns * panel_size[0], rows * panel_size[1]), border=False)
+    plotter.set_background("white")
+    for index, (result, title) in enumerate(zip(results, titles)):
+        plotter.subplot(index // columns, index % columns)
+        grid = _grid(result.points + result.target[result.peak_frame], result.tets)
+        grid.cell_data["colour"] = _partition_colours(result.labels)
+        plotter.add_mesh(grid, scalars="colour", rgb=True, lighting=True)
+        plotter.add_text(f"{title}: {result.n_partitions} partitions, e_G {100 * result.relative_error:.2g} %",
+                         font_size=9, color="black", position="upper_left")
+        plotter.view_xz()
+        plotter.camera.zoom(1.3)
+    return _write(plotter, Path(path))
+
+
+def _write(plotter, path: Path) -> Path:
     tmp = path.with_name(f".{path.stem}.tmp.png")
     try:
         plotter.screenshot(str(tmp))
