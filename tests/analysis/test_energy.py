@@ -102,3 +102,17 @@ def test_grouping_and_summary():
     assert summary[("b", "ka")].std["peak_J"] == 0.0
     with pytest.raises(EnergyError, match="unknown grouping key"):
         group_curves(curves, ("colour",))
+
+
+def test_vowel_windows_put_the_consonant_inside():
+    from tonguevis.analysis.energy import vowel_windows
+
+    prods = [SimpleNamespace(train=t, index=i, start=s, end=s + 0.3, release=s, vowel=s + 0.15)
+             for t, base in ((1, 5.0), (2, 8.0)) for i, s in ((k, base + 0.3 * (k - 1)) for k in range(1, 6))]
+    windows = vowel_windows(prods)
+    assert [(w.train, w.index) for w in windows] == [(1, k) for k in range(2, 6)] + [(2, k) for k in range(2, 6)]
+    first = windows[0]
+    assert first.start == pytest.approx(5.15) and first.end == pytest.approx(5.45)
+    assert first.start < first.release < first.end
+    curves = production_curves(_motion(np.arange(0, 10, 0.01), np.ones(1000)), windows)
+    assert curves[0].extra["release_s"] == pytest.approx(5.3)

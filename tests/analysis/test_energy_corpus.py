@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -147,3 +148,33 @@ def test_cli_energy_reports_missing_paths(tmp_path, capsys):
     code = main(["energy", str(tmp_path / "nothing"), "--csv", str(tmp_path / "e.csv")])
     assert code == 2
     assert "no such file" in capsys.readouterr().err
+
+
+def test_demo_vowel_windows_hold_the_release(demo_result):
+    from tonguevis.analysis.energy import production_curves, vowel_windows
+
+    motion = demo_result.motions["spk1_ka"]
+    truth = TRUTH["files"]["spk1_ka.tsv"]["productions"]
+    windows = [w for w in vowel_windows(SimpleNamespace(**p) for p in truth) if 2 <= w.index <= 4]
+    curves = production_curves(motion, windows, recording="spk1_ka")
+    assert len(curves) == 15
+    for c in curves:
+        inside = (c.extra["release_s"] - c.start) / (c.end - c.start)
+        assert 0.2 < inside < 0.8  # the release sits inside the vowel-to-vowel span
+
+
+def test_cli_energy_vowel_window(tmp_path, monkeypatch):
+    from tonguevis.cli import energy as energy_cli
+    from tonguevis.cli import main
+
+    monkeypatch.setattr(energy_cli, "load_model", lambda args: box_tongue())
+    out = tmp_path / "v.csv"
+    assert main(["energy", str(DATA_DIR / "spk3_la.tsv"), "--csv", str(out), "--window", "vowel",
+                 "--modes", str(MODES), "--landmarks", "rule", "--quiet"]) == 0
+    with open(out, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    truth = {(p["train"], p["index"]): p for p in _truth_productions("spk3_la.tsv")}
+    assert {tuple(map(int, r["production"].split("."))) for r in rows} == set(truth)
+    for key, p in truth.items():
+        times = [float(r["recording_time_s"]) for r in rows if r["production"] == f"{key[0]}.{key[1]}"]
+        assert min(times) < p["release"] < max(times) <= p["vowel"] + 0.03

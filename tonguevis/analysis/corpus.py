@@ -199,20 +199,25 @@ class CorpusResult:
 
 
 def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int = 100,
-                         keep=(2, 3, 4), keep_motions: bool = True, progress=None, **simulate_options) -> CorpusResult:
+                         keep=(2, 3, 4), keep_motions: bool = True, window: str = "release", progress=None,
+                         **simulate_options) -> CorpusResult:
     """Simulate every recording of ``corpus`` and cut its energy into production curves.
 
     sensor_map : for every file (dict, JSON path or preset); None uses a
         ``sensor_map.json`` beside a recording when there is one.
     keep : production positions kept per train (the paper's 2-4; None = all).
+    window : "release" (release to next release, §3.2) or "vowel" (previous
+        vowel to own vowel: the consonant mid-curve, see :func:`vowel_windows`).
     progress(done, total, message) is called once per recording.
     """
     from tonguevis._progress import report
-    from tonguevis.analysis.energy import production_curves
+    from tonguevis.analysis.energy import EnergyError, production_curves, vowel_windows
     from tonguevis.io import read_recording
     from tonguevis.preprocess import find_productions
     from tonguevis.sim import TongueModel, simulate
 
+    if window not in ("release", "vowel"):
+        raise EnergyError(f"window must be 'release' or 'vowel', got {window!r}")
     model = model or TongueModel.default()
     curves, motions, tables = [], {}, {}
     for k, entry in enumerate(corpus.entries):
@@ -223,8 +228,13 @@ def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int
         rec = read_recording(entry.path, sensor_map=mapping)
         entry = entry.apply_metadata(rec.metadata) if entry.source != "table" else entry
         motion = simulate(rec, model=model, modes=modes, **simulate_options)
-        table = find_productions(_head_corrected(rec), keep=keep)
-        curves.extend(production_curves(motion, table, recording=entry.name, speaker=entry.speaker,
+        if window == "release":
+            table = find_productions(_head_corrected(rec), keep=keep)
+            spans = list(table)
+        else:
+            table = find_productions(_head_corrected(rec), keep=None)
+            spans = [w for w in vowel_windows(table) if keep is None or w.index in keep]
+        curves.extend(production_curves(motion, spans, recording=entry.name, speaker=entry.speaker,
                                         syllable=entry.syllable, trial=entry.trial))
         if keep_motions:
             motions[entry.name] = motion

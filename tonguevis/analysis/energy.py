@@ -47,11 +47,13 @@ class EnergyCurve:
         production's train and 1-based position in it; production : a label
         ``"<train>.<index>"``.
     times : (k,) seconds on the recording's clock of the frames inside the production.
-    time_s : (k,) seconds since the production's start (its consonant release).
+    time_s : (k,) seconds since the curve's start (the consonant release; the
+        previous vowel for vowel-to-vowel windows).
     time_norm : (k,) in [0, 1]: (t - start) / (end - start).
     energy : (k,) joules.
     frames : (k,) frame indices into the motion.
-    start, end : the production's span (s, recording clock).
+    start, end : the curve's span (s, recording clock).
+    extra : ``release_s`` (the consonant release, s) when the span knows it.
     """
 
     recording: str
@@ -114,7 +116,7 @@ def production_curves(
 
     motion : a :class:`~tonguevis.sim.Motion` (uses ``times`` and ``energy``).
     productions : objects with ``train``, ``index``, ``start``, ``end`` (s), e.g.
-        a :class:`~tonguevis.preprocess.ProductionTable`.
+        a :class:`~tonguevis.preprocess.ProductionTable` or :func:`vowel_windows`.
     A production keeps the frames with start <= t <= end; one with fewer than
     two frames inside the motion raises :class:`EnergyError`.
     """
@@ -136,8 +138,39 @@ def production_curves(
             train=int(p.train), index=int(p.index), times=t, time_s=t - start,
             time_norm=(t - start) / (end - start), energy=energy[frames], frames=frames,
             start=start, end=end,
+            extra={"release_s": float(p.release)} if hasattr(p, "release") else {},
         ))
     return curves
+
+
+@dataclass(frozen=True)
+class Window:
+    """A span of a production for its curve: ``start``/``end`` in s, ``release`` its consonant release."""
+
+    train: int
+    index: int
+    start: float
+    end: float
+    release: float
+
+
+def vowel_windows(productions: Iterable) -> list[Window]:
+    """Vowel-to-vowel spans with the consonant in the middle.
+
+    Production k's window runs from the vowel of production k − 1 of the same
+    train to its own vowel, so the consonant closure and release fall inside
+    rather than at the edges (as a release-to-release production has them).
+    The first production of a train has no window.  ``productions`` must hold
+    every production of the trains (``find_productions(..., keep=None)``).
+    """
+    prods = list(productions)
+    previous = {(p.train, p.index): p for p in prods}
+    out = []
+    for p in prods:
+        before = previous.get((p.train, p.index - 1))
+        if before is not None and p.vowel > before.vowel:
+            out.append(Window(p.train, p.index, float(before.vowel), float(p.vowel), float(p.release)))
+    return out
 
 
 @dataclass

@@ -6,8 +6,8 @@ train unless ``--all``), and every production's elastic energy U = ½ qᵀΛq is
 written in long format: one row per frame with the columns
 ``recording,production,time_s,time_norm,energy_J`` then
 ``speaker,syllable,trial,train,index,recording_time_s,frame``.  ``time_s`` is
-seconds since the production's consonant release, ``time_norm`` the same
-divided by the production's duration.  Speaker, syllable and trial come from
+seconds since the production's consonant release (``--window vowel``: since
+the previous vowel), ``time_norm`` the same divided by the span's duration.  Speaker, syllable and trial come from
 file names like ``spk1_ta.tsv`` or ``spk1/ta_2.tsv``, or from ``--labels TABLE``.
 """
 
@@ -37,6 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="grouping for the plot and summary, from speaker,syllable,trial,recording "
                              "(default: speaker,syllable)")
     parser.add_argument("--all", action="store_true", help="every production, not only the 2nd-4th of each train")
+    parser.add_argument("--window", choices=("release", "vowel"), default="release",
+                        help="curve span: release to next release (default), or previous vowel to own vowel "
+                             "(the consonant mid-curve)")
     add_model_arguments(parser)
 
 
@@ -62,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args)
     with tqdm_progress("energy curves", disable=args.quiet) as progress:
         result = corpus_energy_curves(corpus, model=model, sensor_map=args.sensors, modes=args.modes,
-                                      keep=None if args.all else (2, 3, 4), keep_motions=False,
+                                      keep=None if args.all else (2, 3, 4), keep_motions=False, window=args.window,
                                       landmarks=args.landmarks, warping=not args.linear,
                                       progress=progress)
     write_curves_csv(result.curves, args.csv)
