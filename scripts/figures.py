@@ -16,6 +16,8 @@ shipped tongue model (or ``--mesh``), its productions are found (§3.2; the
   non-native /ka/), on normalised time.
 * ``fig14_all_speakers.png``: every production of every speaker, one panel
   per syllable, group means bold.
+* ``fig14_vowel_windows.png``: the same on vowel-to-vowel windows, which put
+  the consonant closure mid-curve (closer to how the paper's Fig. 14 reads).
 * ``morph_la_ka.png``: a morph from spk1 /la/ to spk1 /ka/ at their energy peaks.
 
 Prints the per-group statistics (peak, time of peak, area).  Figures derived
@@ -48,6 +50,42 @@ def simulate_corpus(data: Path, model, modes: int):
         result = corpus_energy_curves(corpus, model=model, modes=modes, progress=progress)
     print(f"simulated {len(corpus)} recordings in {time.perf_counter() - t0:.1f} s; {len(result.curves)} curves")
     return result
+
+
+def vowel_curves(result, data: Path):
+    """The same productions on vowel-to-vowel windows (consonant mid-curve), from the simulated motions."""
+    from tonguevis.analysis.corpus import _head_corrected, labels_from_name
+    from tonguevis.analysis.energy import production_curves, vowel_windows
+    from tonguevis.io import read_recording
+    from tonguevis.preprocess import find_productions
+
+    curves = []
+    for name, motion in result.motions.items():
+        entry = labels_from_name(data / f"{name}.tsv")
+        rec = read_recording(entry.path)
+        windows = [w for w in vowel_windows(find_productions(_head_corrected(rec), keep=None)) if 2 <= w.index <= 4]
+        curves += production_curves(motion, windows, recording=name, speaker=entry.speaker, syllable=entry.syllable)
+    return curves
+
+
+def fig14_vowel(curves, out: Path) -> None:
+    from matplotlib.figure import Figure
+
+    from tonguevis.analysis.energy import summarize
+    from tonguevis.analysis.energy_plot import plot_energy_curves, save_figure
+
+    fig = Figure(figsize=(13, 8), layout="constrained")
+    axes = fig.subplots(2, 2).ravel()
+    for ax, syllable in zip(axes, ("ta", "ka", "la", "ra")):
+        chosen = [c for c in curves if c.syllable == syllable]
+        plot_energy_curves(ax, chosen, ("speaker",), normalised=True,
+                           colours={(s,): c for s, c in SPEAKER_COLOURS.items()}, linewidth=0.6, alpha=0.35)
+        for g in summarize(chosen, ("speaker",)):
+            ax.plot(g.grid, 1e3 * g.mean_curve, color=SPEAKER_COLOURS[g.key[0]], lw=2.6)
+        ax.set_xlabel("normalised time, previous vowel → own vowel (the consonant in the middle)")
+        ax.set_title(f"/{syllable}/, vowel-to-vowel windows")
+    fig.suptitle("Every production (thin) and each speaker's mean (bold), consonant mid-window")
+    save_figure(fig, out / "fig14_vowel_windows.png", dpi=100)
 
 
 def fig13(result, out: Path) -> None:
@@ -115,7 +153,8 @@ def fig14(result, out: Path) -> None:
                            linewidth=0.6, alpha=0.35)
         for g in summarize(curves, ("speaker",)):
             ax.plot(g.grid, 1e3 * g.mean_curve, color=SPEAKER_COLOURS[g.key[0]], lw=2.6)
-        ax.set_title(f"/{syllable}/: every production (thin) and the speaker's mean (bold)")
+        ax.set_title(f"/{syllable}/, release-to-release productions")
+    fig.suptitle("Every production (thin) and each speaker's mean (bold)")
     save_figure(fig, out / "fig14_all_speakers.png", dpi=100)
 
     print("\nper speaker and syllable (mean ± sd over productions; time of peak normalised 0-1):")
@@ -162,6 +201,7 @@ def main(argv=None) -> int:
     result = simulate_corpus(args.data, model, args.modes)
     fig13(result, args.out)
     fig14(result, args.out)
+    fig14_vowel(vowel_curves(result, args.data), args.out)
     if not args.no_morph:
         morph_figure(result, args.out)
     print(f"\nwrote figures to {args.out}")
