@@ -83,6 +83,8 @@ def test_vtu_export_has_the_fields(tmp_path, small_result):
     assert peak == 1
     np.testing.assert_allclose(back.point_data["approximation"], result.approximation[peak])
     np.testing.assert_allclose(back.point_data["target"], target.displacements[peak][result.split_nodes])
+    np.testing.assert_allclose(result.approximated_points(peak), back.points + back.point_data["approximation"])
+    np.testing.assert_allclose(result.target_points(0), mesh.points + target.displacements[0])
     joined = result.to_meshio(frame=0, split=False)
     assert len(joined.points) == mesh.n_nodes
     with pytest.raises(SegmentationError, match="frame 7"):

@@ -54,8 +54,8 @@ def adjust_boundaries(fitter: LocalFitter, labels: np.ndarray, seeds: np.ndarray
                 continue
             grown = np.append(members[to], tet)
             evaluations += 1
-            e_source = fitter.error(shrunk, base=members[source])
-            e_to = fitter.error(grown, base=members[to])
+            e_source = fitter.error(shrunk)
+            e_to = fitter.error(grown)
             new_total = total - errors[source] - errors[to] + e_source + e_to
             if new_total < total - RELATIVE_GAIN * trace[0]:
                 labels[tet] = to

@@ -182,7 +182,7 @@ class ConstraintFitter(LocalFitter):
                 self._systems.popitem(last=False)
         return found
 
-    def _compute_error(self, members: np.ndarray, base: np.ndarray | None) -> float:
+    def _compute_error(self, members: np.ndarray) -> float:
         interior = self.interior_nodes(members)
         mask = np.zeros(len(self.points), dtype=bool)
         mask[interior] = True

@@ -51,7 +51,7 @@ class RigidFitter(LocalFitter):
         self._t = quarter[:, None, None] * np.cross(corners[:, :, None, :], y).sum(axis=1)
         self._q = quarter * np.einsum("karj,karj->k", y, y)
 
-    def _compute_error(self, members: np.ndarray, base: np.ndarray | None) -> float:
+    def _compute_error(self, members: np.ndarray) -> float:
         m0 = self._m0[members].sum()
         m1 = self._m1[members].sum(axis=0)
         m2 = self._m2[members].sum(axis=0)

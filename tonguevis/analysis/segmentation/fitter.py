@@ -72,28 +72,24 @@ class LocalFitter:
         nodes = np.flatnonzero(lumped > 0)
         return nodes, lumped[nodes]
 
-    def error(self, members: np.ndarray, base: np.ndarray | None = None) -> float:
-        """Squared approximation error ‖ũ − u‖² of the set (m²·m³; divide by volume for e_P).
-
-        ``base`` optionally names a subset of ``members`` computed before, which
-        lets a fitter reuse its partial work (the constraint fitter's assembly).
-        """
+    def error(self, members: np.ndarray) -> float:
+        """Squared approximation error ‖ũ − u‖² of the set (m²·m³; divide by volume for e_P)."""
         self.n_evaluations += 1
         members, key = self.sorted_members(members)
         found = self._memo.get(key)
         if found is None:
-            found = self._compute_error(members, base)
+            found = self._compute_error(members)
             self._memo[key] = found
             self.n_computed += 1
         return found
 
-    def errors(self, jobs: list[tuple[np.ndarray, np.ndarray | None]]) -> list[float]:
-        """:meth:`error` of several (members, base) pairs; threaded when the fitter allows it."""
-        if self.threads > 1 and len(jobs) > 1:
-            return list(worker_pool("tonguevis-fit", self.threads).map(lambda job: self.error(*job), jobs))
-        return [self.error(*job) for job in jobs]
+    def errors(self, sets: list[np.ndarray]) -> list[float]:
+        """:meth:`error` of several tet sets; threaded when the fitter allows it."""
+        if self.threads > 1 and len(sets) > 1:
+            return list(worker_pool("tonguevis-fit", self.threads).map(self.error, sets))
+        return [self.error(members) for members in sets]
 
-    def _compute_error(self, members: np.ndarray, base: np.ndarray | None) -> float:  # pragma: no cover
+    def _compute_error(self, members: np.ndarray) -> float:  # pragma: no cover
         raise NotImplementedError
 
     def approximate(self, members: np.ndarray, displacements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

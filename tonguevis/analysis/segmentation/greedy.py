@@ -60,7 +60,7 @@ def grow_partitions(fitter: LocalFitter, seeds, progress: ProgressCallback | Non
         pending = [i for i, proposal in enumerate(proposals) if proposal is None]
         rings = {i: graph.one_ring(members[i], labels) for i in pending}
         jobs = [(i, np.concatenate([members[i], rings[i]])) for i in pending if len(rings[i])]
-        errors = fitter.errors([(candidate, members[i]) for i, candidate in jobs])  # independent: threaded
+        errors = fitter.errors([candidate for _, candidate in jobs])  # independent: threaded
         for (i, candidate), error in zip(jobs, errors):
             proposals[i] = (rings[i], error / fitter.volume(candidate))
         for i in pending:

@@ -77,6 +77,16 @@ class SegmentationResult:
         """The frame of largest weight (the energy peak of a production)."""
         return int(np.argmax(self.frame_weights))
 
+    def target_points(self, frame: int | None = None) -> np.ndarray:
+        """(n, 3) target shape of a frame (peak by default), m: rest points + target."""
+        frame = self.peak_frame if frame is None else int(frame)
+        return self.points + self.target[frame]
+
+    def approximated_points(self, frame: int | None = None) -> np.ndarray:
+        """(m, 3) approximated shape on the split mesh (draw with ``split_tets``), m."""
+        frame = self.peak_frame if frame is None else int(frame)
+        return self.points[self.split_nodes] + self.approximation[frame]
+
     def partition_rows(self) -> list[dict[str, Any]]:
         """One dict per partition: ``partition``, ``tets``, ``volume_cm3``,
         ``rms_error_mm`` (sqrt of e_P), ``seed`` (tet) and ``centroid_m`` (3 floats)."""
