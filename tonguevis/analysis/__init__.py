@@ -35,3 +35,8 @@ __all__ += [
     "corpus_energy_curves", "load_corpus", "modal_energy", "morph_between", "production_curves", "smacof",
     "summarize",
 ]
+
+# Leave-one-sensor-out validation against baselines.
+from tonguevis.analysis.validation import HeldOutSensor, ValidationResult, validate  # noqa: E402
+
+__all__ += ["HeldOutSensor", "ValidationResult", "validate"]

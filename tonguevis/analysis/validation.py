@@ -1,0 +1,272 @@
+"""Leave-one-sensor-out validation: how well does the model predict a sensor it was not told?
+
+For each tongue sensor h of a recording in turn:
+
+1. The recording is prepared once with *all* tongue sensors
+   (:func:`tonguevis.sim.prepare_targets`): head and jaw correction, rest
+   pose, the similarity fit onto the model, and each sensor's node (the
+   placement-rule node, or with ``landmarks="speaker"`` the dorsal-surface
+   node nearest its aligned rest position).  Using every sensor's *rest*
+   position here is fair: rest poses are known before any motion.  Sensor h's
+   *motion* never drives anything.
+2. The model is driven by the other sensors only, and the displacement of
+   h's node is read from the result.  Four predictors:
+
+   * ``model``: the warped modal model, Newmark dynamics (what ``simulate`` runs);
+   * ``linear``: the same modes without warping (linear modal dynamics);
+   * ``static``: the warped model solved quasi-statically, frame by frame
+     (no inertia or damping; :mod:`tonguevis.analysis.quasistatic`);
+   * ``kinematic``: no mesh at all, a radial-basis interpolation of the
+     driving sensors' displacements over their aligned rest positions
+     (:mod:`tonguevis.analysis.kinematic`).
+
+3. Each prediction is compared with h's measured displacement from rest, in
+   the model frame (after the same similarity fit), with :func:`trajectory_scores`.
+
+Scoring lives in :mod:`tonguevis.analysis.validation_scores`, the report
+tables in :mod:`tonguevis.analysis.validation_report`.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tonguevis._progress import ProgressCallback, report
+from tonguevis.analysis.kinematic import interpolate_displacements
+from tonguevis.analysis.validation_scores import (
+    recording_summary,
+    resolve_rest_interval,
+    trajectory_scores,
+)
+from tonguevis.errors import SimulationError
+from tonguevis.io.recording import Recording
+
+logger = logging.getLogger("tonguevis")
+
+METHODS = ("model", "linear", "static", "kinematic")
+
+@dataclass
+class HeldOutSensor:
+    """One held-out sensor.
+
+    name, node : the sensor and its mesh node; drivers : the sensors that drove the model.
+    measured : (F, 3) its measured displacement from rest, model frame, metres.
+    predicted : method -> (F, 3) predicted displacement of its node (or point), metres.
+    converged : method -> (F,) bool, Newton convergence of the driven run (kinematic: all True).
+    """
+
+    name: str
+    node: int
+    drivers: list[str]
+    measured: np.ndarray
+    predicted: dict[str, np.ndarray] = field(default_factory=dict)
+    converged: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+@dataclass
+class ValidationResult:
+    """Scores per held-out sensor, the recording's summary and the settings used.
+
+    ``as_dict()`` is the JSON document: {"sensors": {NAME: scores},
+    "settings": {...}, "recording": {...}}.
+    """
+
+    sensors: dict[str, dict[str, Any]]
+    settings: dict[str, Any]
+    recording: dict[str, Any]
+    held_out: dict[str, HeldOutSensor]
+
+    def as_dict(self) -> dict[str, Any]:
+        return _finite({"sensors": self.sensors, "settings": self.settings, "recording": self.recording})
+
+    def write_json(self, path) -> None:
+        """Write :meth:`as_dict` as JSON (temporary file, then rename)."""
+        import json
+
+        from tonguevis.analysis.validation_report import atomic_write_text
+
+        atomic_write_text(path, json.dumps(self.as_dict(), indent=1, allow_nan=False) + "\n")
+
+
+def validate(
+    recording: Recording,
+    model=None,
+    modes: int = 100,
+    landmarks: str = "speaker",
+    rest_interval: tuple[float, float] | None = None,
+    quasi_static: bool = True,
+    tolerance: float = 1e-8,
+    progress: ProgressCallback | None = None,
+) -> ValidationResult:
+    """Leave-one-sensor-out validation of ``model`` (default: the shipped tongue) on ``recording``.
+
+    Needs >= 3 tongue sensors with landmarks on the model (each run is driven
+    by >= 2).  ``rest_interval`` (start_s, end_s) defaults to the detected
+    rest, else the stillest 0.2 s window (logged; the JSON says which).
+    """
+    from tonguevis.sim import TongueModel
+    from tonguevis.sim.simulate import TONGUE_SENSORS, prepare_targets, simulate
+
+    model = model or TongueModel.default()
+    file = recording.metadata.get("file")
+    candidates = [n for n in TONGUE_SENSORS if n in recording.sensors and n in model.landmarks.sensors]
+    if len(candidates) < 3:
+        raise SimulationError(
+            f"leave-one-sensor-out needs at least 3 tongue sensors with model landmarks, found "
+            f"{candidates or 'none'} (recording sensors: {', '.join(recording.sensor_names)}); "
+            "map the channels with a sensor map", file)
+    interval, rest_how = resolve_rest_interval(recording, candidates, rest_interval)
+    prep = prepare_targets(recording, model, landmarks, interval)
+    names, nodes = prep.names, np.asarray(prep.nodes)
+    basis = model.basis(modes)
+    w_full = model.rotation_matrix(basis)
+    report(progress, 0, 4, "simulating with every sensor")
+    motion = simulate(recording, model, modes=modes, warping=True, landmarks=landmarks,
+                      rest_interval=interval, tolerance=tolerance)
+    centres = _aligned_rest(recording, prep)
+    s = len(names)
+    dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
+    phi_s = basis.phi[dofs].reshape(s, 3, -1)
+    w_s = w_full[dofs].reshape(s, 3, -1)
+    # Trial h drives with every sensor but h: h's targets are marked missing,
+    # which the integrator treats as a sensor that is not there.
+    trials = np.repeat(prep.displacement[None], s, axis=0)  # (S, F, S, 3)
+    trials[np.arange(s), :, np.arange(s)] = np.nan
+    q_runs: dict[str, list] = {}
+    for k, (method, warping) in enumerate((("model", True), ("linear", False))):
+        report(progress, 1 + k, 4, f"leave-one-out: {method}")
+        q_runs[method] = _drive_trials(basis, phi_s, w_s, trials, warping, 1.0 / recording.rate,
+                                       model.material, tolerance)
+    if quasi_static:
+        from tonguevis.analysis.quasistatic import quasi_static as solve_static
+
+        report(progress, 3, 4, "leave-one-out: quasi-static")
+        q_runs["static"] = [solve_static(basis.eigenvalues, phi_s, w_s, t, tolerance)[:2] for t in trials]
+    held_out: dict[str, HeldOutSensor] = {}
+    scores: dict[str, dict[str, Any]] = {}
+    for h, name in enumerate(names):
+        keep = np.array([k for k in range(s) if k != h])
+        item = HeldOutSensor(name, int(nodes[h]), [names[k] for k in keep], prep.displacement[:, h])
+        for method, runs in q_runs.items():
+            q, conv = runs[h]
+            item.predicted[method] = _node_trajectory(basis, w_full, int(nodes[h]), q, method != "linear")
+            item.converged[method] = np.asarray(conv, dtype=bool)
+        item.predicted["kinematic"] = interpolate_displacements(
+            centres[keep], prep.displacement[:, keep], centres[h][None])[:, 0]
+        item.converged["kinematic"] = np.ones(len(recording.times), dtype=bool)
+        held_out[name] = item
+        scores[name] = _sensor_scores(item)
+    report(progress, 4, 4, "validated")
+    summary = recording_summary(recording, motion, prep, interval, rest_how)
+    settings = _settings(model, basis, modes, landmarks, quasi_static, tolerance)
+    return ValidationResult(scores, settings, summary, held_out)
+
+
+def _sensor_scores(item: HeldOutSensor) -> dict[str, Any]:
+    """Scores of every method on the frames where all methods and the measurement are finite."""
+    ok = np.all(np.isfinite(item.measured), axis=1)
+    for pred in item.predicted.values():
+        ok &= np.all(np.isfinite(pred), axis=1)
+    out: dict[str, Any] = {"node": item.node, "drivers": item.drivers, "frames": int(ok.sum())}
+    measured = item.measured[ok]
+    out["measured_std_axes_mm"] = (1e3 * measured.std(axis=0)).tolist() if len(measured) else [np.nan] * 3
+    out["measured_peak_mm"] = float(1e3 * np.linalg.norm(measured, axis=1).max()) if len(measured) else np.nan
+    for method, pred in item.predicted.items():
+        s = trajectory_scores(measured, pred[ok])
+        out[f"{method}_rmse_mm"] = s["rmse_mm"]
+        out[f"{method}_corr"] = s["corr"]
+        out[f"{method}_rmse_axes_mm"] = s["rmse_axes_mm"]
+        out[f"{method}_corr_axes"] = s["corr_axes"]
+        out[f"{method}_unconverged_frames"] = int(np.sum(~item.converged[method]))
+    return out
+
+
+def _drive_trials(basis, phi_s, w_s, trials, warping, dt, material, tolerance) -> list:
+    """[(q (F, m), converged (F,))] per trial of targets (T, F, S, 3) at the sensor rows phi_s, w_s (S, 3, m).
+
+    The compiled integrator runs all trials in one launch when available; the
+    NumPy reference otherwise (same result to rounding).
+    """
+    from tonguevis.sim.newmark import NewmarkSettings, integrate
+
+    settings = NewmarkSettings(dt=dt, alpha=material.alpha, beta=material.beta, tolerance=tolerance, warping=warping)
+    try:
+        from tonguevis.sim.newmark_warp import integrate_warp
+    except ImportError:  # pragma: no cover - the compiled path ships with tonguevis
+        results = [integrate(basis.eigenvalues, phi_s, w_s, t, settings) for t in trials]
+    else:
+        results = integrate_warp(basis.eigenvalues, phi_s, w_s, trials, settings)
+    return [(r.q, r.converged) for r in results]
+
+
+def _node_trajectory(basis, w_full, node: int, q: np.ndarray, warping: bool) -> np.ndarray:
+    """(F, 3) displacement of one node for modal displacements q (F, m), metres."""
+    from tonguevis.sim.rotation import rotate_accumulated
+
+    rows = slice(3 * node, 3 * node + 3)
+    d = q @ basis.phi[rows].T
+    if not warping:
+        return d
+    return rotate_accumulated(q @ w_full[rows].T, d)
+
+
+def _aligned_rest(recording: Recording, prep) -> np.ndarray:
+    """(S, 3) rest positions of the prepared sensors in the model frame, metres.
+
+    Mirrors the corrections of ``prepare_targets`` (head when >= 3 references,
+    jaw when present) so that the kinematic baseline uses the same rest pose.
+    """
+    aligned = getattr(prep, "aligned_rest", None)
+    if aligned is not None:
+        return np.asarray(aligned)
+    from tonguevis import preprocess as pp
+
+    rec = recording
+    if sum(n.upper().startswith("REF") for n in rec.sensors) >= 3:
+        rec = pp.correct_head(rec, rest_interval=prep.rest_interval)
+    if "JAW" in rec.sensors:
+        rec = pp.correct_jaw(rec, rest_interval=prep.rest_interval)
+    rest = pp.rest_pose(rec, prep.rest_interval, sensors=prep.names)
+    return prep.transform.apply(np.array([rest[n] for n in prep.names]))
+
+
+def _settings(model, basis, modes, landmarks, quasi_static, tolerance) -> dict[str, Any]:
+    from tonguevis.analysis.validation_scores import MIN_AXIS_STD_MM
+
+    mesh = model.mesh
+    return {
+        "modes": int(modes),
+        "landmarks": landmarks,
+        "methods": list(METHODS if quasi_static else [m for m in METHODS if m != "static"]),
+        "mesh": {"nodes": int(mesh.n_nodes), "tets": int(mesh.n_tets),
+                 "source": str(mesh.metadata.get("file") or mesh.metadata.get("source") or "default"),
+                 "anchors": [int(a) for a in model.anchors],
+                 "sensor_landmarks": {k: int(v) for k, v in model.landmarks.sensors.items()}},
+        "material": model.material.as_dict(),
+        "lowest_frequency_hz": float(np.sqrt(max(basis.eigenvalues[0], 0.0)) / (2 * np.pi)),
+        "highest_frequency_hz": float(np.sqrt(max(basis.eigenvalues[-1], 0.0)) / (2 * np.pi)),
+        "newton_tolerance_m": tolerance,
+        "kinematic": "RBFInterpolator, linear kernel + degree-1 polynomial, in the driving sensors' affine hull",
+        "units": "displacements in mm in the model frame (after the similarity fit)",
+        "correlation": ("per-axis Pearson r of predicted vs measured displacement, averaged over the axes "
+                        f"whose measured standard deviation is at least {MIN_AXIS_STD_MM} mm"),
+    }
+
+
+def _finite(obj):
+    """The same structure with NaN/inf floats as None (strict JSON) and NumPy scalars as Python."""
+    if isinstance(obj, dict):
+        return {str(k): _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [_finite(v) for v in (obj.tolist() if isinstance(obj, np.ndarray) else obj)]
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj

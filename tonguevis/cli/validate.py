@@ -1,0 +1,59 @@
+"""``tonguevis validate FILE --json OUT``: leave-one-sensor-out validation of the model.
+
+For each tongue sensor in turn, the model is driven by the other tongue
+sensors and the held-out sensor's node is compared with its measurement:
+RMSE (mm, model frame) and mean per-axis correlation for the warped model,
+the linear modal model, a quasi-static solve and a kinematic (RBF)
+interpolation.  Writes the JSON document (and optionally a Markdown report)
+and prints the table.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tonguevis.cli._common import add_recording_arguments, load_model_args, read_recording_args
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_recording_arguments(parser)
+    parser.add_argument("--mesh", type=Path, metavar="PATH",
+                        help="tetrahedral tongue mesh (TetGen .node/.ele, VTU, Gmsh); default: the shipped tongue")
+    parser.add_argument("--axes", metavar="MAP",
+                        help="axis mapping of --mesh into x anterior, y left, z up, e.g. -x,-z,-y (ArtiSynth)")
+    parser.add_argument("--modes", type=int, default=100, metavar="M", help="vibration modes (default 100)")
+    parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
+                        help="sensor nodes: snapped to the speaker's layout (default) or the paper's placement rule")
+    parser.add_argument("--rest", type=float, nargs=2, metavar=("START", "END"),
+                        help="rest interval in seconds (default: detected, else the stillest 0.2 s)")
+    parser.add_argument("--no-static", action="store_true", help="skip the quasi-static baseline")
+    parser.add_argument("--json", type=Path, required=True, metavar="OUT", help="write the results here (JSON)")
+    parser.add_argument("--md", type=Path, metavar="OUT", help="also write a Markdown report")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    from tonguevis._progress import tqdm_progress
+    from tonguevis.analysis.validation import validate
+    from tonguevis.analysis.validation_report import atomic_write_text, axis_table, recording_markdown
+    from tonguevis.errors import TonguevisError
+
+    if args.modes < 1:
+        raise TonguevisError(f"--modes must be at least 1, got {args.modes}")
+    if args.rest is not None and not args.rest[0] < args.rest[1]:
+        raise TonguevisError(f"--rest START END needs START < END, got {args.rest[0]} {args.rest[1]}")
+    recording = read_recording_args(args)
+    model = load_model_args(args)
+    with tqdm_progress("validating", disable=args.quiet) as progress:
+        result = validate(recording, model, modes=args.modes, landmarks=args.landmarks,
+                          rest_interval=tuple(args.rest) if args.rest else None,
+                          quasi_static=not args.no_static, progress=progress)
+    doc = result.as_dict()
+    result.write_json(args.json)
+    text = recording_markdown(doc, title=str(args.file))
+    if args.md is not None:
+        atomic_write_text(args.md, text + "\nPer axis (x anterior, y left, z up):\n\n" + axis_table(doc) + "\n")
+    print(text)
+    print(f"wrote {args.json}" + (f" and {args.md}" if args.md else ""))
+    return 0
