@@ -153,10 +153,12 @@ def test_cli_morph_png(saved_motions, tmp_path, capsys):
     from tonguevis.cli import main
 
     out = tmp_path / "m.png"
-    code = main(["morph", f"{saved_motions / 'a.npz'}@0.04", f"{saved_motions / 'b.npz'}@0.03", "--out", str(out)])
+    code = main(["morph", f"{saved_motions / 'a.npz'}@0.04", f"{saved_motions / 'b.npz'}@0.03", "--out", str(out),
+                 "--difference", "node_mean"])
     assert code == 0, capsys.readouterr().err
     text = capsys.readouterr().out
     assert "source (t = 0): a @ 0.04 s" in text and "target (t = 1): b @ 0.03 s" in text
+    assert "element difference (node_mean)" in text and "m²" in text
     assert out.read_bytes()[:4] == b"\x89PNG" and out.stat().st_size > 20_000
 
 
@@ -208,3 +210,23 @@ def test_cli_morph_simulates_a_recording_once(tmp_path, monkeypatch, capsys):
     text = capsys.readouterr().out
     assert "spk1_la @ 5.55 s" in text and "spk1_la @ 5.70 s" in text
     assert out.stat().st_size > 20_000
+
+
+def test_node_mean_difference_ignores_element_size(morph):
+    model = box_tongue()
+    mesh = model.mesh
+    a, b = morph.source_displacement, morph.target_displacement
+    node = Morph(model, _q(1), _q(2), difference="node_mean")
+    expected = [np.mean(np.sum((a[tet] - b[tet]) ** 2, axis=1)) for tet in mesh.tets]
+    np.testing.assert_allclose(node.element_difference, expected, rtol=1e-12)
+    assert node.difference_unit == "m²" and morph.difference_unit == "1/m"
+    # A uniform translation between the ends gives every element the same node_mean difference,
+    # but eq. (14) then still ranks elements by their size.
+    shift = np.tile([1e-3, 0.0, 0.0], (mesh.n_nodes, 1))
+    same = element_difference(mesh.points, mesh.tets, a + shift, a, kind="node_mean")
+    np.testing.assert_allclose(same, 1e-6)
+    eq14 = element_difference(mesh.points, mesh.tets, a + shift, a)
+    volumes = np.abs(np.linalg.det(mesh.points[mesh.tets[:, 1:]] - mesh.points[mesh.tets[:, :1]])) / 6
+    np.testing.assert_allclose(eq14, 4e-6 / volumes, rtol=1e-10)
+    with pytest.raises(MorphError, match="unknown element difference"):
+        Morph(model, _q(1), _q(2), difference="hausdorff")

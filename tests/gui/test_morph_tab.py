@@ -68,6 +68,11 @@ def test_ends_slider_and_colours(tab, tmp_path):
     colours = np.asarray(tab.surface.cell_data["difference"])
     assert colours.min() < 0.1 and colours.max() > 0.9
     assert "percentile" in tab.legend_label.text() and "1/m" in tab.legend_label.text()
+    eq14_colours = colours.copy()
+    # Colouring by the size-independent node mean re-ranks the elements and changes the legend's unit.
+    tab.difference.setCurrentIndex(1)
+    assert tab.morph.difference == "node_mean" and "m²" in tab.legend_label.text()
+    assert not np.allclose(np.asarray(tab.surface.cell_data["difference"]), eq14_colours)
     tab.grab().save(str(tmp_path / "morph_tab.png"))
 
 

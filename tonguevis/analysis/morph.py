@@ -30,13 +30,27 @@ class MorphError(TonguevisError):
     """A morph asked between incompatible shapes."""
 
 
-def element_difference(points: np.ndarray, tets: np.ndarray, u_a: np.ndarray, u_b: np.ndarray) -> np.ndarray:
-    """(E,) eq. (14): ‖u_a,E − u_b,E‖² / V_E over each tet's 4 nodes, in 1/m.
+#: Element differences a morph can colour by: eq. (14) as the paper writes it, or
+#: the mean squared distance of the element's nodes, which does not depend on
+#: the element's size (eq. 14 divides by V_E, so on a mesh of uneven tets the
+#: small ones stand out whatever the shapes do).
+DIFFERENCES = ("eq14", "node_mean")
 
+
+def element_difference(points: np.ndarray, tets: np.ndarray, u_a: np.ndarray, u_b: np.ndarray,
+                       kind: str = "eq14") -> np.ndarray:
+    """(E,) difference of two displacements per element.
+
+    "eq14": ‖u_a,E − u_b,E‖² / V_E over each tet's 4 nodes (the 12-vector), in 1/m;
+    "node_mean": the mean over the 4 nodes of |u_a − u_b|², in m².
     points (n, 3) rest positions (m); tets (E, 4); u_a, u_b (n, 3) displacements (m).
     """
     diff2 = np.einsum("ij,ij->i", u_a - u_b, u_a - u_b)
-    return diff2[tets].sum(axis=1) / np.abs(signed_tet_volumes(points, tets))
+    if kind == "eq14":
+        return diff2[tets].sum(axis=1) / np.abs(signed_tet_volumes(points, tets))
+    if kind == "node_mean":
+        return diff2[tets].mean(axis=1)
+    raise MorphError(f"unknown element difference {kind!r}; choose one of {', '.join(DIFFERENCES)}")
 
 
 def cdf_colour(values: np.ndarray) -> np.ndarray:
@@ -77,7 +91,10 @@ class Morph:
     """
 
     def __init__(self, model, q_source: np.ndarray, q_target: np.ndarray, warping: bool = True,
-                 labels: tuple[str, str] = ("source", "target")):
+                 labels: tuple[str, str] = ("source", "target"), difference: str = "eq14"):
+        if difference not in DIFFERENCES:
+            raise MorphError(f"unknown element difference {difference!r}; choose one of {', '.join(DIFFERENCES)}")
+        self.difference = difference
         q_source = np.asarray(q_source, dtype=np.float64).ravel()
         q_target = np.asarray(q_target, dtype=np.float64).ravel()
         if q_source.shape != q_target.shape:
@@ -116,17 +133,22 @@ class Morph:
 
     @cached_property
     def element_difference(self) -> np.ndarray:
-        """(E,) eq. (14) between source and target, 1/m."""
+        """(E,) difference between source and target: eq. (14) in 1/m (default) or node_mean in m²."""
         mesh = self.model.mesh
-        return element_difference(mesh.points, mesh.tets, self.source_displacement, self.target_displacement)
+        return element_difference(mesh.points, mesh.tets, self.source_displacement, self.target_displacement,
+                                  self.difference)
 
     @cached_property
     def element_colour(self) -> np.ndarray:
         """(E,) colour value in (0, 1): the empirical CDF of :attr:`element_difference`."""
         return cdf_colour(self.element_difference)
 
+    @property
+    def difference_unit(self) -> str:
+        return "1/m" if self.difference == "eq14" else "m²"
+
     def colour_legend(self, quantiles=(0.0, 0.25, 0.5, 0.75, 1.0)) -> list[tuple[float, float]]:
-        """(colour value, difference in 1/m) pairs for a legend: the differences at those quantiles."""
+        """(colour value, difference in :attr:`difference_unit`) pairs for a legend, at those quantiles."""
         return [(float(qn), float(np.quantile(self.element_difference, qn))) for qn in quantiles]
 
     # ------------------------------------------------------------------ frames
@@ -170,7 +192,8 @@ def same_model(a, b) -> bool:
     return a.basis_key(1) == b.basis_key(1)
 
 
-def morph_between(source_motion, source_time: float, target_motion, target_time: float) -> Morph:
+def morph_between(source_motion, source_time: float, target_motion, target_time: float,
+                  difference: str = "eq14") -> Morph:
     """A :class:`Morph` from the frame of ``source_motion`` nearest ``source_time`` (s)
     to the frame of ``target_motion`` nearest ``target_time``; both motions on the same model."""
     if not same_model(source_motion.model, target_motion.model):
@@ -187,6 +210,7 @@ def morph_between(source_motion, source_time: float, target_motion, target_time:
                              f"{motion.times[-1]:.3f} s)")
     i, j = source_motion.frame_at(source_time), target_motion.frame_at(target_time)
     # Use the source's model for both: the target's q lives on an identical basis.
-    morph = Morph(source_motion.model, source_motion.q[i], target_motion.q[j], warping=source_motion.warping)
+    morph = Morph(source_motion.model, source_motion.q[i], target_motion.q[j], warping=source_motion.warping,
+                  difference=difference)
     morph.source_frame, morph.target_frame = i, j
     return morph

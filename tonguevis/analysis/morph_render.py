@@ -21,6 +21,18 @@ from tonguevis.analysis.morph import Morph, play_schedule
 
 COLORMAP = "coolwarm"  # blue = low difference, red = high
 SCALAR_BAR = "difference percentile (eq. 14, CDF)"
+
+
+def scalar_bar_title(morph: Morph) -> str:
+    """The colour legend's title for the morph's kind of element difference."""
+    what = "eq. 14" if morph.difference == "eq14" else "mean node distance²"
+    return f"difference percentile ({what}, CDF)"
+
+
+def bar_args(morph: Morph) -> dict:
+    """Scalar-bar settings: horizontal, at the bottom of the view, titled for the morph."""
+    return {**_BAR_ARGS, "title": scalar_bar_title(morph)}
+
 #: Camera directions (from the focal point towards the camera) and up vectors, our frame
 #: (x anterior, y left, z up).
 _BAR_ARGS = {"title": SCALAR_BAR, "vertical": False, "fmt": "%.2f", "position_x": 0.15, "position_y": 0.03,
@@ -93,7 +105,7 @@ def render_png(morph: Morph, path, steps=(0.0, 0.25, 0.5, 0.75, 1.0), view: str 
             shown = surface.copy()
             shown.points = morph.model.mesh.points[point_ids] + disp[k][point_ids]
             plotter.add_mesh(shown, scalars="difference", cmap=COLORMAP, clim=(0, 1), show_edges=False,
-                             show_scalar_bar=(k == len(steps) // 2), scalar_bar_args=_BAR_ARGS)
+                             show_scalar_bar=(k == len(steps) // 2), scalar_bar_args=bar_args(morph))
             name = {0.0: morph.labels[0] + " (t = 0)", 1.0: morph.labels[1] + " (t = 1)"}.get(float(t), f"t = {t:.2f}")
             plotter.add_text(name, font_size=10, position="upper_edge")
             place_camera(plotter, view, centre, radius)
@@ -129,7 +141,7 @@ def render_mp4(morph: Morph, path, n_frames: int = 60, fps: int = 30, back: bool
             mesh = surface.copy()
             shown.append(mesh)
             plotter.add_mesh(mesh, scalars="difference", cmap=COLORMAP, clim=(0, 1),
-                             show_scalar_bar=(k == 0), scalar_bar_args=_BAR_ARGS)
+                             show_scalar_bar=(k == 0), scalar_bar_args=bar_args(morph))
             plotter.add_text(view, font_size=8, position="upper_left")
             place_camera(plotter, view, centre, radius, zoom=1.0 if k == 0 else 1.6)
         plotter.subplot(0)

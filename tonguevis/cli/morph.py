@@ -37,6 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, metavar="MP4|PNG", help="output video or image")
     parser.add_argument("--frames", type=int, default=60, help="MP4 frames from source to target (default 60)")
     parser.add_argument("--fps", type=int, default=30, help="MP4 frame rate (default 30)")
+    parser.add_argument("--difference", choices=("eq14", "node_mean"), default="eq14",
+                        help="element difference the colours rank: eq14 (the paper's, divided by the element volume) "
+                             "or node_mean (mean squared node distance, independent of element size)")
     parser.add_argument("--one-way", action="store_true", help="MP4 plays source → target only (default: and back)")
     parser.add_argument("--sensors", metavar="MAP", help="sensor map for recordings (default: sensor_map.json beside)")
     add_model_arguments(parser)
@@ -88,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
             if path not in motions:
                 model = model or load_model(args)
                 motions[path] = _motion(path, model, args, progress)
-    morph = morph_between(motions[src_path], src_time, motions[tgt_path], tgt_time)
+    morph = morph_between(motions[src_path], src_time, motions[tgt_path], tgt_time, difference=args.difference)
     src, tgt = motions[src_path], motions[tgt_path]
     morph.labels = (f"{src_path.stem} @ {src.times[morph.source_frame]:.2f} s",
                     f"{tgt_path.stem} @ {tgt.times[morph.target_frame]:.2f} s")
@@ -97,7 +100,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"target (t = 1): {morph.labels[1]}, energy {1e3 * tgt.energy[morph.target_frame]:.3f} mJ")
     gap = 1e3 * np.linalg.norm(morph.source_displacement - morph.target_displacement, axis=1)
     print(f"node distance source-target: max {gap.max():.2f} mm, mean {gap.mean():.2f} mm; "
-          f"element difference (eq. 14) median {np.median(diff):.3g} 1/m, max {diff.max():.3g} 1/m")
+          f"element difference ({args.difference}) median {np.median(diff):.3g} {morph.difference_unit}, "
+          f"max {diff.max():.3g} {morph.difference_unit}")
     title = "q(t) = (1-t) q_source + t q_target"
     if suffix == ".png":
         render_png(morph, args.out, title=title)

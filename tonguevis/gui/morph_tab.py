@@ -15,7 +15,7 @@ import numpy as np
 from PySide6 import QtCore, QtWidgets
 
 from tonguevis.analysis.morph import Morph, morph_between
-from tonguevis.analysis.morph_render import COLORMAP, SCALAR_BAR, VIEWS, morph_bounds, morph_surface, place_camera
+from tonguevis.analysis.morph_render import COLORMAP, bar_args, morph_bounds, morph_surface, place_camera
 from tonguevis.errors import TonguevisError
 
 SLIDER_STEPS = 200
@@ -47,6 +47,12 @@ class MorphTab(QtWidgets.QWidget):
             box.setSuffix(" s")
         self.source_file.currentIndexChanged.connect(lambda _i: self._limit_time(self.source_file, self.source_time))
         self.target_file.currentIndexChanged.connect(lambda _i: self._limit_time(self.target_file, self.target_time))
+        self.difference = QtWidgets.QComboBox()
+        self.difference.addItem("eq. (14): ‖Δũ_E‖² / V_E", "eq14")
+        self.difference.addItem("mean node distance² (size-independent)", "node_mean")
+        self.difference.setToolTip("what the colours rank: the paper's eq. (14) divides by the element's volume, "
+                                   "so small elements stand out; the node mean does not")
+        self.difference.currentIndexChanged.connect(lambda _i: self.morph is not None and self.build())
         self.build_button = QtWidgets.QPushButton("Morph")
         self.build_button.clicked.connect(self.build)
         self.slider = QtWidgets.QSlider(QtCore.Qt.Horizontal)
@@ -71,7 +77,9 @@ class MorphTab(QtWidgets.QWidget):
         form.addWidget(QtWidgets.QLabel("target (t = 1)"), 1, 0)
         form.addWidget(self.target_file, 1, 1)
         form.addWidget(self.target_time, 1, 2)
-        form.addWidget(self.build_button, 0, 3, 2, 1)
+        form.addWidget(QtWidgets.QLabel("colour by"), 2, 0)
+        form.addWidget(self.difference, 2, 1, 1, 2)
+        form.addWidget(self.build_button, 0, 3, 3, 1)
         blend = QtWidgets.QHBoxLayout()
         blend.addWidget(QtWidgets.QLabel("source"))
         blend.addWidget(self.slider, 1)
@@ -133,7 +141,8 @@ class MorphTab(QtWidgets.QWidget):
             self.status.setText("Choose both a source and a target recording.")
             return
         try:
-            morph = morph_between(src, self.source_time.value(), tgt, self.target_time.value())
+            morph = morph_between(src, self.source_time.value(), tgt, self.target_time.value(),
+                                  difference=self.difference.currentData())
         except TonguevisError as exc:
             self.status.setText(f"Cannot morph: {exc}")
             return
@@ -143,13 +152,15 @@ class MorphTab(QtWidgets.QWidget):
         self._build_scene()
         diff = morph.element_difference
         quantiles = morph.colour_legend((0.0, 0.25, 0.5, 0.75, 1.0))
+        what = ("e = ‖ũ_src − ũ_tgt‖²/V (eq. 14)" if morph.difference == "eq14"
+                else "e = mean over its nodes of |ũ_src − ũ_tgt|²")
         self.legend_label.setText(
-            "Colour = percentile of the element's source–target difference e = ‖ũ_src − ũ_tgt‖²/V (eq. 14), "
+            f"Colour = percentile of the element's source–target difference {what}, "
             "blue = alike, red = most different; percentiles → e: "
-            + ", ".join(f"{int(100 * p)}% → {v:.3g} 1/m" for p, v in quantiles))
+            + ", ".join(f"{int(100 * p)}% → {v:.3g} {morph.difference_unit}" for p, v in quantiles))
         gap = 1e3 * np.linalg.norm(morph.source_displacement - morph.target_displacement, axis=1)
         self.status.setText(f"Morph {morph.labels[0]} → {morph.labels[1]}: nodes move up to {gap.max():.1f} mm "
-                            f"(mean {gap.mean():.1f} mm); median element difference {np.median(diff):.3g} 1/m.")
+                            f"(mean {gap.mean():.1f} mm); median element difference {np.median(diff):.3g} {morph.difference_unit}.")
         self.slider.blockSignals(True)
         self.slider.setValue(0)
         self.slider.blockSignals(False)
@@ -165,8 +176,7 @@ class MorphTab(QtWidgets.QWidget):
         for k, view in enumerate(("oblique", "top", "front", "lateral")):
             plotter.subplot(k)
             plotter.add_mesh(self.surface, scalars="difference", cmap=COLORMAP, clim=(0, 1), show_scalar_bar=(k == 0),
-                             scalar_bar_args={"title": SCALAR_BAR, "vertical": False, "fmt": "%.2f",
-                                              "position_x": 0.15, "position_y": 0.03, "width": 0.7, "height": 0.08})
+                             scalar_bar_args=bar_args(morph))
             plotter.add_text(view, font_size=8, position="upper_left")
             place_camera(plotter, view, centre, radius, zoom=1.0 if k == 0 else 1.5)
         plotter.subplot(0)
