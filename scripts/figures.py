@@ -18,7 +18,9 @@ shipped tongue model (or ``--mesh``), its productions are found (§3.2; the
   per syllable, group means bold.
 * ``fig14_vowel_windows.png``: the same on vowel-to-vowel windows, which put
   the consonant closure mid-curve (closer to how the paper's Fig. 14 reads).
-* ``morph_la_ka.png``: a morph from spk1 /la/ to spk1 /ka/ at their energy peaks.
+* ``morph_la_ka.png``: a morph from spk1 /la/ to spk1 /ka/ at their energy
+  peaks, coloured by eq. (14); ``morph_la_ka_node_mean.png`` by the
+  size-independent mean squared node distance.
 
 Prints the per-group statistics (peak, time of peak, area).  Figures derived
 from third-party meshes must not be committed: use the shipped mesh for docs/.
@@ -175,10 +177,11 @@ def morph_figure(result, out: Path) -> None:
         return curve.times[int(np.argmax(curve.energy))]
 
     src, tgt = result.motions["spk1_la"], result.motions["spk1_ka"]
-    morph = morph_between(src, peak("spk1_la"), tgt, peak("spk1_ka"))
-    morph.labels = (f"spk1 /la/ @ {src.times[morph.source_frame]:.2f} s", f"spk1 /ka/ @ {tgt.times[morph.target_frame]:.2f} s")
-    render_png(morph, out / "morph_la_ka.png",
-               title="q(t) = (1-t) q_source + t q_target")
+    for difference, name in (("eq14", "morph_la_ka.png"), ("node_mean", "morph_la_ka_node_mean.png")):
+        morph = morph_between(src, peak("spk1_la"), tgt, peak("spk1_ka"), difference=difference)
+        morph.labels = (f"spk1 /la/ @ {src.times[morph.source_frame]:.2f} s",
+                        f"spk1 /ka/ @ {tgt.times[morph.target_frame]:.2f} s")
+        render_png(morph, out / name, title="q(t) = (1-t) q_source + t q_target")
 
 
 def main(argv=None) -> int:
