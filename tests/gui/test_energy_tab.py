@@ -119,3 +119,26 @@ def test_add_recordings_simulates_in_the_background(qtbot):
     assert len(widget.lines) == 15 and widget.add_button.isEnabled()
     widget.load_paths([DATA_DIR / "missing.tsv"])
     assert "Cannot add" in widget.hover_label.text()
+
+
+def test_add_motion_of_the_app(qtbot, curves):
+    from types import SimpleNamespace
+
+    from tonguevis.gui.energy_tab import EnergyTab
+
+    widget = EnergyTab()
+    qtbot.addWidget(widget)
+    widget.set_curves(curves)
+    times = np.arange(0, 10, 0.01)
+    motion = SimpleNamespace(times=times, energy=np.cos(times) ** 2)
+    prods = [SimpleNamespace(train=1, index=k, start=5 + 0.3 * k, end=5.3 + 0.3 * k, release=5 + 0.3 * k)
+             for k in (2, 3, 4)]
+    got = []
+    widget.motionsLoaded.connect(got.append)
+    widget.add_motion("spk3_ra.tsv", motion, prods)
+    assert got and got[-1]["spk3_ra"] is motion
+    new = [c for c in widget.curves if c.recording == "spk3_ra"]
+    assert len(new) == 3 and {(c.speaker, c.syllable) for c in new} == {("spk3", "ra")}
+    assert len(widget.curves) == len(curves) + 3
+    widget.add_motion("spk3_ra.tsv", motion, prods[:1])  # replaces, not duplicates
+    assert len([c for c in widget.curves if c.recording == "spk3_ra"]) == 1

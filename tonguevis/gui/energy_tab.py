@@ -145,6 +145,20 @@ class EnergyTab(QtWidgets.QWidget):
             self.motions.update(motions)
             self.motionsLoaded.emit(dict(self.motions))
 
+    def add_motion(self, name: str, motion, productions) -> None:
+        """Add the curves of a motion the app simulated itself (``name``: its file name or stem;
+        speaker and syllable parsed from it, see :mod:`tonguevis.analysis.corpus`)."""
+        from pathlib import Path
+
+        from tonguevis.analysis.corpus import labels_from_name
+        from tonguevis.analysis.energy import production_curves
+
+        entry = labels_from_name(Path(name))
+        stem = entry.name
+        curves = production_curves(motion, productions, recording=stem, speaker=entry.speaker,
+                                   syllable=entry.syllable, trial=entry.trial)
+        self.add_curves(curves, {stem: motion})
+
     # ------------------------------------------------------------------ loading in the background
     def _ask_paths(self) -> None:
         files, _ = QtWidgets.QFileDialog.getOpenFileNames(self, "Recordings to add")
