@@ -163,3 +163,20 @@ def test_zero_boundary_shortcut_matches_a_real_solve(small_bar):
     assert fitter.n_factorisations == 0
     nodes, approx = fitter.approximate(everything, frames)
     np.testing.assert_allclose(approx, fit(points, tets, everything, frames)[1], atol=1e-15)
+
+
+def test_local_connectivity_test_equals_the_global_search(small_bar):
+    points, tets = small_bar
+    graph = TetGraph.from_tets(tets, len(points))
+    rng = np.random.default_rng(13)
+    outcomes = set()
+    for size in (2, 5, 12, 30, 60):
+        for _ in range(6):
+            members = _random_connected_set(graph, size, rng)
+            inside = np.zeros(len(tets), dtype=bool)
+            inside[members] = True
+            for tet in members:
+                expected = graph.is_connected(members[members != tet])
+                assert graph.stays_connected_without(inside, int(tet)) == expected
+                outcomes.add(expected)
+    assert outcomes == {True, False}  # both answers were exercised

@@ -49,9 +49,10 @@ def adjust_boundaries(fitter: LocalFitter, labels: np.ndarray, seeds: np.ndarray
             nb = graph.neighbours[tet]
             if source == to or not np.any(labels[nb[nb >= 0]] == to) or len(members[source]) < 2:
                 continue
-            shrunk = members[source][members[source] != tet]
-            if not graph.is_connected(shrunk):
+            inside = labels == source
+            if not graph.stays_connected_without(inside, tet):
                 continue
+            shrunk = members[source][members[source] != tet]
             grown = np.append(members[to], tet)
             evaluations += 1
             e_source = fitter.error(shrunk)

@@ -43,23 +43,28 @@ class RigidFitter(LocalFitter):
         self._x = x
         quarter = self.tet_volumes / 4.0
         corners = x[self.tets]  # (k, 4, 3)
-        self._m0 = self.tet_volumes.copy()
-        self._m1 = quarter[:, None] * corners.sum(axis=1)
-        self._m2 = quarter[:, None, None] * np.einsum("kai,kaj->kij", corners, corners)
+        m0 = self.tet_volumes
+        m1 = quarter[:, None] * corners.sum(axis=1)
+        m2 = quarter[:, None, None] * np.einsum("kai,kaj->kij", corners, corners)
         y = np.transpose(self.columns, (1, 0, 2))[self.tets]  # (k, 4, r, 3)
-        self._s = quarter[:, None, None] * y.sum(axis=1)  # (k, r, 3)
-        self._t = quarter[:, None, None] * np.cross(corners[:, :, None, :], y).sum(axis=1)
-        self._q = quarter * np.einsum("karj,karj->k", y, y)
+        s = quarter[:, None, None] * y.sum(axis=1)  # (k, r, 3)
+        t = quarter[:, None, None] * np.cross(corners[:, :, None, :], y).sum(axis=1)
+        q = quarter * np.einsum("karj,karj->k", y, y)
+        self._r = y.shape[2]
+        # one row of additive moments per tet: a set's sums are one matrix-vector product
+        self._moments = np.concatenate([m0[:, None], m1, m2.reshape(-1, 9), s.reshape(len(s), -1),
+                                        t.reshape(len(t), -1), q[:, None]], axis=1)
 
     def _compute_error(self, members: np.ndarray) -> float:
-        m0 = self._m0[members].sum()
-        m1 = self._m1[members].sum(axis=0)
-        m2 = self._m2[members].sum(axis=0)
-        s = self._s[members].sum(axis=0)
-        t = self._t[members].sum(axis=0)
-        q = self._q[members].sum()
+        mask = np.zeros(len(self.tets))
+        mask[members] = 1.0
+        sums = mask @ self._moments
+        r = self._r
+        m0, m1, m2 = sums[0], sums[1:4], sums[4:13].reshape(3, 3)
+        s = sums[13:13 + 3 * r].reshape(r, 3)
+        t = sums[13 + 3 * r:13 + 6 * r].reshape(r, 3)
         _, _, _, captured = rigid_coefficients(m0, m1, m2, s, t)
-        return max(float(q - captured), 0.0)
+        return max(float(sums[-1] - captured), 0.0)
 
     def approximate(self, members: np.ndarray, displacements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The rigid fit of each frame: nodes (p,) and (F, p, 3) displacements in m."""

@@ -63,6 +63,43 @@ class TetGraph:
         data = np.ones(int(keep.sum()), dtype=np.int8)
         return sp.csr_matrix((data, (rows[keep], cols[keep])), shape=(self.n_tets, self.n_tets))
 
+    @cached_property
+    def node_tets(self) -> sp.csr_matrix:
+        """(n, k) 0/1 incidence: row i holds the tets containing node i."""
+        rows = self.tets.ravel()
+        cols = np.repeat(np.arange(self.n_tets), 4)
+        data = np.ones(len(rows), dtype=np.int8)
+        return sp.csr_matrix((data, (rows, cols)), shape=(self.n_nodes, self.n_tets))
+
+    def stays_connected_without(self, inside: np.ndarray, tet: int) -> bool:
+        """Whether the face-connected set ``inside`` ((k,) bool mask) stays connected without ``tet``.
+
+        Cheap local test first: the set's face neighbours of ``tet`` joined
+        through tets around ``tet``'s nodes (sufficient); the whole set is
+        searched only when that fails.
+        """
+        around = self.neighbours[tet]
+        around = around[(around >= 0)]
+        around = around[inside[around]]
+        if len(around) <= 1:  # a leaf stays attached; a lone tet leaves nothing (or nothing connected)
+            return len(around) == 1
+        star = self.node_tets[self.tets[tet]].indices
+        local = np.unique(star[inside[star] & (star != tet)])
+        position = {int(t): i for i, t in enumerate(local)}
+        seen = {int(around[0])}
+        stack = [int(around[0])]
+        while stack:
+            current = stack.pop()
+            for other in self.neighbours[current]:
+                other = int(other)
+                if other in position and other not in seen:
+                    seen.add(other)
+                    stack.append(other)
+        if all(int(t) in seen for t in around):
+            return True
+        rest = np.flatnonzero(inside)
+        return self.is_connected(rest[rest != tet])
+
     def one_ring(self, members: np.ndarray, labels: np.ndarray) -> np.ndarray:
         """Sorted unassigned tets sharing a face with the tets ``members``."""
         around = self.neighbours[members].ravel()
