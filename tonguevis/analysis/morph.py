@@ -205,7 +205,8 @@ def morph_between(source_motion, source_time: float, target_motion, target_time:
     if source_motion.warping != target_motion.warping:
         raise MorphError("one motion is warped and the other linear")
     for motion, t, what in ((source_motion, source_time, "source"), (target_motion, target_time, "target")):
-        if not motion.times[0] - 0.5 / 100 <= t <= motion.times[-1] + 0.5 / 100:
+        half = 0.5 * float(np.median(np.diff(motion.times))) if motion.n_frames > 1 else 0.0
+        if not motion.times[0] - half <= t <= motion.times[-1] + half:
             raise MorphError(f"{what} time {t:.3f} s is outside its motion ({motion.times[0]:.3f}-"
                              f"{motion.times[-1]:.3f} s)")
     i, j = source_motion.frame_at(source_time), target_motion.frame_at(target_time)
