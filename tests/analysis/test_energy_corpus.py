@@ -178,3 +178,23 @@ def test_cli_energy_vowel_window(tmp_path, monkeypatch):
     for key, p in truth.items():
         times = [float(r["recording_time_s"]) for r in rows if r["production"] == f"{key[0]}.{key[1]}"]
         assert min(times) < p["release"] < max(times) <= p["vowel"] + 0.03
+
+
+def test_walked_non_recordings_are_skipped_named_ones_fail(tmp_path, monkeypatch, capsys):
+    import shutil
+
+    from tonguevis.cli import energy as energy_cli
+    from tonguevis.cli import main
+
+    monkeypatch.setattr(energy_cli, "load_model", lambda args: box_tongue())
+    for name in ("spk2_ra.tsv", "spk2_ra.wav", "sensor_map.json"):
+        shutil.copy(DATA_DIR / name, tmp_path / name)
+    (tmp_path / "energy_old.csv").write_text("recording,production,time_s\nx,1.2,0.1\n")  # an earlier output
+    out = tmp_path / "out" / "e.csv"
+    out.parent.mkdir()
+    assert main(["energy", str(tmp_path), "--csv", str(out), "--modes", str(MODES), "--landmarks", "rule",
+                 "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert "skipped" in text and "energy_old.csv" in text and "15 production curves" in text
+    code = main(["energy", str(tmp_path / "energy_old.csv"), "--csv", str(out), "--quiet"])
+    assert code == 2 and "energy_old.csv" in capsys.readouterr().err

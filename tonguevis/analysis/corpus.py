@@ -15,6 +15,7 @@ Labels come, in increasing priority, from
 from __future__ import annotations
 
 import csv
+import logging
 import os
 import re
 from dataclasses import dataclass, field, replace
@@ -22,6 +23,8 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 from tonguevis.errors import TonguevisError
+
+logger = logging.getLogger("tonguevis")
 
 
 class CorpusError(TonguevisError):
@@ -43,6 +46,7 @@ class CorpusEntry:
     syllable: str = ""
     trial: int = 1
     source: str = "name"  # where the labels came from: name, folder, metadata, table
+    walked: bool = False  # found by walking a folder (not named by the user): skipped if unreadable
 
     @property
     def name(self) -> str:
@@ -177,11 +181,13 @@ class Corpus:
 def load_corpus(paths: Iterable[str | os.PathLike], table: str | os.PathLike | None = None,
                 extensions: Sequence[str] | None = None) -> Corpus:
     """Walk ``paths`` for recordings and label them (names, then the optional table)."""
+    paths = [Path(p) for p in paths]
+    named = {p.resolve() for p in paths if p.is_file()}
     files = find_recordings(paths, extensions)
     labels = read_label_table(table) if table is not None else {}
     entries = []
     for f in files:
-        entry = labels_from_name(f)
+        entry = replace(labels_from_name(f), walked=f.resolve() not in named)
         override = (labels.get(str(f.resolve())) or labels.get(f.name) or labels.get(f.name.split(".")[0]))
         if override:
             entry = replace(entry, **override, source="table")
@@ -196,6 +202,7 @@ class CorpusResult:
     curves: list
     motions: dict
     productions: dict
+    skipped: list = field(default_factory=list)  # (path, reason) of walked files that were not recordings
 
 
 def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int = 100,
@@ -218,14 +225,23 @@ def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int
 
     if window not in ("release", "vowel"):
         raise EnergyError(f"window must be 'release' or 'vowel', got {window!r}")
+    from tonguevis.errors import RecordingError
+
     model = model or TongueModel.default()
-    curves, motions, tables = [], {}, {}
+    curves, motions, tables, skipped = [], {}, {}, []
     for k, entry in enumerate(corpus.entries):
         report(progress, k, len(corpus), f"simulating {entry.path.name}")
         mapping = sensor_map
         if mapping is None and (entry.path.parent / "sensor_map.json").is_file():
             mapping = entry.path.parent / "sensor_map.json"
-        rec = read_recording(entry.path, sensor_map=mapping)
+        try:
+            rec = read_recording(entry.path, sensor_map=mapping)
+        except RecordingError as exc:
+            if not entry.walked:
+                raise
+            logger.warning("skipping %s: %s", entry.path, exc)
+            skipped.append((entry.path, str(exc)))
+            continue
         entry = entry.apply_metadata(rec.metadata) if entry.source != "table" else entry
         motion = simulate(rec, model=model, modes=modes, **simulate_options)
         if window == "release":
@@ -240,7 +256,7 @@ def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int
             motions[entry.name] = motion
         tables[entry.name] = table
     report(progress, len(corpus), len(corpus), "done")
-    return CorpusResult(curves, motions, tables)
+    return CorpusResult(curves, motions, tables, skipped)
 
 
 def _head_corrected(rec):

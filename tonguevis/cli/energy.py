@@ -68,6 +68,8 @@ def run(args: argparse.Namespace) -> int:
                                       keep=None if args.all else (2, 3, 4), keep_motions=False, window=args.window,
                                       landmarks=args.landmarks, warping=not args.linear,
                                       progress=progress)
+    for path, reason in result.skipped:
+        print(f"skipped {path}: {reason}")
     write_curves_csv(result.curves, args.csv)
     print(f"{len(corpus)} recording(s), {len(result.curves)} production curves -> {args.csv}")
     summaries = summarize(result.curves, by) if result.curves else []
