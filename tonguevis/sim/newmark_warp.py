@@ -38,10 +38,9 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
     with _lock:
         if _kernel is not None:
             return
-        import warp as wp
+        from tonguevis._warp import load_warp
 
-        wp.config.quiet = True
-        wp.init()
+        wp = load_warp()
         f64 = wp.float64
 
         @wp.func

@@ -23,10 +23,9 @@ def _build():
     with _lock:
         if _kernel is not None:
             return
-        import warp as wp
+        from tonguevis._warp import load_warp
 
-        wp.config.quiet = True
-        wp.init()
+        wp = load_warp()
 
         @wp.func
         def coefficients(t: wp.float64):

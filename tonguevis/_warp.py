@@ -1,0 +1,51 @@
+"""Importing warp-lang quietly: the library never prints.
+
+warp announces itself on stdout when it initialises and, on machines without
+an NVIDIA driver, its native code writes a CUDA warning to stderr.  Both are
+noise for a CPU user (the kernels then run on the CPU, as intended), so the
+init runs with warp's log level at errors and with the process's C-level
+stderr pointed at /dev/null for that call only.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+import threading
+
+logger = logging.getLogger("tonguevis")
+_lock = threading.Lock()
+_warp = None
+
+
+def load_warp():
+    """The initialised ``warp`` module (CPU, or CUDA when a GPU is present)."""
+    global _warp
+    with _lock:
+        if _warp is not None:
+            return _warp
+        import warp as wp
+
+        if hasattr(wp, "LOG_ERROR") and hasattr(wp.config, "log_level"):
+            wp.config.log_level = wp.LOG_ERROR
+        else:  # older warp
+            wp.config.quiet = True
+        saved = None
+        try:
+            sys.stderr.flush()
+            saved = os.dup(2)
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, 2)
+            os.close(devnull)
+        except OSError:  # no real file descriptor 2 (embedded interpreters): just init
+            saved = None
+        try:
+            wp.init()
+        finally:
+            if saved is not None:
+                os.dup2(saved, 2)
+                os.close(saved)
+        logger.debug("warp %s initialised; preferred device %s", wp.__version__, wp.get_preferred_device())
+        _warp = wp
+        return wp
