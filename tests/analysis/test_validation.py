@@ -133,6 +133,8 @@ def test_the_json_has_what_it_promises(box_model, tmp_path):
             assert len(scores[f"{method}_rmse_axes_mm"]) == 3 and len(scores[f"{method}_corr_axes"]) == 3
             assert scores[f"{method}_unconverged_frames"] == 0
         assert scores["frames"] == rec.n_samples
+    assert doc["sensors"]["TT"]["outside_drivers"] is True  # the tip lies beyond TB, TD, TL, TR
+    assert sum(doc["sensors"]["TT"]["kinematic_weights"]) == pytest.approx(1.0)
     settings = doc["settings"]
     assert settings["modes"] == MODES and settings["landmarks"] == "rule"
     assert settings["mesh"]["nodes"] == box_model.mesh.n_nodes

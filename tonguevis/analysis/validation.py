@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from tonguevis._progress import ProgressCallback, report
-from tonguevis.analysis.kinematic import interpolate_displacements
+from tonguevis.analysis.kinematic import interpolation_weights
 from tonguevis.analysis.validation_scores import (
     recording_summary,
     resolve_rest_interval,
@@ -155,11 +155,15 @@ def validate(
             q, conv = runs[h]
             item.predicted[method] = _node_trajectory(basis, w_full, int(nodes[h]), q, method != "linear")
             item.converged[method] = np.asarray(conv, dtype=bool)
-        item.predicted["kinematic"] = interpolate_displacements(
-            centres[keep], prep.displacement[:, keep], centres[h][None])[:, 0]
+        weights = interpolation_weights(centres[keep], centres[h][None])[0]
+        item.predicted["kinematic"] = np.einsum("n,fnc->fc", weights, prep.displacement[:, keep])
         item.converged["kinematic"] = np.ones(len(recording.times), dtype=bool)
         held_out[name] = item
         scores[name] = _sensor_scores(item)
+        # A negative interpolation weight: the held-out sensor lies outside the
+        # drivers' hull (exact for <= 4 drivers, where the weights are barycentric).
+        scores[name]["outside_drivers"] = bool(np.any(weights < -1e-9))
+        scores[name]["kinematic_weights"] = weights.tolist()
     report(progress, 4, 4, "validated")
     summary = recording_summary(recording, motion, prep, interval, rest_how)
     settings = _settings(model, basis, modes, landmarks, quasi_static, tolerance)
