@@ -173,10 +173,10 @@ def conclusions(groups, sensitivity) -> list[str]:
                 if best < 0.5:
                     blind.append(f"{n} {a} in {f} (best r {fmt(best)})")
         if blind:
-            out.append("  No predictor follows: " + "; ".join(blind) + ". No predictor, physical or "
-                       "kinematic, recovers that motion from the other sensors: it is not in them (the tip, say, "
-                       "raised on its own), so this is a limit of what a held-out test with this layout can show, "
-                       "not a fault of one model.")
+            out.append("  Motion that no predictor follows (r < 0.5 along an axis where the sensor moved >= 1 mm): "
+                       + "; ".join(blind) + ". Neither the physical nor the kinematic predictors recover it from "
+                       "the other sensors: it is not in them (the tip, say, raised on its own), so this is a limit "
+                       "of what a held-out test with this layout can show, not the fault of one model.")
     for data in ("real", "demo"):
         sp, ru = groups.get((data, "speaker"), []), groups.get((data, "rule"), [])
         if sp and ru:
