@@ -112,8 +112,9 @@ def _refined(solve, matrix, steps: int = 3):
 def _factorise(matrix: sp.csc_matrix):
     # SPD: no pivoting, symmetric ordering; wider supernodes (relax, panel) factor ~30 % faster.
     # (SuperLU needs relax <= panel_size: relax 40 with panel 20 corrupted the heap.)
-    return spla.splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, relax=10, panel_size=10,
-                     options={"SymmetricMode": True})
+    # No equilibration either: the stiffness is symmetric and needs no scaling without pivoting.
+    return spla.splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, relax=16, panel_size=16,
+                     options={"SymmetricMode": True, "Equil": False})
 
 
 class ConstraintFitter(LocalFitter):
