@@ -135,6 +135,24 @@ def where(model, result) -> list[str]:
     return words
 
 
+def render_bar(path: Path) -> None:
+    """The bar of Fig. 8 (middle third bent, seeds at both ends and the middle), rigid and
+    constraint rows; the bar comes from the tests' helper so the picture is what they check."""
+    sys.path.insert(0, str(REPO))
+    from tests.analysis.segmentation_support import bar_mesh, bent_bar_displacement, tet_containing_x
+    from tonguevis.analysis.segmentation import SegmentationTarget, segment
+    from tonguevis.analysis.segmentation.render import render_png
+    from tonguevis.mesh.tetmesh import TetMesh
+
+    points, tets = bar_mesh(24, 2, 2, length=0.12)
+    target = SegmentationTarget.frame(bent_bar_displacement(points, 0.04, 0.08, 0.5), description="bent bar")
+    seeds = [tet_containing_x(points, tets, x) for x in (0.0, 0.06, 0.12)]
+    mesh = TetMesh(points, tets)
+    rows = [segment(mesh, target, mode, seeds=seeds, constrained_nodes=[]) for mode in ("rigid", "constraint")]
+    render_png(rows, path, titles=["bar bent in its middle third"] * 2, view=(0.0, -1.0, 0.0))
+    print(f"wrote {path}")
+
+
 def timed(function, repeat: int = 1):
     best, value = np.inf, None
     for _ in range(repeat):
@@ -149,8 +167,12 @@ def main(argv=None) -> int:
     parser.add_argument("--json", type=Path, help="write the figures to this JSON file")
     parser.add_argument("--survey", action="store_true", help="segment /ta/ /ka/ /la/ /ra/ of the three speakers")
     parser.add_argument("--png", type=Path, help="render the Fig. 17 setting (rigid and constraint rows)")
-    parser.add_argument("--survey-png", type=Path, help="render the survey (one row per file)")
+    parser.add_argument("--survey-png", type=Path, help="render the survey (a panel per file)")
+    parser.add_argument("--bar-png", type=Path, help="render the bent bar of Fig. 8 and stop")
     args = parser.parse_args(argv)
+    if args.bar_png:
+        render_bar(args.bar_png)
+        return 0
 
     from tonguevis.analysis.segmentation import peak_energy_target, production_target, segment
 
