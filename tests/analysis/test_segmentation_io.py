@@ -125,3 +125,18 @@ def test_progress_reports_and_cancels(small_result):
 
     with pytest.raises(Cancelled):
         segment(mesh, target, "constraint", seeds=[0, mesh.n_tets - 1], constrained_nodes=[], progress=cancel_soon)
+
+
+@pytest.mark.parametrize("mode", ["rigid", "constraint"])
+def test_a_part_no_seed_can_reach_gets_its_own_partition(mode):
+    points, tets = bar_mesh(4, 2, 2, length=0.04)
+    far = points + [0.1, 0.0, 0.0]  # a second, separate bar
+    both = TetMesh(np.vstack([points, far]), np.vstack([tets, tets + len(points)]))
+    u = np.vstack([bent_bar_displacement(points, 0.01, 0.03, 0.2), bent_bar_displacement(far, 0.11, 0.13, 0.3)])
+    target = SegmentationTarget.frame(u)
+    result = segment(both, target, mode, seeds=[0], constrained_nodes=[])
+    assert result.n_partitions == 2
+    assert np.all(result.labels[: len(tets)] == 0) and np.all(result.labels[len(tets):] == 1)
+    assert result.seeds.tolist() == [0, len(tets)]
+    auto = segment(both, target, mode, seeds="auto", n_partitions=2, threshold=None, constrained_nodes=[])
+    assert auto.n_partitions == 2 and len(np.unique(auto.labels[: len(tets)])) == 1
