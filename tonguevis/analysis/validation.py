@@ -161,7 +161,8 @@ def validate(
         held_out[name] = item
         scores[name] = _sensor_scores(item)
         # A negative interpolation weight: the held-out sensor lies outside the
-        # drivers' hull (exact for <= 4 drivers, where the weights are barycentric).
+        # drivers' hull (exact when the drivers are affinely independent, as
+        # for 2 or 3 drivers: the weights are then barycentric coordinates).
         scores[name]["outside_drivers"] = bool(np.any(weights < -1e-9))
         scores[name]["kinematic_weights"] = weights.tolist()
     report(progress, 4, 4, "validated")

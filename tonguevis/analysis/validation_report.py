@@ -89,7 +89,8 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
         lines.append("- drift: not measured (the sensors never return within 0.5 mm of rest after moving)")
     else:
         lines.append(f"- drift after the return to rest (t = {fmt(r['drift_time_s'])} s, sensors within "
-                     f"{fmt(r['drift_sensor_offset_mm'])} mm of rest): mesh at most {fmt(r['drift_mm'])} mm from rest")
+                     f"{fmt(r['drift_sensor_offset_mm'])} mm of rest): mesh at most {fmt(r['drift_mm'])} mm from rest, "
+                     f"{fmt(r.get('drift_beyond_static_mm'), 3)} mm from the quasi-static shape for the same targets")
     return lines
 
 
