@@ -16,7 +16,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from tonguevis.analysis.segmentation.graph import TetGraph, set_key
+from tonguevis.analysis.segmentation.graph import TetGraph
 from tonguevis.analysis.segmentation.target import SegmentationTarget
 
 
@@ -51,9 +51,6 @@ class LocalFitter:
 
     def _prepare(self) -> None:  # pragma: no cover - overridden
         pass
-
-    def key(self, members: np.ndarray) -> bytes:
-        return set_key(members, len(self.tets))
 
     def sorted_members(self, members: np.ndarray) -> tuple[np.ndarray, bytes]:
         """The set's tets in increasing order and its key (no sort: a mask)."""

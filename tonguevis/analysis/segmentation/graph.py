@@ -138,16 +138,3 @@ class TetGraph:
         centres = points[self.tets[members]].mean(axis=1)
         middle = centres.mean(axis=0)
         return int(members[int(np.argmin(np.sum((centres - middle) ** 2, axis=1)))])
-
-    def interface_tets(self, labels: np.ndarray) -> np.ndarray:
-        """(b,) tets with a face neighbour in another partition."""
-        nb = self.neighbours
-        other = np.where(nb >= 0, labels[np.maximum(nb, 0)], labels[:, None])
-        return np.flatnonzero(np.any(other != labels[:, None], axis=1))
-
-
-def set_key(members: np.ndarray, n_tets: int) -> bytes:
-    """A hashable key of a tet set (its packed membership bits)."""
-    mask = np.zeros(n_tets, dtype=bool)
-    mask[members] = True
-    return np.packbits(mask).tobytes()
