@@ -122,6 +122,20 @@ def overview_rows(groups):
     return table(rows)
 
 
+def axis_rows(groups):
+    """Mean per-axis RMSE and r of each method per data group."""
+    rows = [["data", "landmarks", "method", "RMSE x", "RMSE y", "RMSE z", "r x", "r y", "r z"]]
+    for (data, landmarks), docs in groups.items():
+        if not docs:
+            continue
+        for m in METHODS:
+            rm = np.array([s[f"{m}_rmse_axes_mm"] for d in docs for s in d["sensors"].values()], dtype=float)
+            rc = np.array([s[f"{m}_corr_axes"] for d in docs for s in d["sensors"].values()], dtype=float)
+            rows.append([data, landmarks, LABEL[m]] + [fmt(v) for v in np.nanmean(rm, axis=0)]
+                        + [fmt(v) for v in np.nanmean(rc, axis=0)])
+    return table(rows)
+
+
 # --------------------------------------------------------------------------- conclusions
 def _runs(docs):
     """(recording stem, sensor, scores) of every held-out run."""
@@ -315,6 +329,10 @@ def render(args, model, groups, sensitivity, elapsed) -> str:
         "Mean over held-out runs of the RMSE (mm) and, in parentheses, of r.",
         "",
         overview_rows(groups),
+        "",
+        "By axis (x anterior, y left, z up), mean over held-out runs:",
+        "",
+        axis_rows(groups),
         "",
         "## Conclusions",
         "",
