@@ -1,0 +1,164 @@
+"""The Qt-free application state, and the rule that the core never imports Qt."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from tonguevis.appstate import MAX_SPEED, MIN_SPEED, AppState, interval_at
+
+
+def recorder(state: AppState, *names: str) -> list:
+    events: list = []
+    for name in names:
+        state.subscribe(name, events.append)
+    return events
+
+
+def test_set_time_clamps_and_notifies_once():
+    state = AppState(0.0, 2.0, 0.01)
+    events = recorder(state, "time")
+    state.set_time(1.234, source="plot")
+    state.set_time(1.234)  # unchanged: no event
+    state.set_time(5.0)
+    state.set_time(-1.0)
+    assert [e.value for e in events] == [1.234, 2.0, 0.0]
+    assert events[0].source == "plot"
+    assert state.time == 0.0
+
+
+def test_nan_time_is_ignored():
+    state = AppState(0.0, 1.0)
+    state.set_time(0.5)
+    state.set_time(float("nan"))
+    assert state.time == 0.5
+
+
+def test_step_snaps_to_frame_grid():
+    state = AppState(1.0, 2.0, 0.01)
+    state.set_time(1.2349)
+    state.step(1)
+    assert state.time == pytest.approx(1.24)
+    state.step(-3)
+    assert state.time == pytest.approx(1.21)
+    state.step(-1000)
+    assert state.time == 1.0
+
+
+def test_speed_is_clamped_to_quarter_to_real_time():
+    state = AppState()
+    events = recorder(state, "speed")
+    state.set_speed(0.1)
+    state.set_speed(3.0)
+    state.set_speed(0.5)
+    assert [e.value for e in events] == [MIN_SPEED, MAX_SPEED, 0.5]
+
+
+def test_playing_events_only_on_change():
+    state = AppState()
+    events = recorder(state, "playing")
+    state.set_playing(True)
+    state.set_playing(True)
+    state.toggle_playing()
+    assert [e.value for e in events] == [True, False]
+
+
+def test_loop_range_clamped_sorted_and_used_as_playback_bounds():
+    state = AppState(0.0, 10.0)
+    state.set_loop((4.0, 2.0))
+    assert state.loop == (2.0, 4.0)
+    assert state.playback_bounds() == (2.0, 4.0)
+    state.set_loop((9.0, 20.0))
+    assert state.loop == (9.0, 10.0)
+    state.set_loop((3.0, 3.0))  # empty: no loop
+    assert state.loop is None
+    assert state.playback_bounds() == (0.0, 10.0)
+
+
+def test_new_range_clears_loop_and_clamps_time():
+    state = AppState(0.0, 10.0)
+    state.set_time(8.0)
+    state.set_loop((1.0, 2.0))
+    events = recorder(state, "range", "time")
+    state.set_range(0.0, 5.0, 0.02)
+    assert state.loop is None
+    assert state.time == 5.0
+    assert [e.name for e in events] == ["range", "time"]
+    with pytest.raises(ValueError):
+        state.set_range(3.0, 1.0, 0.01)
+    with pytest.raises(ValueError):
+        state.set_range(0.0, 1.0, 0.0)
+
+
+def test_unsubscribe_and_unknown_event():
+    state = AppState(0.0, 1.0)
+    seen = []
+    unsubscribe = state.subscribe("time", seen.append)
+    state.set_time(0.3)
+    unsubscribe()
+    state.set_time(0.4)
+    assert len(seen) == 1
+    with pytest.raises(ValueError, match="unknown AppState event"):
+        state.subscribe("tiem", seen.append)
+
+
+def test_observer_writing_back_does_not_recurse_forever():
+    # A view that snaps the time to its own frame grid writes back inside the
+    # callback; the second event carries the snapped value and then it settles.
+    state = AppState(0.0, 1.0, 0.1)
+    seen = []
+
+    def snapping_view(event):
+        seen.append(event.value)
+        state.set_time(round(event.value, 1))
+
+    state.subscribe("time", snapping_view)
+    state.set_time(0.33)
+    assert seen == [0.33, 0.3]
+    assert state.time == 0.3
+
+
+def test_selection_and_colour():
+    state = AppState()
+    events = recorder(state, "selection", "color")
+    state.select("TT")
+    state.set_color("energy")
+    with pytest.raises(ValueError):
+        state.set_color("rainbow")
+    assert [(e.name, e.value) for e in events] == [("selection", "TT"), ("color", "energy")]
+
+
+def test_interval_at():
+    intervals = [(0.0, 1.0), (1.5, 2.0)]
+    assert interval_at(intervals, 1.7) == (1.5, 2.0)
+    assert interval_at(intervals, 1.2) is None
+
+
+def test_core_never_imports_qt():
+    # Every non-GUI module of the package must import without pulling in Qt,
+    # VTK's Qt bindings or pyvistaqt (the core runs headless).
+    code = textwrap.dedent(
+        """
+        import importlib, pkgutil, sys
+        import tonguevis
+        skipped = []
+        imported = []
+        for info in pkgutil.walk_packages(tonguevis.__path__, "tonguevis."):
+            if info.name.startswith("tonguevis.gui") or info.name == "tonguevis.__main__":
+                continue
+            try:
+                importlib.import_module(info.name)
+                imported.append(info.name)
+            except Exception as exc:  # other modules' missing optional deps are not our concern
+                skipped.append(info.name)
+        qt = sorted(m for m in sys.modules if m.split(".")[0] in ("PySide6", "PyQt5", "PyQt6", "pyvistaqt", "qtpy"))
+        assert "tonguevis.appstate" in imported and "tonguevis.cli.view" in imported, imported
+        print("QT", qt)
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "QT []" in out.stdout, out.stdout

@@ -1,0 +1,44 @@
+"""``tonguevis export-video``: simulate a recording and render it off screen to MP4 with its sound."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the first demo recording)")
+    parser.add_argument("--out", type=Path, required=True, metavar="MP4", help="the video to write")
+    parser.add_argument("--start", type=float, metavar="S", help="first second (default: the start)")
+    parser.add_argument("--end", type=float, metavar="S", help="last second (default: the end)")
+    parser.add_argument("--sensors", metavar="MAP", help="sensor map: a preset or a JSON file of name -> channel")
+    parser.add_argument("--mesh", type=Path, metavar="PATH", help="tetrahedral tongue mesh (default: the shipped one)")
+    parser.add_argument("--modes", type=int, default=100, metavar="M", help="vibration modes (default 100)")
+    parser.add_argument("--fps", type=int, default=25, help="video frames per second (default 25)")
+    parser.add_argument("--size", default="1280x720", metavar="WxH", help="video size in pixels (default 1280x720)")
+    parser.add_argument("--color", choices=("displacement", "energy", "plain"), default="displacement",
+                        help="surface colouring (default: displacement magnitude)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def run(args) -> int:
+    from tonguevis._progress import tqdm_progress
+    from tonguevis.errors import RecordingError
+    from tonguevis.gui.session import demo_recording_path, load_session
+    from tonguevis.gui.simulation import simulate_session
+    from tonguevis.gui.video import export_video
+
+    path = args.file or demo_recording_path()
+    if path is None:
+        raise RecordingError("no file given and no demo recording in data/")
+    try:
+        width, height = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        raise RecordingError(f"--size must look like 1280x720, got {args.size!r}") from None
+    session = load_session(path, sensor_map=args.sensors)
+    with tqdm_progress("simulating", disable=args.quiet) as progress:
+        simulate_session(session, mesh_path=args.mesh, modes=args.modes, progress=progress)
+    with tqdm_progress("rendering", disable=args.quiet) as progress:
+        out = export_video(session, args.out, args.start, args.end, fps=args.fps, size=(width, height),
+                           mode=args.color, progress=progress)
+    print(out)
+    return 0

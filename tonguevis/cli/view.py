@@ -1,0 +1,22 @@
+"""``tonguevis view``: the desktop app (the demo when no file is given)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the first demo recording)")
+    parser.add_argument("--sensors", metavar="MAP",
+                        help="sensor map: a preset (paper, haskins, mngu0) or a JSON file of name -> channel")
+    parser.add_argument("--mesh", type=Path, metavar="PATH", help="tetrahedral tongue mesh (default: the shipped one)")
+    parser.add_argument("--modes", type=int, default=100, metavar="M", help="vibration modes (default 100)")
+    parser.add_argument("--screenshot", type=Path, metavar="PNG",
+                        help="open the window, show --frame, save the whole window as PNG and exit")
+    parser.add_argument("--frame", type=int, metavar="N", help="frame shown for --screenshot (default: the middle)")
+
+
+def run(args) -> int:
+    from tonguevis.gui.app import run_view  # Qt only loads here: `import tonguevis.cli.view` stays light
+
+    return run_view(args.file, args.sensors, args.mesh, args.modes, args.screenshot, args.frame)

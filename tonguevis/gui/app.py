@@ -1,0 +1,89 @@
+"""Starting the desktop app: the QApplication, the window, and the screenshot mode."""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+import traceback
+
+log = logging.getLogger("tonguevis")
+
+
+def application():
+    from PySide6.QtWidgets import QApplication
+
+    app = QApplication.instance()
+    if app is None:
+        app = QApplication(sys.argv[:1])
+        app.setApplicationName("tonguevis")
+        app.setOrganizationName("tonguevis")
+    return app
+
+
+def install_error_hook(window) -> None:
+    """Unexpected exceptions in Qt callbacks become a dialog; the app keeps running."""
+
+    def hook(kind, value, tb):
+        log.error("unexpected error:\n%s", "".join(traceback.format_exception(kind, value, tb)))
+        try:
+            window.show_error("Unexpected error", f"{kind.__name__}: {value}")
+        except Exception:  # never let the hook itself raise
+            pass
+
+    sys.excepthook = hook
+
+
+def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings=None, feature_tabs: bool = True):
+    """A shown MainWindow that opens ``file`` (default: the demo)."""
+    from tonguevis.gui.window import MainWindow
+
+    application()
+    window = MainWindow(settings=settings, modes=modes, mesh_path=mesh)
+    if feature_tabs:
+        from tonguevis.gui.tabs import add_feature_tabs
+
+        add_feature_tabs(window)
+    window.show()
+    if file is None:
+        window.open_demo()
+    else:
+        window.open_recording(file, sensor_map=sensors)
+    return window
+
+
+def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None) -> int:
+    """``tonguevis view``: run the app; with ``screenshot``, save the window at ``frame`` and exit."""
+    app = application()
+    window = create_window(file, sensors, mesh, modes)
+    if screenshot is None:
+        install_error_hook(window)
+        return app.exec()
+    status = {"code": 1}
+
+    def shoot(ok: bool) -> None:
+        from PySide6.QtCore import QTimer
+
+        if not ok:
+            message = window.statusBar().currentMessage()
+            print(f"tonguevis view: no screenshot, the simulation did not finish: {message}", file=sys.stderr)
+            app.exit(2)
+            return
+        frames = window.session.frames
+        index = min(max(int(frame if frame is not None else frames.n_frames // 2), 0), frames.n_frames - 1)
+        window.state.set_time(float(frames.times[index]))
+
+        def save() -> None:
+            window.export_screenshot(os.fspath(screenshot))
+            status["code"] = 0
+            window.close()
+            app.exit(0)
+
+        QTimer.singleShot(600, save)  # let the plots draw at their final size
+
+    if window.session is None and window.last_dialog is not None:
+        print(f"tonguevis view: {window.last_dialog.text()}", file=sys.stderr)
+        return 2
+    window.simulation_finished.connect(shoot)
+    code = app.exec()
+    return code if code else status["code"]

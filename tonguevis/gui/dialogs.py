@@ -1,0 +1,86 @@
+"""Dialogs: errors that name the file and the problem, and the sensor-mapping dialog."""
+
+from __future__ import annotations
+
+from PySide6.QtWidgets import (QComboBox, QDialog, QDialogButtonBox, QFormLayout, QLabel, QMessageBox,
+                               QVBoxLayout)
+
+from tonguevis.gui.session import ROLES, TONGUE_NAMES
+
+IGNORE = "(not used)"
+
+
+def error_box(parent, title: str, message: str, path=None) -> QMessageBox:
+    """Show a non-blocking error dialog (the app keeps running) and return it."""
+    text = message if path is None or str(path) in message else f"{path}:\n{message}"
+    box = QMessageBox(QMessageBox.Icon.Critical, title, text, QMessageBox.StandardButton.Ok, parent)
+    box.setModal(True)
+    box.open()
+    return box
+
+
+def guess_role(channel: str) -> str:
+    """A first guess of a channel's role from common spellings (the user confirms)."""
+    upper = channel.upper().replace("_", "").replace(" ", "")
+    for role, spellings in {
+        "TT": ("TT", "TIP", "TONGUETIP", "TTIP"), "TB": ("TB", "BLADE", "TBL"),
+        "TD": ("TD", "DORSUM", "TM", "MID", "TMID"), "TBK": ("TBK", "BACK", "TR", "REAR"),
+        "JAW": ("JAW", "LI", "LOWERINCISOR", "JW"), "UL": ("UL", "UPPERLIP"), "LL": ("LL", "LOWERLIP"),
+    }.items():
+        if upper in spellings:
+            return role
+    return IGNORE
+
+
+class SensorMapDialog(QDialog):
+    """Ask which channel is which sensor when a file's channel names are not known.
+
+    ``mapping()`` returns {canonical name: channel} for the channels given a role.
+    """
+
+    def __init__(self, channels: list[str], path=None, parent=None):
+        super().__init__(parent)
+        self.setWindowTitle("Which sensor is which?")
+        layout = QVBoxLayout(self)
+        where = f" in {path}" if path else ""
+        layout.addWidget(QLabel(
+            f"The channels{where} carry no known tongue sensor names ({', '.join(TONGUE_NAMES)}).\n"
+            "Give each channel its role; at least one tongue sensor is needed to drive the model."))
+        form = QFormLayout()
+        self.boxes: dict[str, QComboBox] = {}
+        for channel in channels:
+            box = QComboBox()
+            box.addItems([IGNORE, *ROLES])
+            box.setCurrentText(guess_role(channel))
+            form.addRow(channel, box)
+            self.boxes[channel] = box
+        layout.addLayout(form)
+        self.problem = QLabel()
+        self.problem.setStyleSheet("color: #c0392b")
+        layout.addWidget(self.problem)
+        buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Ok | QDialogButtonBox.StandardButton.Cancel)
+        buttons.accepted.connect(self._check_and_accept)
+        buttons.rejected.connect(self.reject)
+        layout.addWidget(buttons)
+
+    def mapping(self) -> dict[str, str]:
+        return {box.currentText(): channel for channel, box in self.boxes.items()
+                if box.currentText() != IGNORE}
+
+    def set_role(self, channel: str, role: str) -> None:
+        self.boxes[channel].setCurrentText(role)
+
+    def problem_text(self) -> str:
+        roles = [box.currentText() for box in self.boxes.values() if box.currentText() != IGNORE]
+        repeated = sorted({r for r in roles if roles.count(r) > 1})
+        if repeated:
+            return f"each role once: {', '.join(repeated)} given to several channels"
+        if not any(r in TONGUE_NAMES for r in roles):
+            return "give at least one channel a tongue role"
+        return ""
+
+    def _check_and_accept(self) -> None:
+        problem = self.problem_text()
+        self.problem.setText(problem)
+        if not problem:
+            self.accept()

@@ -1,0 +1,122 @@
+"""Window exports: whole-window PNG, and the dialogs of the MP4 and VTK exports."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from PySide6.QtCore import QPoint, Qt
+from PySide6.QtGui import QImage, QPainter
+from PySide6.QtWidgets import (QDialog, QDialogButtonBox, QDoubleSpinBox, QFileDialog, QFormLayout,
+                               QProgressDialog)
+
+from tonguevis.appstate import interval_at
+from tonguevis.errors import TonguevisError
+
+
+def grab_window(window) -> QImage:
+    """The whole window as an image, with the OpenGL 3D views painted in.
+
+    ``QWidget.grab`` cannot read a native OpenGL surface (it comes out black
+    on many platforms), so the 3D area is taken from VTK's own frame buffer
+    and painted over its place in the window.
+    """
+    image = window.grab().toImage().convertToFormat(QImage.Format.Format_RGB888)
+    interactor = window.view3d.plotter.interactor
+    if interactor.isVisible():
+        window.view3d.plotter.render()
+        rgb = window.view3d.plotter.screenshot(None, return_img=True)
+        h, w = rgb.shape[:2]
+        vtk_image = QImage(rgb.tobytes(), w, h, 3 * w, QImage.Format.Format_RGB888).copy()
+        where = interactor.mapTo(window, QPoint(0, 0))
+        ratio = window.devicePixelRatioF() or 1.0
+        painter = QPainter(image)
+        target = vtk_image.scaled(int(interactor.width() * ratio), int(interactor.height() * ratio),
+                                  Qt.AspectRatioMode.IgnoreAspectRatio, Qt.TransformationMode.SmoothTransformation)
+        painter.drawImage(int(where.x() * ratio), int(where.y() * ratio), target)
+        painter.end()
+    return image
+
+
+def atomic_save_image(image: QImage, path) -> None:
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.partial{path.suffix or '.png'}")
+    if not image.save(str(tmp), "PNG"):
+        raise OSError(f"could not write {path}")
+    os.replace(tmp, path)
+
+
+class RangeDialog(QDialog):
+    """Start and end time of a video (defaults: the production under the cursor)."""
+
+    def __init__(self, state, productions, parent=None):
+        super().__init__(parent)
+        self.setWindowTitle("Video time range")
+        default = interval_at(productions, state.time) or (state.start, state.end)
+        self.start, self.end = QDoubleSpinBox(), QDoubleSpinBox()
+        for box, value in ((self.start, default[0]), (self.end, default[1])):
+            box.setDecimals(2)
+            box.setRange(state.start, state.end)
+            box.setSuffix(" s")
+            box.setValue(value)
+        form = QFormLayout(self)
+        form.addRow("from", self.start)
+        form.addRow("to", self.end)
+        buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Ok | QDialogButtonBox.StandardButton.Cancel)
+        buttons.accepted.connect(self.accept)
+        buttons.rejected.connect(self.reject)
+        form.addRow(buttons)
+
+
+def run_with_progress(window, title: str, function, done_message: str, path) -> None:
+    """Run ``function(progress=...)`` in a worker with a progress dialog; errors -> dialog."""
+    from tonguevis.gui.worker import Worker
+
+    worker = Worker(function, window)
+    dialog = QProgressDialog(title, "Cancel", 0, 1000, window)
+    dialog.setWindowModality(Qt.WindowModality.WindowModal)
+    dialog.setMinimumDuration(200)
+    dialog.canceled.connect(worker.cancel)
+    worker.progressed.connect(lambda d, t, m: (dialog.setMaximum(max(t, 1)), dialog.setValue(min(d, t))))
+    worker.succeeded.connect(lambda _r: window.statusBar().showMessage(done_message))
+    worker.failed.connect(lambda message: window.show_error(f"{title} failed", message, path))
+    worker.cancelled.connect(lambda: window.statusBar().showMessage(f"{title}: cancelled"))
+    worker.finished.connect(dialog.reset)
+    window.export_worker = worker
+    worker.start()
+
+
+def ask_video(window) -> None:
+    from tonguevis.gui.video import export_video
+
+    session = window.session
+    if session is None or session.frames is None:
+        window.show_error("Nothing to export", "open a recording and let its simulation finish first")
+        return
+    ranges = RangeDialog(window.state, session.productions, window)
+    if ranges.exec() != QDialog.DialogCode.Accepted:
+        return
+    path, _ = QFileDialog.getSaveFileName(window, "Save the video", f"{Path(session.name).stem}.mp4", "MP4 (*.mp4)")
+    if not path:
+        return
+    start, end, mode = ranges.start.value(), ranges.end.value(), window.state.color
+    run_with_progress(window, "Video export",
+                      lambda progress: export_video(session, path, start, end, mode=mode, progress=progress),
+                      f"saved {path}", path)
+
+
+def ask_vtk(window) -> None:
+    from tonguevis.gui.video import export_vtk_series
+
+    session = window.session
+    if session is None or session.frames is None:
+        window.show_error("Nothing to export", "open a recording and let its simulation finish first")
+        return
+    folder = QFileDialog.getExistingDirectory(window, "Folder for the VTK series")
+    if folder:
+        run_with_progress(window, "VTK export",
+                          lambda progress: export_vtk_series(session, folder, progress=progress),
+                          f"saved {folder}/motion.pvd", folder)
+
+
+__all__ = ["TonguevisError", "ask_video", "ask_vtk", "atomic_save_image", "grab_window"]

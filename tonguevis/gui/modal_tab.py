@@ -1,0 +1,85 @@
+"""The modal displacement q(t): a 3D surface (mode index × time × amplitude) with a
+colour map (§6.1), and beneath it the same data as a map where a click seeks."""
+
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
+from matplotlib.figure import Figure
+from PySide6.QtWidgets import QSplitter, QVBoxLayout, QWidget
+from PySide6.QtCore import Qt
+
+from tonguevis.appstate import AppState
+from tonguevis.gui.timeplot import FACE, TimePlot
+
+#: Frames and modes drawn in the 3D surface (it is a picture, not a table).
+SURFACE_MAX_FRAMES = 240
+SURFACE_MAX_MODES = 40
+COLORMAP = "coolwarm"
+
+
+def decimate(times: np.ndarray, q: np.ndarray, max_frames: int, max_modes: int):
+    """Every k-th frame so at most ``max_frames`` remain, and the first ``max_modes`` modes."""
+    step = max(1, int(np.ceil(len(times) / max_frames)))
+    return times[::step], q[::step, :max_modes]
+
+
+class ModalMap(TimePlot):
+    def __init__(self, state: AppState, parent=None):
+        super().__init__(state, parent, height=1.6)
+        self.ax = self.figure.subplots()
+        self.set_time_axes([self.ax])
+
+    def show_q(self, times: np.ndarray, q: np.ndarray) -> None:
+        self.ax.clear()
+        limit = float(np.percentile(np.abs(q), 99)) or 1.0
+        self.ax.imshow(q.T, origin="lower", aspect="auto", cmap=COLORMAP, vmin=-limit, vmax=limit,
+                       extent=(times[0], times[-1], 0.5, q.shape[1] + 0.5), interpolation="nearest")
+        self.ax.set_ylabel("mode", fontsize=8)
+        self.ax.set_xlabel("time (s)", fontsize=8)
+        self.ax.tick_params(labelsize=7)
+        self.set_time_axes([self.ax])
+        self.draw_idle()
+
+
+class ModalTab(QWidget):
+    def __init__(self, state: AppState, parent=None):
+        super().__init__(parent)
+        self.state = state
+        self.surface_canvas = FigureCanvasQTAgg(Figure(figsize=(5, 3.5), facecolor=FACE, layout="constrained"))
+        self.ax3d = self.surface_canvas.figure.add_subplot(projection="3d")
+        self.map = ModalMap(state, self)
+        splitter = QSplitter(Qt.Orientation.Vertical)
+        splitter.addWidget(self.surface_canvas)
+        splitter.addWidget(self.map)
+        splitter.setSizes([400, 160])
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(2, 2, 2, 2)
+        layout.addWidget(splitter)
+
+    @property
+    def cursor_time(self) -> float:
+        return self.map.cursor_time
+
+    def set_session(self, session) -> None:
+        motion = getattr(session, "motion", None)
+        self.ax3d.clear()
+        if motion is None:
+            self.surface_canvas.draw_idle()
+            return
+        scale = 1e3  # q in mm·kg^½ reads better than m·kg^½
+        times, q = decimate(np.asarray(motion.times), np.asarray(motion.q) * scale,
+                            SURFACE_MAX_FRAMES, SURFACE_MAX_MODES)
+        modes = np.arange(1, q.shape[1] + 1)
+        T, M = np.meshgrid(times, modes, indexing="ij")
+        limit = float(np.percentile(np.abs(q), 99)) or 1.0
+        self.ax3d.plot_surface(M, T, q, cmap=COLORMAP, vmin=-limit, vmax=limit, linewidth=0,
+                               antialiased=False, rcount=len(modes), ccount=len(times))
+        self.ax3d.set_xlabel("mode index", fontsize=8)
+        self.ax3d.set_ylabel("time (s)", fontsize=8)
+        self.ax3d.set_zlabel("q (mm·kg$^{1/2}$)", fontsize=8)
+        self.ax3d.tick_params(labelsize=7)
+        self.ax3d.set_title(f"modal displacement q(t), first {q.shape[1]} of {motion.q.shape[1]} modes",
+                            fontsize=9)
+        self.surface_canvas.draw_idle()
+        self.map.show_q(np.asarray(motion.times), np.asarray(motion.q) * scale)

@@ -1,0 +1,211 @@
+"""The 3D scene: the tongue surface, sensors, EMA markers, jaw and palate (pyvista, no Qt).
+
+One plotter with four renderers in a ``"1|3"`` layout: the main view on the
+left and three small orthographic views (top, front, lateral) on the right.
+All four draw the *same* datasets, so one in-place update of the points and
+scalars and one ``render()`` moves every view to the same frame.  The same
+class drives the window's ``QtInteractor`` and the off-screen plotter of the
+video export.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+import pyvista as pv
+
+MAIN, TOP, FRONT, LATERAL = 0, 1, 2, 3
+VIEW_NAMES = {TOP: "top", FRONT: "front", LATERAL: "lateral (right side)"}
+#: Camera direction (from the focal point towards the camera) and view-up of each view;
+#: frame: x anterior, y left, z up.  Lateral looks from the right so anterior is on the right.
+CAMERAS = {
+    MAIN: ((0.55, -1.0, 0.55), (0.0, 0.0, 1.0)),
+    TOP: ((0.0, 0.0, 1.0), (1.0, 0.0, 0.0)),
+    FRONT: ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
+    LATERAL: ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)),
+}
+TONGUE_COLOUR = "#d98a8a"
+SENSOR_COLOUR = "#2ecc71"
+TARGET_COLOUR = "#ffd23f"
+CONTEXT_COLOUR = "#e8e2d0"
+COLORMAP = "plasma"
+BACKGROUND = ("#20242c", "#3b4252")  # bottom, top
+
+
+def faces_to_vtk(faces: np.ndarray) -> np.ndarray:
+    """(f, 3) triangles -> VTK's flat cell array [3, a, b, c, 3, ...]."""
+    faces = np.asarray(faces, dtype=np.int64)
+    return np.hstack([np.full((len(faces), 1), 3, dtype=np.int64), faces]).ravel()
+
+
+class VertexNormals:
+    """Area-weighted vertex normals of a triangle surface, vectorised (the surface
+    deforms every frame, so shading normals are recomputed in place)."""
+
+    def __init__(self, faces: np.ndarray, n_points: int):
+        self.faces = np.asarray(faces, dtype=np.int64)
+        f = len(self.faces)
+        rows = self.faces.ravel()
+        cols = np.repeat(np.arange(f), 3)
+        self.incidence = sp.csr_matrix((np.ones(3 * f), (rows, cols)), shape=(n_points, f))
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        p = np.asarray(points, dtype=np.float64)
+        a, b, c = (p[self.faces[:, k]] for k in range(3))
+        face_normals = np.cross(b - a, c - a)  # length = 2 × area: area weighting for free
+        normals = self.incidence @ face_normals
+        length = np.linalg.norm(normals, axis=1, keepdims=True)
+        length[length == 0] = 1.0
+        return (normals / length).astype(np.float32)
+
+
+class TongueScene:
+    """The tongue scene on ``plotter`` (a pyvista Plotter or QtInteractor of shape "1|3")."""
+
+    def __init__(self, plotter):
+        self.plotter = plotter
+        self.surface: pv.PolyData | None = None
+        self.sensors: pv.PolyData | None = None
+        self.targets: pv.PolyData | None = None
+        self.residuals: pv.PolyData | None = None
+        self.surface_actors: list = []
+        self.scalar_bar = None
+        self.time_text = None
+        self._normals: VertexNormals | None = None
+        self._mode = "plain"
+        self._clim: dict[str, tuple[float, float]] = {}
+        self._titles: dict[str, str] = {}
+        plotter.set_background(BACKGROUND[0], top=BACKGROUND[1])
+
+    def _each_view(self):
+        for index in (MAIN, TOP, FRONT, LATERAL):
+            self.plotter.subplot(index)
+            yield index
+
+    # -- building --------------------------------------------------------------------
+    def build(self, points: np.ndarray, faces: np.ndarray, n_sensors: int = 0,
+              context: dict[str, pv.PolyData] | None = None,
+              clim: dict[str, tuple[float, float]] | None = None,
+              titles: dict[str, str] | None = None) -> None:
+        """(Re)create every actor: called once per model or motion, never per frame.
+
+        points : (n, 3) node positions (metres); faces : (f, 3) boundary triangles;
+        n_sensors : driving sensors (spheres, markers and residual lines);
+        context : static surfaces (jaw, palate) drawn transparent;
+        clim / titles : colour range and colour-bar title of each scalar mode.
+        """
+        plotter = self.plotter
+        for index in self._each_view():
+            plotter.renderer.clear_actors()
+        self._clim = dict(clim or {})
+        self._titles = dict(titles or {})
+        points = np.asarray(points, dtype=np.float32)
+        self._normals = VertexNormals(faces, len(points))
+        self.surface = pv.PolyData(points.copy(), faces_to_vtk(faces))
+        self.surface.point_data["value"] = np.zeros(len(points), dtype=np.float32)
+        self.surface.point_data["Normals"] = self._normals(points)
+        self.surface.point_data.active_normals_name = "Normals"
+        self.sensors = pv.PolyData(np.zeros((max(n_sensors, 1), 3), dtype=np.float32))
+        self.targets = pv.PolyData(np.zeros((max(n_sensors, 1), 3), dtype=np.float32))
+        self.residuals = pv.PolyData(np.zeros((2 * max(n_sensors, 1), 3), dtype=np.float32))
+        s = max(n_sensors, 1)
+        self.residuals.lines = np.column_stack([np.full(s, 2), np.arange(s), np.arange(s) + s]).ravel()
+        self.surface_actors = []
+        for index in self._each_view():
+            main = index == MAIN
+            actor = plotter.add_mesh(
+                self.surface, scalars="value", cmap=COLORMAP, clim=(0.0, 1.0), show_scalar_bar=False,
+                specular=0.3, specular_power=15, name=f"tongue{index}", reset_camera=False,
+            )
+            actor.mapper.interpolate_before_map = True
+            self.surface_actors.append(actor)
+            if n_sensors:
+                plotter.add_mesh(self.sensors, color=SENSOR_COLOUR, point_size=14 if main else 8,
+                                 render_points_as_spheres=True, name=f"sensors{index}", reset_camera=False)
+                plotter.add_mesh(self.targets, color=TARGET_COLOUR, point_size=9 if main else 5,
+                                 render_points_as_spheres=True, name=f"targets{index}", reset_camera=False)
+                plotter.add_mesh(self.residuals, color=TARGET_COLOUR, line_width=2,
+                                 name=f"residuals{index}", reset_camera=False)
+            for name, surface in (context or {}).items():
+                plotter.add_mesh(surface, color=CONTEXT_COLOUR, opacity=0.22 if main else 0.15,
+                                 name=f"{name}{index}", reset_camera=False, show_scalar_bar=False)
+            if main:
+                self.scalar_bar = plotter.add_scalar_bar(
+                    title="", mapper=actor.mapper, vertical=True, n_labels=4, fmt="%.3g",
+                    position_x=0.88, position_y=0.25, width=0.05, height=0.5, title_font_size=12,
+                    label_font_size=11,
+                )
+                self.time_text = plotter.add_text("", position="upper_left", font_size=10, name="time")
+                if n_sensors:
+                    plotter.add_text("sensor node", position=(8, 26), font_size=8, name="legend_s",
+                                     color=SENSOR_COLOUR)
+                    plotter.add_text("measured EMA (line = residual)", position=(8, 8), font_size=8,
+                                     name="legend_t", color=TARGET_COLOUR)
+            else:
+                plotter.add_text(VIEW_NAMES[index], position="upper_left", font_size=8, name=f"label{index}")
+                plotter.enable_parallel_projection()
+        self.reset_cameras()
+        self.set_mode(self._mode)
+
+    # -- per frame -------------------------------------------------------------------
+    def update(self, points: np.ndarray, scalars: np.ndarray | None = None,
+               sensor_points: np.ndarray | None = None, targets: np.ndarray | None = None,
+               text: str | None = None, render: bool = True) -> None:
+        """Move to one frame: write points/scalars in place, then one render."""
+        if self.surface is None:
+            return
+        self.surface.points[:] = points
+        self.surface.point_data["Normals"][:] = self._normals(points)
+        if scalars is not None:
+            self.surface.point_data["value"][:] = scalars
+        if sensor_points is not None and len(sensor_points):
+            self.sensors.points[:] = sensor_points
+            self.targets.points[:] = targets
+            s = len(sensor_points)
+            self.residuals.points[:s] = sensor_points
+            self.residuals.points[s:] = targets
+        if text is not None and self.time_text is not None:
+            self.time_text.SetText(2, text)  # vtkCornerAnnotation: 2 = upper left
+        if render:
+            self.plotter.render()
+
+    def set_mode(self, mode: str) -> None:
+        """Colour by ``mode`` ('displacement', 'energy' or 'plain')."""
+        self._mode = mode
+        plain = mode not in self._clim
+        for actor in self.surface_actors:
+            actor.mapper.scalar_visibility = not plain
+            actor.prop.color = TONGUE_COLOUR
+            if not plain:
+                actor.mapper.scalar_range = self._clim[mode]
+        if self.scalar_bar is not None:
+            self.scalar_bar.SetVisibility(not plain)
+            self.scalar_bar.SetTitle(self._titles.get(mode, ""))
+
+    @property
+    def mode(self) -> str:
+        return self._mode
+
+    def reset_cameras(self) -> None:
+        """Put every view back to its standard direction, fitted to the scene."""
+        if self.surface is None:
+            return
+        bounds = np.array(self.surface.bounds, dtype=float).reshape(3, 2)
+        centre = bounds.mean(axis=1)
+        size = float(np.linalg.norm(bounds[:, 1] - bounds[:, 0])) or 0.1
+        for index in self._each_view():
+            direction, up = CAMERAS[index]
+            direction = np.asarray(direction, dtype=float)
+            direction /= np.linalg.norm(direction)
+            camera = self.plotter.renderer.camera
+            camera.focal_point = centre
+            camera.position = centre + direction * size * 2.2
+            camera.up = up
+            # Fit the tongue (not the markers, whose buffers may still be empty).
+            self.plotter.renderer.reset_camera(bounds=bounds.ravel())
+            if index != MAIN:
+                camera.parallel_scale = 0.5 * size * 0.75
+            else:
+                camera.zoom(1.3)
+        self.plotter.subplot(MAIN)

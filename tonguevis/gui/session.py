@@ -1,0 +1,185 @@
+"""What the app has open: a recording, its productions, its simulation (no Qt).
+
+:class:`Session` gathers the science objects the views show; the views hold
+none of it themselves.  Loading and simulating are plain functions so the CLI,
+the worker thread and tests share them.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tonguevis._progress import ProgressCallback, report
+from tonguevis.errors import RecordingError, TonguevisError
+from tonguevis.io.recording import Recording
+
+log = logging.getLogger("tonguevis")
+
+#: Canonical tongue sensor names (see tonguevis.io.sensor_map); a recording
+#: carrying none of them needs a sensor map before it can drive the model.
+TONGUE_NAMES = ("TT", "TB", "TD", "TBK", "TL", "TR")
+#: Roles offered by the sensor-mapping dialog.
+ROLES = (*TONGUE_NAMES, "JAW", "UL", "LL", "REF1", "REF2", "REF3")
+
+#: What the sensor panel can show: kind -> (label, unit, scale from SI).
+SIGNAL_KINDS = {
+    "position": ("position", "mm", 1e3),
+    "displacement": ("displacement from rest", "mm", 1e3),
+    "velocity": ("velocity", "mm/s", 1e3),
+    "acceleration": ("acceleration", "mm/s²", 1e3),
+}
+#: Savitzky-Golay window (samples) for velocity and acceleration: plain
+#: differences of 100 Hz data amplify sub-millimetre noise into spikes.
+DERIVATIVE_WINDOW = 11
+
+
+def needs_sensor_map(recording: Recording) -> bool:
+    """True when no channel carries a canonical tongue name (TT, TB, TD, ...)."""
+    return not any(name in TONGUE_NAMES for name in recording.sensor_names)
+
+
+def plotted_sensors(recording: Recording) -> list[str]:
+    """Sensors the panel plots: tongue sensors first (canonical order), then the others
+    except head references."""
+    names = recording.sensor_names
+    tongue = [n for n in TONGUE_NAMES if n in names]
+    rest = [n for n in names if n not in tongue and not n.upper().startswith("REF")]
+    return tongue + rest
+
+
+def production_intervals(productions: Any) -> list[tuple[float, float]]:
+    """(start_s, end_s) of each production, from objects with ``start``/``end`` or pairs."""
+    out = []
+    for item in productions or []:
+        if hasattr(item, "start") and hasattr(item, "end"):
+            out.append((float(item.start), float(item.end)))
+        else:
+            start, end = item[0], item[1]
+            out.append((float(start), float(end)))
+    return sorted(out)
+
+
+def find_production_table(recording: Recording):
+    """The recording's CV productions (a ProductionTable), or None when none can be found (logged)."""
+    from tonguevis.preprocess import find_productions
+
+    try:
+        return find_productions(recording)
+    except TonguevisError as exc:
+        log.warning("no productions found: %s", exc)
+        return None
+
+
+@dataclass
+class Session:
+    """An open recording and, once simulated, its motion.
+
+    recording : the Recording (sensor positions in metres).
+    path : where it came from (None for one built in code).
+    productions : [(start_s, end_s)] CV productions, possibly empty.
+    production_table : the ProductionTable they come from (None if none found).
+    motion : the simulated Motion, or None until the simulation ran.
+    frames : per-frame drawing data (:class:`tonguevis.gui.frames.MotionFrames`).
+    """
+
+    recording: Recording
+    path: Path | None = None
+    productions: list[tuple[float, float]] = field(default_factory=list)
+    production_table: Any = None
+    motion: Any = None
+    frames: Any = None
+    _signals: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def name(self) -> str:
+        return self.path.name if self.path is not None else "recording"
+
+    @property
+    def time_range(self) -> tuple[float, float, float]:
+        """(start_s, end_s, frame_period_s) of the motion, else of the recording."""
+        times = self.motion.times if self.motion is not None else self.recording.times
+        if len(times) == 0:
+            raise RecordingError("the recording has no samples", self.path)
+        period = float(np.median(np.diff(times))) if len(times) > 1 else 1.0 / self.recording.rate
+        return float(times[0]), float(times[-1]), period
+
+    def signals(self, kind: str) -> dict[str, np.ndarray]:
+        """{sensor: (N, 3)} in the unit of ``SIGNAL_KINDS[kind]`` (cached)."""
+        if kind not in SIGNAL_KINDS:
+            raise ValueError(f"unknown signal kind {kind!r}; choose one of {', '.join(SIGNAL_KINDS)}")
+        if kind not in self._signals:
+            self._signals[kind] = self._compute_signals(kind)
+        return self._signals[kind]
+
+    def _compute_signals(self, kind: str) -> dict[str, np.ndarray]:
+        rec = self.recording
+        names = plotted_sensors(rec)
+        scale = SIGNAL_KINDS[kind][2]
+        if kind == "position":
+            return {n: rec.sensors[n] * scale for n in names}
+        if kind == "displacement":
+            return {n: (rec.sensors[n] - rest) * scale for n, rest in self._rest(names).items()}
+        from tonguevis.preprocess.filtering import derivative
+
+        order = 1 if kind == "velocity" else 2
+        window = min(DERIVATIVE_WINDOW, rec.n_samples - (1 - rec.n_samples % 2))
+        values = derivative(rec, order=order, window=window if window > order + 1 else None, sensors=names)
+        return {n: values[n] * scale for n in names}
+
+    def _rest(self, names: list[str]) -> dict[str, np.ndarray]:
+        from tonguevis.preprocess.rest import rest_pose
+
+        try:
+            return rest_pose(self.recording, sensors=names)
+        except TonguevisError as exc:
+            # No still interval: the first valid sample is the best "rest" there is.
+            log.info("no rest interval (%s); displacements from the first valid sample", exc)
+            out = {}
+            for n in names:
+                valid = self.recording.valid(n)
+                xyz = self.recording.sensors[n]
+                out[n] = xyz[np.argmax(valid)] if valid.any() else np.zeros(3)
+            return out
+
+
+def load_session(path: str | os.PathLike, sensor_map: dict | str | None = None) -> Session:
+    """Read a recording (any supported format) and find its productions."""
+    from tonguevis.io.registry import read_recording
+
+    path = Path(path)
+    recording = read_recording(path, sensor_map=sensor_map)
+    if recording.n_samples < 2:
+        raise RecordingError(f"the recording has {recording.n_samples} sample(s); at least 2 needed", path)
+    return make_session(recording, path)
+
+
+def make_session(recording: Recording, path=None) -> Session:
+    """A session of ``recording`` with its productions found (when it has a tongue tip)."""
+    table = find_production_table(recording) if "TT" in recording.sensors else None
+    return Session(recording, None if path is None else Path(path), production_intervals(table), table)
+
+
+def remap_session(session: Session, mapping: dict[str, str]) -> Session:
+    """``session`` with channels renamed by ``mapping`` (canonical name -> file channel)."""
+    from tonguevis.io.sensor_map import apply_sensor_map
+
+    recording = apply_sensor_map(session.recording, mapping, str, session.path)
+    recording.metadata["sensor_map"] = dict(mapping)
+    return make_session(recording, session.path)
+
+
+def demo_recording_path() -> Path | None:
+    """The first demo recording shipped in ``data/`` (sorted by name), or None."""
+    from tonguevis.paths import DATA_DIR
+
+    for pattern in ("*.tsv", "*.csv", "*.pos", "*.ema", "*.mat"):
+        found = sorted(DATA_DIR.glob(pattern))
+        if found:
+            return found[0]
+    return None

@@ -1,0 +1,66 @@
+"""Build the tongue model and simulate a session (no Qt; the worker thread runs this)."""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+
+from tonguevis._progress import ProgressCallback
+from tonguevis.gui.frames import MotionFrames
+from tonguevis.gui.session import Session
+
+log = logging.getLogger("tonguevis")
+
+
+def build_model(mesh_path: str | os.PathLike | None = None):
+    """The default tongue model, or one on the mesh at ``mesh_path``."""
+    from tonguevis import TongueModel
+
+    if mesh_path is None:
+        return TongueModel.default()
+    from_file = getattr(TongueModel, "from_file", None)
+    if from_file is not None:
+        return from_file(Path(mesh_path))
+    from tonguevis.mesh import read_mesh
+
+    return TongueModel.from_mesh(read_mesh(Path(mesh_path)))
+
+
+def staged(progress: ProgressCallback | None, stage: int, stages: int, name: str) -> ProgressCallback | None:
+    """A progress callback mapping one stage's (done, total) into a 0..1000 overall scale."""
+    if progress is None:
+        return None
+
+    def callback(done: int, total: int, message: str = "") -> None:
+        fraction = (done / total) if total else 0.0
+        progress(int(1000 * (stage + min(max(fraction, 0.0), 1.0)) / stages), 1000, message or name)
+
+    return callback
+
+
+def simulate_session(
+    session: Session,
+    model=None,
+    mesh_path: str | os.PathLike | None = None,
+    modes: int = 100,
+    warping: bool = True,
+    landmarks: str = "speaker",
+    progress: ProgressCallback | None = None,
+) -> Session:
+    """Simulate ``session.recording`` and return the session with ``motion`` and ``frames``.
+
+    ``landmarks``: sensor nodes snapped to the speaker's layout ('speaker') or the
+    paper's placement rule ('rule').  ``progress(done, total, message)`` may raise :class:`tonguevis.errors.Cancelled`.
+    """
+    from tonguevis import simulate
+
+    if progress is not None:
+        progress(0, 1000, "building the tongue model")
+    if model is None:
+        model = build_model(mesh_path)
+    motion = simulate(session.recording, model=model, modes=modes, warping=warping,
+                      landmarks=landmarks, progress=staged(progress, 0, 2, "simulating"))
+    frames = MotionFrames(motion, progress=staged(progress, 1, 2, "reconstructing frames"))
+    session.motion, session.frames = motion, frames
+    return session
