@@ -1,0 +1,69 @@
+"""The shipped tongue: size, quality, landmarks, context surfaces."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tonguevis.mesh import (
+    SENSOR_NAMES,
+    context_surface_path,
+    find_landmarks,
+    load_default_landmarks,
+    load_default_mesh,
+    read_surface,
+    tet_quality,
+)
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    return load_default_mesh()
+
+
+def test_size_near_the_papers_mesh(mesh):
+    assert 1500 <= mesh.n_nodes <= 2200
+    assert 6500 <= mesh.n_tets <= 10000
+    assert 80e-6 <= mesh.volume <= 100e-6                       # m³: 80-100 cm³
+
+
+def test_adult_proportions_in_our_frame(mesh):
+    extent = np.ptp(mesh.points, axis=0) * 1e3                  # mm
+    assert 70 <= extent[0] <= 82                                # tip to root
+    assert 60 <= extent[1] <= 72                                # width at the root
+    assert 50 <= extent[2] <= 60                                # floor to dorsum
+    tip = mesh.points[np.argmax(mesh.points[:, 0])]
+    assert abs(tip[1]) < 2e-3                                   # tip on the midline
+    assert tip[2] - mesh.points[:, 2].min() > 0.035             # the blade hangs free
+
+
+def test_symmetric_about_y0(mesh):
+    from scipy.spatial import cKDTree
+
+    boundary = mesh.points[np.unique(mesh.boundary_faces())]
+    mirrored = boundary * [1, -1, 1]
+    distance = cKDTree(boundary).query(mirrored)[0]
+    assert np.median(distance) < 1.5e-3
+
+
+def test_tets_positive_and_decent(mesh):
+    quality = tet_quality(mesh.points, mesh.tets)
+    assert quality.min() > 0.1
+    assert np.median(quality) > 0.7
+
+
+def test_shipped_landmarks_match_the_rule(mesh):
+    shipped = load_default_landmarks(mesh)
+    found = find_landmarks(mesh)
+    assert set(SENSOR_NAMES) <= set(shipped.sensors)
+    assert shipped.sensors == found.sensors
+    np.testing.assert_array_equal(shipped.anchors, found.anchors)
+
+
+@pytest.mark.parametrize("name", ["jaw", "palate"])
+def test_context_surfaces_in_metres_around_the_tongue(mesh, name):
+    points, triangles = read_surface(context_surface_path(name))
+    assert triangles.shape[1] == 3 and triangles.max() < len(points)
+    assert np.ptp(points, axis=0).max() < 0.15
+    centre = mesh.points.mean(axis=0)
+    assert np.linalg.norm(points.mean(axis=0)[:2] - centre[:2]) < 0.04
