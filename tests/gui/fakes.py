@@ -40,6 +40,11 @@ class Landmarks:
         self.sensors = sensors
 
 
+class FakeBasis:
+    def __init__(self, phi):
+        self.phi = phi
+
+
 class FakeModel:
     """A TongueModel look-alike: ``displacement(s)(q, warping)`` from an analytic basis."""
 
@@ -52,20 +57,24 @@ class FakeModel:
             field = np.zeros_like(p)
             field[:, (k % 3)] = np.sin((k + 1) * np.pi * p[:, 0] / 2) * (1 + p[:, 2])
             basis.append(field.ravel())
-        self.basis = np.array(basis).T * 0.01  # (3n, m)
+        self.phi = np.array(basis).T * 0.01  # (3n, m)
         far = np.argmax(p[:, 0] + p[:, 2])
         mid = np.argmin(np.linalg.norm(p - [0.5, 0.5, 1.0], axis=1))
         self.landmarks = Landmarks({"TT": int(far), "TD": int(mid)})
 
+    def basis(self, m):
+        return FakeBasis(self.phi[:, :m])
+
+    @property
     def surface_faces(self):
         return self.mesh.boundary_faces()
 
     def displacement(self, q, warping=True):
-        return (self.basis @ q).reshape(-1, 3)
+        return (self.phi @ q).reshape(-1, 3)
 
-    def displacements(self, q, warping=True):
+    def displacements(self, q, warping=True, dtype=np.float64):
         q = np.atleast_2d(q)
-        return np.einsum("dm,fm->fd", self.basis, q).reshape(len(q), -1, 3)
+        return np.einsum("dm,fm->fd", self.phi, q).reshape(len(q), -1, 3).astype(dtype)
 
 
 def fake_recording(duration: float = 2.0, rate: float = 100.0, audio_rate: int = 8000,
@@ -84,7 +93,7 @@ def fake_recording(duration: float = 2.0, rate: float = 100.0, audio_rate: int =
 
 def fake_motion(model: FakeModel, recording: Recording) -> Motion:
     times = recording.times
-    m = model.basis.shape[1]
+    m = model.phi.shape[1]
     q = np.sin(2 * np.pi * np.outer(times, np.arange(1, m + 1)) / 2.0)
     names = list(model.landmarks.sensors)
     nodes = np.array([model.landmarks.sensors[n] for n in names])

@@ -2,21 +2,51 @@
 
 Every time plot (sensor panel, waveform, spectrogram, modal map) derives from
 :class:`TimePlot`: clicking or dragging in one of its time axes calls
-``state.set_time``; every ``time`` event moves its cursor lines.  Cursors are
-drawn by blitting over a cached background, so playback costs a few
-milliseconds per plot instead of a full redraw.
+``state.set_time``; every ``time`` event moves its cursor lines.  The cursors
+are painted by a transparent Qt overlay from the axes' cached pixel
+transforms, so moving them costs no matplotlib drawing at all (a blit of the
+whole figure cost tens of milliseconds per plot per frame under software
+rendering); only the two thin strips of the old and new line repaint.
 """
 
 from __future__ import annotations
 
 from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
 from matplotlib.figure import Figure
-from PySide6.QtWidgets import QSizePolicy
+from PySide6.QtCore import QRect, Qt
+from PySide6.QtGui import QColor, QPainter, QPen
+from PySide6.QtWidgets import QSizePolicy, QWidget
 
 from tonguevis.appstate import AppState, Event
 
 CURSOR_COLOUR = "#e74c3c"
 FACE = "#fbfbfb"
+
+
+class CursorOverlay(QWidget):
+    """Draws vertical cursor lines over the canvas; transparent to the mouse."""
+
+    def __init__(self, canvas: "TimePlot"):
+        super().__init__(canvas)
+        self.canvas = canvas
+        self.setAttribute(Qt.WidgetAttribute.WA_TransparentForMouseEvents)
+        self.setAttribute(Qt.WidgetAttribute.WA_NoSystemBackground)
+        self.columns: list[tuple[int, int, int]] = []  # (x, top, bottom) in widget pixels
+
+    def paintEvent(self, _event) -> None:  # noqa: N802 (Qt name)
+        if not self.columns:
+            return
+        painter = QPainter(self)
+        painter.setPen(QPen(QColor(CURSOR_COLOUR), 1.5))
+        for x, top, bottom in self.columns:
+            painter.drawLine(x, top, x, bottom)
+        painter.end()
+
+    def set_columns(self, columns: list[tuple[int, int, int]]) -> None:
+        old = self.columns
+        self.columns = columns
+        for x, top, bottom in old + columns:
+            self.update(QRect(x - 2, top, 5, bottom - top + 1))
 
 
 class TimePlot(FigureCanvasQTAgg):
@@ -26,11 +56,12 @@ class TimePlot(FigureCanvasQTAgg):
         super().__init__(Figure(figsize=(5, height), facecolor=FACE, layout="constrained"))
         self.setParent(parent)
         self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
+        self.setMinimumHeight(110)  # below this the axes' labels leave no room to plot
         self.state = state
         self.cursor_time = state.time  # what the cursors show (tests compare views by it)
+        self.overlay = CursorOverlay(self)
         self._time_axes: list = []
-        self._cursors: list = []
-        self._background = None
+        self._drawn = False  # axes transforms valid (set after a draw)
         self._dragging = False
         self._unsubscribe = [state.subscribe("time", self._on_time)]
         self.mpl_connect("draw_event", self._on_draw)
@@ -41,9 +72,7 @@ class TimePlot(FigureCanvasQTAgg):
     def set_time_axes(self, axes: list) -> None:
         """Axes whose x is time (s): they get a cursor and seek on click/drag."""
         self._time_axes = list(axes)
-        self._cursors = [ax.axvline(self.state.time, color=CURSOR_COLOUR, lw=1.2, animated=True)
-                         for ax in self._time_axes]
-        self._background = None
+        self._place_cursors()
 
     def close_plot(self) -> None:
         for unsubscribe in self._unsubscribe:
@@ -51,25 +80,36 @@ class TimePlot(FigureCanvasQTAgg):
         self._unsubscribe = []
 
     # -- cursor ---------------------------------------------------------------
-    def _on_draw(self, _event) -> None:
-        self._background = self.copy_from_bbox(self.figure.bbox)
-        self._draw_cursors()
+    def resizeEvent(self, event) -> None:  # noqa: N802 (Qt name)
+        super().resizeEvent(event)
+        self.overlay.setGeometry(self.rect())
 
-    def _draw_cursors(self) -> None:
-        for line in self._cursors:
-            line.set_xdata([self.cursor_time, self.cursor_time])
-            line.axes.draw_artist(line)
+    def _on_draw(self, _event) -> None:
+        self._drawn = True
+        self._place_cursors()
+
+    def cursor_columns(self) -> list[tuple[int, int, int]]:
+        """(x, top, bottom) widget pixels of the cursor in each time axis (none outside the axis)."""
+        if not self._drawn:
+            return []
+        ratio = self.device_pixel_ratio or 1.0
+        height = self.figure.bbox.height
+        out = []
+        for ax in self._time_axes:
+            box = ax.bbox
+            x_px = ax.transData.transform((self.cursor_time, 0.0))[0]
+            if not box.x0 - 0.5 <= x_px <= box.x1 + 0.5:
+                continue
+            out.append((int(round(x_px / ratio)), int(round((height - box.y1) / ratio)),
+                        int(round((height - box.y0) / ratio))))
+        return out
+
+    def _place_cursors(self) -> None:
+        self.overlay.set_columns(self.cursor_columns())
 
     def _on_time(self, event: Event) -> None:
         self.cursor_time = event.value
-        if not self._cursors or not self.isVisible():
-            return  # drawn at the right place when shown (draw_event)
-        if self._background is None:
-            self.draw_idle()
-            return
-        self.restore_region(self._background)
-        self._draw_cursors()
-        self.blit(self.figure.bbox)
+        self._place_cursors()
 
     # -- seeking ----------------------------------------------------------------
     def _seek(self, event) -> bool:
@@ -93,4 +133,4 @@ class TimePlot(FigureCanvasQTAgg):
         """Widget pixel (x, y) of data point (t, y) in ``ax`` (for tests and tooltips)."""
         x_px, y_px = ax.transData.transform((t, y))
         ratio = self.device_pixel_ratio or 1.0
-        return int(round(x_px / ratio)), int(round(self.height() - y_px / ratio))
+        return int(round(x_px / ratio)), int(round((self.figure.bbox.height - y_px) / ratio))

@@ -82,7 +82,8 @@ class View3D(QWidget):
         self.session = None
         self.frame = -1
         self.renders = 0
-        self.plotter = QtInteractor(self, shape="1|3", splitting_position=0.72, auto_update=False)
+        # No multisampling: under software OpenGL (Xvfb, VMs) 8x MSAA costs most of each frame.
+        self.plotter = QtInteractor(self, shape="1|3", splitting_position=0.72, auto_update=False, multi_samples=0)
         self.scene = TongueScene(self.plotter)
         self.colour = QComboBox()
         for mode in COLOR_MODES:
@@ -134,7 +135,10 @@ class View3D(QWidget):
         mode = self.state.color
         scalars = frames.scalars[mode][i] if mode in frames.scalars else None
         self.scene.update(frames.points[i], scalars, frames.sensor_points[i], frames.targets[i],
-                          frame_text(frames, i, self.session.productions))
+                          frame_text(frames, i, self.session.productions), render=False)
+        # One render per frame: the widget's paint renders the scene (pyvistaqt's paintGL
+        # always renders), so asking for a repaint instead of render() avoids a second one.
+        self.plotter.interactor.update()
         self.renders += 1
 
     def _on_colour(self, event) -> None:

@@ -228,7 +228,7 @@ class MainWindow(QMainWindow):
             self.last_dialog = dialog
             dialog.open()
             return True
-        self._show_session(session)
+        self.show_session(session)
         return True
 
     def _mapped(self, session: Session, mapping: dict[str, str]) -> None:
@@ -237,7 +237,7 @@ class MainWindow(QMainWindow):
         except TonguevisError as exc:
             self.show_error("Sensor map not usable", str(exc), session.path)
             return
-        self._show_session(session)
+        self.show_session(session)
 
     def open_mesh(self, path) -> None:
         from tonguevis.gui.simulation import build_model
@@ -255,7 +255,7 @@ class MainWindow(QMainWindow):
         if self.session is not None:
             self._simulate(self.session)
 
-    def _show_session(self, session: Session) -> None:
+    def show_session(self, session: Session) -> None:
         """Show the recording at once (plots, audio), then simulate it."""
         self.session = session
         self.setWindowTitle(f"tonguevis — {session.name}")

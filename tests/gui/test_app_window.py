@@ -1,0 +1,164 @@
+"""The main window on real pieces: demo recording, real simulate(), four 3D views, plots, audio."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("PySide6")
+pytest.importorskip("pyvistaqt")
+
+from tests.gui.conftest import demo_session, show_and_simulate  # noqa: E402
+
+pytestmark = [pytest.mark.gui, pytest.mark.timeout(120)]
+
+
+def cursors(window):
+    return {name: view.cursor_time for name, view in window.time_views.items()}
+
+
+def test_play_moves_the_tongue_and_every_cursor_together(qtbot, window):
+    session = show_and_simulate(qtbot, window, demo_session())
+    state = window.state
+    assert session.frames.n_frames == session.motion.n_frames > 200
+    state.set_time(5.2)  # just before the first syllable
+    before = np.array(window.view3d.scene.surface.points)
+    renders = window.view3d.renders
+    state.set_playing(True)
+    qtbot.waitUntil(lambda: state.time > 6.2, timeout=10000)  # a second of playback
+    state.set_playing(False)
+    after = np.array(window.view3d.scene.surface.points)
+    # The rendered buffer moved (in place: same dataset object as at build time).
+    assert np.abs(after - before).max() > 1e-4
+    assert window.view3d.renders - renders >= 3  # several frames, not one jump
+    i = session.frames.frame_at(state.time)
+    assert np.allclose(after, session.frames.points[i])
+    # Every view shows the same time.
+    times = cursors(window)
+    assert all(t == state.time for t in times.values()), times
+    assert "wall clock" in window.statusBar().currentMessage() or "audio" in window.statusBar().currentMessage()
+
+
+def test_click_in_sensor_plot_seeks_every_view(qtbot, window):
+    from PySide6.QtCore import QPoint, Qt
+
+    show_and_simulate(qtbot, window, demo_session())
+    plot = window.sensor_panel.plot
+    ax = plot.axes[2]
+    qtbot.waitUntil(lambda: plot._drawn, timeout=5000)
+    x, y = plot.data_to_widget(ax, 6.0, float(np.mean(ax.get_ylim())))
+    qtbot.mouseClick(plot, Qt.MouseButton.LeftButton, pos=QPoint(x, y))
+    state = window.state
+    assert abs(state.time - 6.0) < 0.02  # within two frames of pixel rounding
+    assert all(t == state.time for t in cursors(window).values())
+    # The 3D view shows the frame of that time.
+    frames = window.session.frames
+    assert np.allclose(window.view3d.scene.surface.points, frames.points[frames.frame_at(state.time)])
+
+
+def test_waveform_drag_and_slider_and_steps(qtbot, window):
+    from PySide6.QtCore import QPoint, Qt
+
+    show_and_simulate(qtbot, window, demo_session())
+    audio = window.audio
+    qtbot.waitUntil(lambda: audio._drawn, timeout=5000)
+    x0, y = audio.data_to_widget(audio.wave_ax, 4.0, 0.0)
+    x1, _ = audio.data_to_widget(audio.wave_ax, 5.5, 0.0)
+    qtbot.mousePress(audio, Qt.MouseButton.LeftButton, pos=QPoint(x0, y))
+    qtbot.mouseMove(audio, QPoint(x1, y))
+    qtbot.mouseRelease(audio, Qt.MouseButton.LeftButton, pos=QPoint(x1, y))
+    assert abs(window.state.time - 5.5) < 0.02
+    window.transport.slider.setValue(100)
+    assert window.state.time == pytest.approx(window.state.start + 100 * window.state.frame_period)
+    t = window.state.time
+    window.transport.forward.click()
+    assert window.state.time == pytest.approx(t + window.state.frame_period)
+
+
+def test_loop_current_production(qtbot, window):
+    session = show_and_simulate(qtbot, window, demo_session())
+    assert session.productions, "the demo's first train has productions"
+    start, end = session.productions[0]
+    window.state.set_time(0.5 * (start + end))
+    window.transport.loop.setChecked(True)
+    assert window.state.loop == (start, end)
+    window.state.set_speed(1.0)
+    window.state.set_playing(True)
+    # Playing past the production's end wraps to its start.
+    wrapped = []
+    window.state.subscribe("time", lambda e: wrapped.append(e.value))
+    qtbot.waitUntil(lambda: any(b < a for a, b in zip(wrapped, wrapped[1:])), timeout=5000)
+    window.state.set_playing(False)
+    assert all(start <= t <= end for t in wrapped)
+
+
+def test_colour_modes_change_scalars(qtbot, window):
+    session = show_and_simulate(qtbot, window, demo_session())
+    window.state.set_time(6.0)
+    frames = session.frames
+    i = frames.frame_at(6.0)
+    values = window.view3d.scene.surface.point_data["value"]
+    assert np.allclose(values, frames.scalars["displacement"][i])
+    window.state.set_color("energy")
+    assert np.allclose(window.view3d.scene.surface.point_data["value"], frames.scalars["energy"][i])
+    window.state.set_color("plain")
+    assert not window.view3d.scene.surface_actors[0].mapper.scalar_visibility
+
+
+def test_malformed_file_gives_a_dialog_and_the_app_keeps_running(qtbot, window, tmp_path):
+    bad = tmp_path / "broken.tsv"
+    bad.write_text("AudioTime[s]\tnot an NDI header\n1\t2\n")
+    assert not window.open_recording(bad)
+    box = window.last_dialog
+    assert box is not None and box.isVisible()
+    assert "broken.tsv" in box.text()
+    box.close()
+    # Still alive: a good recording opens and simulates afterwards.
+    show_and_simulate(qtbot, window, demo_session(3.5, 5.8))
+
+
+def test_unknown_channels_ask_for_a_sensor_map(qtbot, window, tmp_path):
+    import shutil
+
+    from tests.gui.conftest import DEMO
+
+    if not DEMO.exists():
+        pytest.skip("demo corpus not built")
+    copy = tmp_path / "nomap.tsv"
+    shutil.copy(DEMO, copy)  # no sensor_map.json beside it: channels keep their NDI names
+    assert window.open_recording(copy)
+    dialog = window.last_dialog
+    from tonguevis.gui.dialogs import SensorMapDialog
+
+    assert isinstance(dialog, SensorMapDialog)
+    assert dialog.problem_text()  # nothing chosen yet: not acceptable
+    channels = list(dialog.boxes)
+    dialog.set_role(channels[1], "TT")
+    dialog.set_role(channels[2], "TT")
+    assert "several" in dialog.problem_text()
+    dialog.set_role(channels[2], "TD")
+    assert dialog.problem_text() == ""
+    assert dialog.mapping() == {"TT": channels[1], "TD": channels[2]}
+
+
+def test_cancel_simulation(qtbot, window):
+    session = demo_session()
+    with qtbot.waitSignal(window.simulation_finished, timeout=30000) as blocker:
+        window.show_session(session)
+        window.worker.cancel()
+    assert blocker.args == [False]
+    assert "cancelled" in window.statusBar().currentMessage()
+    assert window.session.frames is None
+
+
+def test_recent_files_remembered(qtbot, window, tmp_path):
+    bad = tmp_path / "missing.tsv"
+    window.open_recording(bad)  # fails: not remembered
+    assert str(bad) not in window.recent_files()
+    from tests.gui.conftest import DEMO
+
+    if DEMO.exists():
+        window.open_recording(DEMO)
+        window._cancel_worker()
+        assert window.recent_files()[0] == str(DEMO.resolve())
+        assert window.recent_menu.actions()[0].text() == str(DEMO.resolve())
