@@ -238,41 +238,32 @@ def curves_to_rows(curves: Sequence[EnergyCurve]) -> list[tuple]:
 def write_curves_csv(curves: Sequence[EnergyCurve], path) -> None:
     """Write the curves as long-format CSV (:data:`CSV_COLUMNS`); temporary file, then rename."""
     import csv
-    import os
-    import tempfile
-    from pathlib import Path
 
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
+    from tonguevis.io._common import atomic_write
+
+    def write(tmp):
+        with open(tmp, "w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow(CSV_COLUMNS)
             writer.writerows(curves_to_rows(curves))
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+
+    atomic_write(path, write)
 
 
 def write_summary_csv(summaries: Sequence[GroupSummary], by: Sequence[str], path) -> None:
     """One row per group: the keys, n, then mean and std of each statistic."""
     import csv
-    import os
-    import tempfile
-    from pathlib import Path
 
-    path = Path(path)
+    from tonguevis.io._common import atomic_write
+
     stats = list(summaries[0].mean) if summaries else []
     header = [*by, "n"] + [f"{s}_{kind}" for s in stats for kind in ("mean", "std")]
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
+
+    def write(tmp):
+        with open(tmp, "w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow(header)
             for g in summaries:
                 writer.writerow([*g.key, g.n] + [f"{v:.6g}" for s in stats for v in (g.mean[s], g.std[s])])
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+
+    atomic_write(path, write)

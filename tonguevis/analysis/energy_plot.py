@@ -7,8 +7,6 @@ a whole figure file (Agg backend, temporary file then rename).
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Sequence
 
@@ -73,15 +71,10 @@ def save_energy_png(curves: Sequence[EnergyCurve], path, by: Sequence[str] = ("s
 
 def save_figure(fig, path, dpi: int = 120) -> None:
     """fig.savefig to a temporary file in the target folder, then rename."""
+    from tonguevis.io._common import atomic_write
+
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=path.suffix or ".png")
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=dpi, format=(path.suffix.lstrip(".") or "png"))
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format=(path.suffix.lstrip(".") or "png")))
 
 
 def plot_mds_paths(ax, embedding: np.ndarray, segments: Sequence[tuple[int, int]], labels: Sequence[str],

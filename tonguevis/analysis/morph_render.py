@@ -12,7 +12,6 @@ imageio-ffmpeg.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -78,7 +77,10 @@ def morph_bounds(morph: Morph, ts) -> tuple[np.ndarray, float]:
 
 
 def _atomic(path: Path, write) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=path.suffix)
+    """``write(tmp)`` into a temporary file with the same suffix (ffmpeg and VTK pick formats by it), then rename."""
+    import tempfile
+
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent if str(path.parent) else ".")
     os.close(fd)
     try:
         write(tmp)
