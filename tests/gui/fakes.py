@@ -10,29 +10,15 @@ from __future__ import annotations
 import numpy as np
 
 from tonguevis.io.recording import Audio, Recording
-from tonguevis.mesh.tetmesh import TetMesh, signed_tet_volumes
+from tonguevis.mesh.tetmesh import TetMesh
 from tonguevis.sim.material import Material
 from tonguevis.sim.motion import Motion
 
-# Five-tet split of a unit cube (corner indices 0..7 of x + 2y + 4z).
-_CUBE_TETS = np.array([[0, 1, 2, 4], [1, 3, 2, 7], [1, 4, 5, 7], [2, 4, 7, 6], [1, 2, 4, 7]])
-
-
 def box_mesh(nx: int = 4, ny: int = 3, nz: int = 3, size=(0.06, 0.04, 0.03)) -> TetMesh:
-    """A box of (nx × ny × nz) cubes split into tets, metres, all tets positive."""
-    xs, ys, zs = (np.linspace(0, s, k + 1) for s, k in zip(size, (nx, ny, nz)))
-    grid = np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), axis=-1).reshape(-1, 3)
-    index = np.arange(len(grid)).reshape(nx + 1, ny + 1, nz + 1)
-    tets = []
-    for i in range(nx):
-        for j in range(ny):
-            for k in range(nz):
-                corners = [index[i + a, j + b, k + c] for c in (0, 1) for b in (0, 1) for a in (0, 1)]
-                tets.extend([[corners[v] for v in tet] for tet in _CUBE_TETS])
-    tets = np.array(tets)
-    negative = signed_tet_volumes(grid, tets) < 0
-    tets[negative] = tets[negative][:, [0, 2, 1, 3]]
-    return TetMesh(grid, tets)
+    """A conforming box of (nx × ny × nz) cubes split into positive tets, metres."""
+    from tonguevis.mesh.structured import box_mesh as structured_box
+
+    return structured_box(nx, ny, nz, size=size)
 
 
 class Landmarks:

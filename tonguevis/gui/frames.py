@@ -21,7 +21,7 @@ BATCH = 128
 
 #: Scalar quantities per node, with the unit the colour bar shows.
 SCALARS = {
-    "displacement": ("displacement |u|", "mm"),
+    "displacement": ("displacement", "mm"),
     "energy": ("energy density", "J/m³"),
 }
 

@@ -47,6 +47,7 @@ class ModalTab(QWidget):
         super().__init__(parent)
         self.state = state
         self.surface_canvas = FigureCanvasQTAgg(Figure(figsize=(5, 3.5), facecolor=FACE, layout="constrained"))
+        self.surface_canvas.setMinimumHeight(160)
         self.ax3d = self.surface_canvas.figure.add_subplot(projection="3d")
         self.map = ModalMap(state, self)
         splitter = QSplitter(Qt.Orientation.Vertical)

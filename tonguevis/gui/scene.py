@@ -133,7 +133,7 @@ class TongueScene:
             if main:
                 self.scalar_bar = plotter.add_scalar_bar(
                     title="", mapper=actor.mapper, vertical=True, n_labels=4, fmt="%.3g",
-                    position_x=0.88, position_y=0.25, width=0.05, height=0.5, title_font_size=12,
+                    position_x=0.9, position_y=0.25, width=0.045, height=0.5, title_font_size=12,
                     label_font_size=11,
                 )
                 self.time_text = plotter.add_text("", position="upper_left", font_size=10, name="time")

@@ -14,7 +14,10 @@ from tonguevis.appstate import AppState
 from tonguevis.gui.session import SIGNAL_KINDS, Session
 from tonguevis.gui.timeplot import TimePlot
 
-SENSOR_COLOURS = ["#c0392b", "#2980b9", "#27ae60", "#8e44ad", "#d35400", "#16a085", "#7f8c8d", "#2c3e50"]
+SENSOR_COLOURS = ["#c0392b", "#2980b9", "#27ae60", "#8e44ad", "#e67e22", "#16a085", "#2c3e50", "#7f8c8d"]
+#: Fixed colours of the canonical sensors, so a sensor keeps its colour across recordings.
+NAMED_COLOURS = {"TT": "#c0392b", "TB": "#e67e22", "TD": "#2980b9", "TBK": "#16a085", "TL": "#27ae60",
+                 "TR": "#8e44ad", "JAW": "#555555"}
 AXIS_NAMES = ("x (anterior)", "y (left)", "z (up)")
 
 
@@ -39,8 +42,8 @@ class SensorPlot(TimePlot):
                 ax.axvspan(start, end, color="#3498db" if j % 2 else "#95a5a6", alpha=0.12, lw=0)
                 ax.axvline(start, color="#7f8c8d", lw=0.6, ls="--")
             for i, (name, xyz) in enumerate(signals.items()):
-                (line,) = ax.plot(times, xyz[:, k], lw=0.9, color=SENSOR_COLOURS[i % len(SENSOR_COLOURS)],
-                                  label=name)
+                colour = NAMED_COLOURS.get(name, SENSOR_COLOURS[i % len(SENSOR_COLOURS)])
+                (line,) = ax.plot(times, xyz[:, k], lw=0.9, color=colour, label=name)
                 self.lines.setdefault(name, []).append(line)
         if len(times):
             self.axes[0].set_xlim(times[0], times[-1])

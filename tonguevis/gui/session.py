@@ -86,6 +86,7 @@ class Session:
     production_table : the ProductionTable they come from (None if none found).
     motion : the simulated Motion, or None until the simulation ran.
     frames : per-frame drawing data (:class:`tonguevis.gui.frames.MotionFrames`).
+    notes : what the user should know about how it was simulated (e.g. no rest found).
     """
 
     recording: Recording
@@ -94,6 +95,7 @@ class Session:
     production_table: Any = None
     motion: Any = None
     frames: Any = None
+    notes: list[str] = field(default_factory=list)
     _signals: dict = field(default_factory=dict, repr=False)
 
     @property

@@ -39,6 +39,19 @@ def staged(progress: ProgressCallback | None, stage: int, stages: int, name: str
     return callback
 
 
+def rest_interval(recording) -> tuple[tuple[float, float], str]:
+    """The rest interval of ``recording`` and how it was found ("detected" or "stillest window").
+
+    Recordings without a still stretch (a read sentence, e.g. Haskins files) use the
+    window where the tongue sensors move least, so they can still be replayed.
+    """
+    from tonguevis.analysis.validation_scores import resolve_rest_interval
+    from tonguevis.gui.session import TONGUE_NAMES
+
+    sensors = [n for n in TONGUE_NAMES if n in recording.sensors]
+    return resolve_rest_interval(recording, sensors)
+
+
 def simulate_session(
     session: Session,
     model=None,
@@ -59,8 +72,12 @@ def simulate_session(
         progress(0, 1000, "building the tongue model")
     if model is None:
         model = build_model(mesh_path)
-    motion = simulate(session.recording, model=model, modes=modes, warping=warping,
-                      landmarks=landmarks, progress=staged(progress, 0, 2, "simulating"))
+    rest, how = rest_interval(session.recording)
+    session.notes = [] if how == "detected" else [
+        f"no rest interval found: the stillest {rest[1] - rest[0]:.1f} s ({rest[0]:.2f}-{rest[1]:.2f} s) "
+        "is used as the rest pose"]
+    motion = simulate(session.recording, model=model, modes=modes, warping=warping, landmarks=landmarks,
+                      rest_interval=rest, progress=staged(progress, 0, 2, "simulating"))
     frames = MotionFrames(motion, progress=staged(progress, 1, 2, "reconstructing frames"))
     session.motion, session.frames = motion, frames
     return session

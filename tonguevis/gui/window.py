@@ -316,7 +316,8 @@ class MainWindow(QMainWindow):
         motion = session.motion
         self.statusBar().showMessage(
             f"{session.name}: {motion.n_frames} frames simulated, "
-            f"{int((~motion.converged).sum())} not converged; press Space to play")
+            f"{int((~motion.converged).sum())} not converged; press Space to play"
+            + "".join(f"; {note}" for note in session.notes))
         self.simulation_finished.emit(True)
 
     def _on_sim_failed(self, session: Session, message: str) -> None:

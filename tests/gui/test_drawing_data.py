@@ -1,0 +1,153 @@
+"""Qt-free helpers of the app: energy density, per-frame drawing data, normals, audio, sessions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.gui.fakes import FakeModel, box_mesh, fake_motion, fake_recording
+from tonguevis.gui.energy_density import EnergyDensity
+from tonguevis.sim.assembly import assemble_stiffness
+
+
+@pytest.fixture(scope="module")
+def fake():
+    model = FakeModel(box_mesh())
+    recording = fake_recording(duration=1.0)
+    return model, recording, fake_motion(model, recording)
+
+
+def test_energy_density_integrates_to_half_u_K_u():
+    mesh = box_mesh()
+    density = EnergyDensity(mesh.points, mesh.tets, 6912.0, 0.49)
+    K = assemble_stiffness(mesh.points, mesh.tets, 6912.0, 0.49)
+    rng = np.random.default_rng(1)
+    u = 1e-3 * rng.standard_normal((3, mesh.n_nodes, 3))
+    expected = [0.5 * ui.ravel() @ (K @ ui.ravel()) for ui in u]
+    assert np.allclose(density.total(u), expected, rtol=1e-10)
+
+
+def test_rigid_motion_has_no_energy_density():
+    mesh = box_mesh()
+    density = EnergyDensity(mesh.points, mesh.tets, 6912.0, 0.49)
+    theta = np.array([0.01, -0.02, 0.005])
+    u = np.cross(theta, mesh.points) + [0.001, 0.002, -0.003]
+    assert np.abs(density.element(u)).max() < 1e-9 * density.element(1e-3 * mesh.points).max()
+
+
+def test_strain_operator_path_equals_direct_formula():
+    mesh = box_mesh()
+    density = EnergyDensity(mesh.points, mesh.tets, 6912.0, 0.49)
+    u = 1e-3 * np.random.default_rng(2).standard_normal((2, mesh.n_nodes, 3))
+    strains = (density.strain_operator() @ u.reshape(2, -1).T).T
+    assert np.allclose(density.from_strains(strains), density.element(u), rtol=1e-10, atol=0)
+
+
+def test_nodal_average_is_volume_weighted_mean():
+    mesh = box_mesh(2, 1, 1)
+    density = EnergyDensity(mesh.points, mesh.tets, 6912.0, 0.49)
+    values = np.arange(mesh.n_tets, dtype=float)
+    nodal = density.to_nodes(values)
+    for node in range(mesh.n_nodes):  # plain reference
+        around = np.any(mesh.tets == node, axis=1)
+        w = density.volumes[around]
+        assert nodal[node] == pytest.approx((w * values[around]).sum() / w.sum())
+
+
+def test_motion_frames_match_the_motion(fake):
+    from tonguevis.gui.frames import MotionFrames
+
+    model, _, motion = fake
+    frames = MotionFrames(motion, batch=7)  # batches that do not divide the frame count
+    u = model.displacements(motion.q)
+    assert np.allclose(frames.points, model.mesh.points + u, atol=1e-6)
+    assert np.allclose(frames.scalars["displacement"], 1e3 * np.linalg.norm(u, axis=2), rtol=1e-5, atol=1e-6)
+    density = EnergyDensity(model.mesh.points, model.mesh.tets, 6912.0, 0.49)
+    assert np.allclose(frames.scalars["energy"], density.nodal(u), rtol=1e-4, atol=1e-6 * frames.clim["energy"][1])
+    assert np.allclose(frames.sensor_points, frames.points[:, motion.sensor_nodes])
+    assert frames.clim["displacement"][1] <= frames.scalars["displacement"].max()
+    assert frames.frame_at(motion.times[5] + 0.004) == 5
+    assert frames.frame_at(-10) == 0 and frames.frame_at(1e9) == frames.n_frames - 1
+
+
+def test_vertex_normals_point_out_of_a_box():
+    from tonguevis.gui.scene import VertexNormals
+
+    mesh = box_mesh()
+    faces = mesh.boundary_faces()
+    normals = VertexNormals(faces, mesh.n_nodes)(mesh.points)
+    on_surface = np.unique(faces)
+    centre = mesh.points.mean(axis=0)
+    outward = np.einsum("ij,ij->i", normals[on_surface], mesh.points[on_surface] - centre)
+    assert np.all(outward > 0)
+    assert np.allclose(np.linalg.norm(normals[on_surface], axis=1), 1, atol=1e-6)
+
+
+def test_pcm16_slice_and_slow_down():
+    from tonguevis.gui.playback import pcm16
+
+    rate = 1000.0
+    samples = np.linspace(-1, 1, 2000)
+    pcm = np.frombuffer(pcm16(samples, rate, 0.5, 1.0, 0.0, 1.0), dtype="<i2")
+    assert len(pcm) == 500 and pcm[0] == int(samples[500] * 32767)
+    slow = np.frombuffer(pcm16(samples, rate, 0.5, 1.0, 0.0, 0.5), dtype="<i2")
+    assert len(slow) == 1000  # half speed: twice the samples, same start and end values
+    assert abs(int(slow[0]) - int(pcm[0])) <= 1 and abs(int(slow[-2]) - int(pcm[-1])) <= 40
+
+
+def test_waveform_envelope_matches_a_loop():
+    from tonguevis.gui.audio_panel import envelope
+
+    samples = np.random.default_rng(3).standard_normal(10_007)
+    times, low, high = envelope(samples, 1000.0, 2.0, bins=100)
+    per = 100
+    for b in (0, 37, 99):
+        block = samples[b * per:(b + 1) * per]
+        assert low[b] == block.min() and high[b] == block.max()
+        assert times[b] == pytest.approx(2.0 + (b + 0.5) * per / 1000.0)
+
+
+def test_video_frame_times():
+    from tonguevis.gui.video import frame_times
+
+    t = frame_times(1.0, 2.0, 25)
+    assert len(t) == 25 and t[0] == 1.0 and t[-1] < 2.0
+
+
+def test_session_signals_units_and_derivatives(fake):
+    from tonguevis.gui.session import Session
+
+    _, recording, _ = fake
+    session = Session(recording)
+    position = session.signals("position")
+    assert list(position) == ["TT", "TD", "JAW"]
+    assert np.allclose(position["TT"], 1e3 * recording.sensors["TT"])
+    velocity = session.signals("velocity")["TT"][:, 2]
+    # z = 0.05 + 0.005 cos(4πt): velocity -0.005·4π sin(4πt) m/s, in mm/s.
+    t = recording.times
+    inner = slice(10, -10)
+    assert np.allclose(velocity[inner], -1e3 * 0.005 * 4 * np.pi * np.sin(4 * np.pi * t)[inner], atol=0.5)
+    with pytest.raises(ValueError):
+        session.signals("jerk")
+
+
+def test_sensor_map_needed_only_without_tongue_names(fake):
+    from tonguevis.gui.dialogs import guess_role
+    from tonguevis.gui.session import needs_sensor_map, remap_session, Session
+
+    _, recording, _ = fake
+    assert not needs_sensor_map(recording)
+    unnamed = recording.renamed({"TT": "S1", "TD": "S2", "JAW": "S5"})
+    assert needs_sensor_map(unnamed)
+    remapped = remap_session(Session(unnamed), {"TT": "S1", "TD": "S2"})
+    assert set(remapped.recording.sensor_names) == {"TT", "TD", "S5"}
+    assert guess_role("tongue_tip") == "TT" and guess_role("S3") == "(not used)"
+
+
+def test_production_intervals_from_objects_and_pairs():
+    from types import SimpleNamespace
+
+    from tonguevis.gui.session import production_intervals
+
+    assert production_intervals([SimpleNamespace(start=2, end=3), (0.5, 1.0)]) == [(0.5, 1.0), (2.0, 3.0)]
+    assert production_intervals(None) == []
