@@ -58,15 +58,22 @@ def morph_surface(morph: Morph):
 
 
 def place_camera(plotter, view: str, centre, radius: float, zoom: float = 1.0) -> None:
-    """Point the current renderer's camera at ``centre`` from the direction of ``VIEWS[view]``."""
+    """Point the current renderer's camera at ``centre`` from the direction of ``VIEWS[view]``,
+    far enough that a sphere of ``radius`` fits the viewport both ways (then ``zoom``)."""
     direction, up = VIEWS[view]
     d = np.asarray(direction, float)
     d /= np.linalg.norm(d)
-    plotter.camera.focal_point = tuple(centre)
-    plotter.camera.position = tuple(np.asarray(centre) + 4.0 * radius * d)
-    plotter.camera.up = up
+    camera = plotter.camera
+    width, height = plotter.renderer.GetSize()
+    aspect = width / height if height else 1.0
+    half_v = np.radians(camera.view_angle) / 2
+    half_h = np.arctan(np.tan(half_v) * aspect)
+    distance = 1.05 * radius / np.sin(min(half_v, half_h))
+    camera.focal_point = tuple(centre)
+    camera.position = tuple(np.asarray(centre) + distance * d)
+    camera.up = up
     plotter.reset_camera_clipping_range()
-    plotter.camera.zoom(zoom)
+    camera.zoom(zoom)
 
 
 def morph_bounds(morph: Morph, ts) -> tuple[np.ndarray, float]:
@@ -109,8 +116,8 @@ def render_png(morph: Morph, path, steps=(0.0, 0.25, 0.5, 0.75, 1.0), view: str 
             plotter.add_mesh(shown, scalars="difference", cmap=COLORMAP, clim=(0, 1), show_edges=False,
                              show_scalar_bar=(k == len(steps) // 2), scalar_bar_args=bar_args(morph))
             name = {0.0: morph.labels[0] + " (t = 0)", 1.0: morph.labels[1] + " (t = 1)"}.get(float(t), f"t = {t:.2f}")
-            plotter.add_text(name, font_size=10, position="upper_edge")
-            place_camera(plotter, view, centre, radius)
+            plotter.add_text(name, font_size=8, position="upper_edge")
+            place_camera(plotter, view, centre, radius, zoom=1.3)
         if title:
             plotter.subplot(0, 0)
             plotter.add_text(title, font_size=9, position=(10, 10))
@@ -145,7 +152,7 @@ def render_mp4(morph: Morph, path, n_frames: int = 60, fps: int = 30, back: bool
             plotter.add_mesh(mesh, scalars="difference", cmap=COLORMAP, clim=(0, 1),
                              show_scalar_bar=(k == 0), scalar_bar_args=bar_args(morph))
             plotter.add_text(view, font_size=8, position="upper_left")
-            place_camera(plotter, view, centre, radius, zoom=1.0 if k == 0 else 1.6)
+            place_camera(plotter, view, centre, radius, zoom=1.3)
         plotter.subplot(0)
         label = plotter.add_text("", font_size=10, position="upper_right")
         plotter.add_text(f"{morph.labels[0]} (t = 0)  →  {morph.labels[1]} (t = 1)"
