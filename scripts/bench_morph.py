@@ -34,11 +34,11 @@ PAPER_FPS = 157.5
 GOAL_FPS = 5000.0
 
 
-def paper_size_model():
-    """(model, description): the ArtiSynth tongue when available, else ours."""
+def paper_size_model(ours: bool = False):
+    """(model, description): the ArtiSynth tongue when available (and not ``ours``), else ours."""
     from tonguevis.sim import TongueModel
 
-    if ARTISYNTH.exists():
+    if ARTISYNTH.exists() and not ours:
         from tonguevis.mesh.axes import ARTISYNTH_AXES
         from tonguevis.mesh.readers import read_mesh
 
@@ -61,12 +61,13 @@ def main(argv=None) -> int:
     parser.add_argument("--frames", type=int, default=2000, help="blends per batch (default 2000)")
     parser.add_argument("--repeats", type=int, default=5, help="timed repeats, best kept (default 5)")
     parser.add_argument("--modes", type=int, default=100)
+    parser.add_argument("--ours", action="store_true", help="use our shipped tongue even when the ArtiSynth one is there")
     args = parser.parse_args(argv)
 
     from tonguevis.analysis.morph import Morph
     from tonguevis.analysis.morph_kernels import MorphKernel
 
-    model, mesh_name = paper_size_model()
+    model, mesh_name = paper_size_model(args.ours)
     t0 = time.perf_counter()
     basis = model.basis(args.modes)
     model.rotation_matrix(basis)
