@@ -16,7 +16,10 @@ default data").  Each cross-section is a superellipse-like outline, widest at
 about 40 % of its height, tapering towards a narrower floor and a domed top.
 The solid is the zero level set of a field sampled on a 0.5 mm grid (marching
 cubes through VTK), Taubin-smoothed, then tetrahedralised with fTetWild
-(pytetwild).  Everything is deterministic: same inputs, same files.
+(pytetwild).  The surface, jaw and palate are deterministic (same bytes every
+run); fTetWild is not bit-reproducible even on one thread (two runs gave 1,719
+and 1,706 nodes), so the committed ``meshes/tongue.vtu`` and its landmarks are
+the reference: rebuild only to change the design, and commit both together.
 
 Usage:  python scripts/build_meshes.py [--out DIR] [--render PNG] [--no-render]
 """
@@ -59,8 +62,8 @@ TOP_EXPONENT = 1.8     # superellipse exponent of the dorsum half of a section
 BOTTOM_EXPONENT = 2.0  # ... and of the lower half (boxier)
 GRID_MM = 0.5          # marching-cubes voxel size
 
-TETWILD_EDGE_FAC = 0.05   # fTetWild ideal edge length, fraction of the bbox diagonal
-TETWILD_EPSILON = 2e-3     # envelope, fraction of the bbox diagonal
+TETWILD_EDGE_FAC = 0.045  # fTetWild ideal edge length, fraction of the bbox diagonal
+TETWILD_EPSILON = 4e-3     # envelope, fraction of the bbox diagonal
 
 log = logging.getLogger("build_meshes")
 
@@ -185,11 +188,11 @@ def _tube(path_xy: np.ndarray, z_low: float, z_high: float, thickness: np.ndarra
 
 def jaw_surface():
     """Lower dental arch: a U band (teeth on gum) around the tongue, mm."""
-    u = np.linspace(-1.0, 1.0, 81)
-    y = 33.0 * np.sin(0.5 * np.pi * u)                         # arch half-width 33 mm at the molars
-    x = 4.0 - 52.0 * (1.0 - np.cos(0.5 * np.pi * u))           # incisors 4 mm ahead of the tip
-    thickness = 7.0 + 4.0 * np.abs(u) ** 2                      # incisors thin, molars broad
-    return _tube(np.column_stack([x, y]), 24.0, 47.0, thickness)
+    u = np.linspace(-1.0, 1.0, 61)
+    y = 37.0 * np.sin(0.5 * np.pi * u)                         # arch half-width 37 mm at the molars
+    x = 5.0 - 50.0 * (1.0 - np.cos(0.5 * np.pi * u))           # incisors 5 mm ahead of the tip
+    thickness = 6.0 + 4.0 * np.abs(u) ** 2                      # incisors thin, molars broad
+    return _tube(np.column_stack([x, y]), 27.0, 46.0, thickness)
 
 
 def palate_surface():
@@ -197,8 +200,8 @@ def palate_surface():
     import trimesh
 
     top = _spline(TOP_Z)
-    xs = np.linspace(8.0, -62.0, 57)                            # alveolar ridge to the soft palate
-    v = np.linspace(-1.0, 1.0, 33)
+    xs = np.linspace(8.0, -62.0, 36)                            # alveolar ridge to the soft palate
+    v = np.linspace(-1.0, 1.0, 21)
     X, V = np.meshgrid(xs, v, indexing="ij")
     s = np.clip(-X, 0.0, LENGTH)
     half_width = 27.0 + 8.0 * np.clip(s / 45.0, 0.0, 1.0)       # to the upper teeth line

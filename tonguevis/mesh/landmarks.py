@@ -13,11 +13,13 @@ Placement rule (paper §3, with TB and TBK added), for any tongue mesh in our fr
   along y) from the left/right lateral edge of the mesh at that level;
 - each point is then snapped to the nearest unused dorsal-surface node (upward
   facing, nothing above), so a node lies within about an edge length of the rule;
-- anchors (Fig. 4: the jaw and hyoid attachments), on the inferior surface near the
-  floor: two at the genioglossus insertion under the front of the floor (towards
-  the mandibular symphysis, 6 % of the length either side of the midline) and
-  three towards the hyoid under the back of the root (on the midline and 18 % of
-  the length either side).
+- anchors (Fig. 4: the jaw and hyoid attachments), among the inferior-surface
+  nodes (facing down, nothing below) in the lowest quarter of the height: two at
+  the genioglossus insertion under the front of the floor (the outermost nodes
+  either side within 10 % of the length from its front, towards the mandibular
+  symphysis) and three towards the hyoid under the back of the root (the
+  outermost either side within 12 % of the length from its back, and the one
+  nearest the midline).
 Any landmark can be overridden by node id.
 """
 
@@ -271,13 +273,19 @@ def _anchors(mesh: TetMesh, y0: float, source) -> np.ndarray:
         raise MeshError(f"only {band.size} nodes on the floor of the mesh: is z up?", source)
     length = float(np.ptp(p[:, 0]))
     x_front, x_back = p[band, 0].max(), p[band, 0].min()
-    targets = [
-        (x_front - 0.03 * length, y0 - 0.06 * length), (x_front - 0.03 * length, y0 + 0.06 * length),
-        (x_back + 0.06 * length, y0 - 0.18 * length), (x_back + 0.06 * length, y0),
-        (x_back + 0.06 * length, y0 + 0.18 * length),
-    ]
-    used: set[int] = set()
-    return np.array([_nearest_unused(p, band, np.array([x, y, z_floor]), used) for x, y in targets])
+    front = band[p[band, 0] >= x_front - 0.10 * length]         # under the front of the floor
+    back = band[p[band, 0] <= x_back + 0.12 * length]           # under the back of the root
+    if front.size < 2 or back.size < 3:
+        raise MeshError("too few floor nodes at the front or back for the anchors", source)
+    # Spread each group as wide as the floor allows: the outermost nodes either
+    # side, plus (hyoid) the one nearest the midline.
+    jaw = [front[np.argmin(p[front, 1])], front[np.argmax(p[front, 1])]]
+    hyoid_mid = back[np.argmin(np.abs(p[back, 1] - y0) + 1e-3 * np.abs(p[back, 0] - x_back))]
+    hyoid = [back[np.argmin(p[back, 1])], hyoid_mid, back[np.argmax(p[back, 1])]]
+    anchors = np.array(jaw + hyoid, dtype=np.int64)
+    if np.unique(anchors).size != 5:
+        raise MeshError("could not place five distinct anchors on the floor of the mesh", source)
+    return anchors
 
 
 def _apply_overrides(landmarks: Landmarks, overrides: Mapping[str, int | Sequence[int]]) -> None:

@@ -101,7 +101,7 @@ def _read_meshio(path: Path) -> tuple[np.ndarray, np.ndarray]:
     if not path.exists():
         raise MeshError("no such mesh file", path)
     try:
-        mesh = meshio.read(path)
+        mesh = quiet_meshio_read(path)
     except meshio.ReadError as exc:
         raise MeshError(
             f"cannot read as a mesh ({exc}); supported: TetGen .node/.ele, .npz, and meshio "
@@ -113,6 +113,22 @@ def _read_meshio(path: Path) -> tuple[np.ndarray, np.ndarray]:
         found = sorted({c.type for c in mesh.cells})
         raise MeshError(f"no linear tetrahedra ('tetra' cells) in the file; found cell types {found}", path)
     return np.asarray(mesh.points, dtype=np.float64)[:, :3], np.concatenate(blocks).astype(np.int64)
+
+
+def quiet_meshio_read(path):
+    """meshio.read, with meshio's stderr chatter captured and its ``sys.exit``
+    on unparsable XML turned into :class:`meshio.ReadError`."""
+    import contextlib
+    import io
+
+    import meshio
+
+    chatter = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(chatter), contextlib.redirect_stdout(chatter):
+            return meshio.read(path)
+    except SystemExit as exc:
+        raise meshio.ReadError(" ".join(chatter.getvalue().split()) or "unreadable file") from exc
 
 
 def _tetgen_rows(path: Path) -> list[list[str]]:

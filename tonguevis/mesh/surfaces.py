@@ -92,8 +92,10 @@ def read_surface(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
 
     if not os.path.exists(path):
         raise MeshError("no such surface file", path)
+    from tonguevis.mesh.readers import quiet_meshio_read
+
     try:
-        surface = meshio.read(path)
+        surface = quiet_meshio_read(path)
     except meshio.ReadError as exc:
         raise MeshError(f"cannot read as a surface ({exc}); supported: OBJ, STL, PLY, VTK ...", path) from exc
     except (ValueError, KeyError, IndexError, EOFError, TypeError, AttributeError) as exc:
