@@ -70,6 +70,18 @@ def vowel_curves(result, data: Path):
     return curves
 
 
+def print_summary(curves, title: str) -> None:
+    from tonguevis.analysis.energy import summarize
+
+    print(f"\n{title} (mean ± sd over productions; time of peak normalised 0-1):")
+    print(f"{'speaker':<8}{'syll':<6}{'n':>3}  {'peak mJ':>16}  {'peak at':>12}  {'area mJ·s':>16}  {'duration s':>12}")
+    for g in summarize(curves, ("speaker", "syllable")):
+        m, s = g.mean, g.std
+        print(f"{g.key[0]:<8}{g.key[1]:<6}{g.n:>3}  {1e3 * m['peak_J']:>8.3f} ± {1e3 * s['peak_J']:<6.3f}"
+              f"  {m['peak_time_norm']:>5.2f} ± {s['peak_time_norm']:<4.2f}"
+              f"  {1e3 * m['area_Js']:>8.4f} ± {1e3 * s['area_Js']:<6.4f}  {m['duration_s']:>5.3f} ± {s['duration_s']:.3f}")
+
+
 def fig14_vowel(curves, out: Path) -> None:
     from matplotlib.figure import Figure
 
@@ -88,6 +100,7 @@ def fig14_vowel(curves, out: Path) -> None:
         ax.set_title(f"/{syllable}/, vowel-to-vowel windows")
     fig.suptitle("Every production (thin) and each speaker's mean (bold), consonant mid-window")
     save_figure(fig, out / "fig14_vowel_windows.png", dpi=100)
+    print_summary(curves, "vowel-to-vowel windows, per speaker and syllable")
 
 
 def fig13(result, out: Path) -> None:
@@ -159,13 +172,7 @@ def fig14(result, out: Path) -> None:
     fig.suptitle("Every production (thin) and each speaker's mean (bold)")
     save_figure(fig, out / "fig14_all_speakers.png", dpi=100)
 
-    print("\nper speaker and syllable (mean ± sd over productions; time of peak normalised 0-1):")
-    print(f"{'speaker':<8}{'syll':<6}{'n':>3}  {'peak mJ':>16}  {'peak at':>12}  {'area mJ·s':>16}  {'duration s':>12}")
-    for g in summarize(result.curves, ("speaker", "syllable")):
-        m, s = g.mean, g.std
-        print(f"{g.key[0]:<8}{g.key[1]:<6}{g.n:>3}  {1e3 * m['peak_J']:>8.3f} ± {1e3 * s['peak_J']:<6.3f}"
-              f"  {m['peak_time_norm']:>5.2f} ± {s['peak_time_norm']:<4.2f}"
-              f"  {1e3 * m['area_Js']:>8.4f} ± {1e3 * s['area_Js']:<6.4f}  {m['duration_s']:>5.3f} ± {s['duration_s']:.3f}")
+    print_summary(result.curves, "release-to-release productions, per speaker and syllable")
 
 
 def morph_figure(result, out: Path) -> None:
