@@ -50,16 +50,16 @@ TOP_Z = [(0, 45.5), (2, 48.5), (6, 50.5), (15, 52.5), (25, 54.0), (35, 55.5), (4
          (50, 54.0), (56, 51.5), (60, 48.5), (65, 42.0), (70, 33.0), (74, 25.0), (77, 19.0)]
 BOTTOM_Z = [(0, 45.5), (2, 42.0), (8, 39.0), (14, 35.5), (18, 33.0), (19.5, 28.0), (21.5, 17.0),
             (24, 7.0), (27, 2.0), (31, 0.0), (65, 0.0), (70, 2.5), (74, 7.0), (77, 12.0)]
-HALF_WIDTH = [(0, 9.0), (5, 11.0), (10, 12.8), (15, 14.0), (20, 15.0), (30, 18.0), (40, 23.5),
-              (50, 28.5), (60, 33.0), (67, 34.0), (72, 30.5), (77, 25.0)]
+HALF_WIDTH = [(0, 9.0), (5, 11.0), (10, 12.8), (15, 14.0), (20, 14.5), (30, 17.0), (40, 23.0),
+              (50, 28.0), (60, 32.5), (67, 33.5), (72, 30.0), (77, 24.5)]
 # Height fraction of the widest point, and floor width as a fraction of the widest.
-WIDEST_AT = [(0, 0.5), (18, 0.5), (26, 0.45), (77, 0.45)]
-FLOOR_WIDTH = [(0, 0.85), (18, 0.85), (26, 0.3), (77, 0.3)]
+WIDEST_AT = [(0, 0.5), (18, 0.5), (26, 0.42), (77, 0.42)]
+FLOOR_WIDTH = [(0, 0.85), (18, 0.85), (26, 0.6), (77, 0.6)]
 LENGTH = 76.0          # mm, tip to the back of the root
 TIP_RADIUS = 3.0       # mm over which the tip rounds off
 ROOT_RADIUS = 6.0      # mm over which the root rounds off
-TOP_EXPONENT = 1.8     # superellipse exponent of the dorsum half of a section
-BOTTOM_EXPONENT = 2.0  # ... and of the lower half (boxier)
+TOP_EXPONENT = 1.6     # superellipse exponent of the dorsum half of a section
+BOTTOM_EXPONENT = 2.5  # ... and of the lower half (boxier)
 GRID_MM = 0.5          # marching-cubes voxel size
 
 TETWILD_EDGE_FAC = 0.045  # fTetWild ideal edge length, fraction of the bbox diagonal

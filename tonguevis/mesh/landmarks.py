@@ -13,13 +13,14 @@ Placement rule (paper §3, with TB and TBK added), for any tongue mesh in our fr
   along y) from the left/right lateral edge of the mesh at that level;
 - each point is then snapped to the nearest unused dorsal-surface node (upward
   facing, nothing above), so a node lies within about an edge length of the rule;
-- anchors (Fig. 4: the jaw and hyoid attachments), among the inferior-surface
-  nodes (facing down, nothing below) in the lowest quarter of the height: two at
-  the genioglossus insertion under the front of the floor (the outermost nodes
-  either side within 10 % of the length from its front, towards the mandibular
-  symphysis) and three towards the hyoid under the back of the root (the
-  outermost either side within 12 % of the length from its back, and the one
-  nearest the midline).
+- anchors (Fig. 4: the jaw and hyoid attachments): the inferior-surface nodes
+  (facing down, nothing below) in the lowest 15 % of the height form the floor;
+  two anchors at the genioglossus insertion under the front of the floor (3 % of
+  the length behind its front, towards the mandibular symphysis) and three
+  towards the hyoid under the back of the root (5 % of the length before its
+  back), placed on the midline (hyoid) and halfway from it to the floor's
+  lateral extent in that region (at least 6 % of the length from the midline),
+  each snapped to the nearest unused floor node.
 Any landmark can be overridden by node id.
 """
 
@@ -268,7 +269,7 @@ def _anchors(mesh: TetMesh, y0: float, source) -> np.ndarray:
     p = mesh.points
     inferior = inferior_surface_nodes(mesh)
     z_floor = p[:, 2].min()
-    band = inferior[p[inferior, 2] <= z_floor + 0.25 * np.ptp(p[:, 2])]
+    band = inferior[p[inferior, 2] <= z_floor + 0.15 * np.ptp(p[:, 2])]
     if band.size < 5:
         raise MeshError(f"only {band.size} nodes on the floor of the mesh: is z up?", source)
     length = float(np.ptp(p[:, 0]))
@@ -277,11 +278,16 @@ def _anchors(mesh: TetMesh, y0: float, source) -> np.ndarray:
     back = band[p[band, 0] <= x_back + 0.12 * length]           # under the back of the root
     if front.size < 2 or back.size < 3:
         raise MeshError("too few floor nodes at the front or back for the anchors", source)
-    # Spread each group as wide as the floor allows: the outermost nodes either
-    # side, plus (hyoid) the one nearest the midline.
-    jaw = [front[np.argmin(p[front, 1])], front[np.argmax(p[front, 1])]]
-    hyoid_mid = back[np.argmin(np.abs(p[back, 1] - y0) + 1e-3 * np.abs(p[back, 0] - x_back))]
-    hyoid = [back[np.argmin(p[back, 1])], hyoid_mid, back[np.argmax(p[back, 1])]]
+    # Each group spreads over the middle half of the floor's width there, so the
+    # anchors neither coincide nor climb the sides.
+    half_front = max(0.5 * np.abs(p[front, 1] - y0).max(), 0.06 * length)
+    half_back = max(0.5 * np.abs(p[back, 1] - y0).max(), 0.06 * length)
+    x_jaw, x_hyoid = x_front - 0.03 * length, x_back + 0.05 * length
+    targets = [(x_jaw, y0 - half_front), (x_jaw, y0 + half_front),
+               (x_hyoid, y0 - half_back), (x_hyoid, y0), (x_hyoid, y0 + half_back)]
+    used: set[int] = set()
+    picked = [_nearest_unused(p, band, np.array([x, y, z_floor]), used) for x, y in targets]
+    jaw, hyoid = picked[:2], picked[2:]
     anchors = np.array(jaw + hyoid, dtype=np.int64)
     if np.unique(anchors).size != 5:
         raise MeshError("could not place five distinct anchors on the floor of the mesh", source)
