@@ -101,3 +101,9 @@ def test_float32_rendering_path_is_close_to_float64():
     d32 = model.displacements(q, dtype=np.float32)
     assert d32.dtype == np.float32
     assert np.abs(d32 - d64).max() < 1e-5 * np.abs(d64).max()
+
+
+def test_volume_kernel_equals_numpy():
+    model = _bar_model(nx=5)
+    disp = np.random.default_rng(9).normal(size=(300, model.mesh.n_nodes, 3)) * 2e-3
+    np.testing.assert_allclose(model.volume_change(disp), model.volume_change(disp, use_warp=False), rtol=0, atol=1e-13)

@@ -193,22 +193,35 @@ class TongueModel:
         """(n, 3) displacement in m for one modal vector ``q`` (m,)."""
         return self.displacements(np.asarray(q)[None, :], warping=warping)[0]
 
-    def volume_change(self, displacements: np.ndarray) -> np.ndarray:
+    def volume_change(self, displacements: np.ndarray, use_warp: bool = True) -> np.ndarray:
         """(F,) relative volume change (V - V_rest)/V_rest for (F, n, 3) displacements.
 
         The volume of a closed tet mesh is the flux of x/3 through its
         boundary, V = ⅙ Σ_faces p0 · (p1 × p2), which touches only the surface
         (about a fifth of the work of summing every tet); a test checks it
-        against the tet sum.
+        against the tet sum.  ``use_warp`` runs it as a warp-lang kernel, else NumPy.
         """
         d = np.asarray(displacements)
         faces = self.surface_faces
         out = np.empty(len(d))
         for start in range(0, len(d), CHUNK_FRAMES):
             pts = self.mesh.points[None] + d[start : start + CHUNK_FRAMES]
-            p0, p1, p2 = (pts[:, faces[:, k]] for k in range(3))
-            out[start : start + len(pts)] = np.einsum("fki,fki->f", p0, np.cross(p1, p2)) / 6.0
+            if use_warp:
+                from tonguevis.sim.warp_kernels import enclosed_volumes
+
+                out[start : start + len(pts)] = enclosed_volumes(pts, faces)
+            else:
+                p0, p1, p2 = (pts[:, faces[:, k]] for k in range(3))
+                out[start : start + len(pts)] = np.einsum("fki,fki->f", p0, np.cross(p1, p2)) / 6.0
         return out / self.rest_volume - 1.0
+
+    @cached_property
+    def dorsal_nodes(self) -> np.ndarray:
+        """Surface nodes a sensor can sit on (upward-facing, not anchors), for snapping."""
+        from tonguevis.mesh import dorsal_surface_nodes
+
+        nodes = dorsal_surface_nodes(self.mesh)
+        return nodes[~np.isin(nodes, self.anchors)]
 
     def energy(self, q: np.ndarray) -> np.ndarray:
         """(F,) elastic energy U = ½ qᵀΛq in J for q (F, m)."""

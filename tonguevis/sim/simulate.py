@@ -90,10 +90,7 @@ def prepare_targets(
     aligned_rest = transform.apply(source)
     alignment_rms = float(np.sqrt(np.mean(np.sum((aligned_rest - target) ** 2, axis=1))))
     if landmarks == "speaker":
-        from tonguevis.mesh import dorsal_surface_nodes
-
-        candidates = dorsal_surface_nodes(model.mesh)
-        candidates = candidates[~np.isin(candidates, model.anchors)]
+        candidates = model.dorsal_nodes
         dist = np.linalg.norm(model.mesh.points[candidates][None] - aligned_rest[:, None], axis=2)
         nodes = candidates[np.argmin(dist, axis=1)]
         if len(np.unique(nodes)) < len(nodes):
