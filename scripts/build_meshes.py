@@ -21,7 +21,7 @@ run); fTetWild is not bit-reproducible even on one thread (two runs gave 1,719
 and 1,706 nodes), so the committed ``meshes/tongue.vtu`` and its landmarks are
 the reference: rebuild only to change the design, and commit both together.
 
-Usage:  python scripts/build_meshes.py [--out DIR] [--render PNG] [--no-render]
+Usage:  python scripts/build_meshes.py [--out DIR] [--render PNG] [--no-render] [--context-only]
 """
 
 from __future__ import annotations
@@ -222,7 +222,7 @@ def palate_surface():
     faces += [quads[:, [0, 2, 1]] + off, quads[:, [0, 3, 2]] + off]
     rim = np.concatenate([np.arange(nv), np.arange(nv - 1, nx * nv, nv)[1:],
                           np.arange(nx * nv - 1, (nx - 1) * nv - 1, -1)[1:],
-                          np.arange((nx - 1) * nv, -1, -nv)[1:]])
+                          np.arange((nx - 1) * nv, 0, -nv)[1:]])
     r0, r1 = rim, np.roll(rim, -1)
     faces += [np.stack([r0, r1, r1 + off], -1), np.stack([r0, r1 + off, r0 + off], -1)]
     mesh = trimesh.Trimesh(np.concatenate([lower, upper]), np.concatenate(faces), process=True)
@@ -241,18 +241,20 @@ def _write_atomic(path: Path, write) -> None:
             os.remove(tmp)
 
 
-def write_outputs(out: Path, mesh: TetMesh, jaw, palate) -> dict:
+def write_outputs(out: Path, mesh: TetMesh | None, jaw, palate) -> dict:
+    """Write the tongue (unless ``mesh`` is None) with its landmarks, and the context."""
     import meshio
 
     from tonguevis.mesh import find_landmarks
 
     out.mkdir(parents=True, exist_ok=True)
-    _write_atomic(out / "tongue.vtu", lambda p: meshio.write(
-        p, meshio.Mesh(mesh.points, [("tetra", mesh.tets.astype(np.int32))]), file_format="vtu",
-        binary=True, compression="zlib"))
-    landmarks = find_landmarks(mesh)
-    _write_atomic(out / "tongue_landmarks.json",
-                  lambda p: Path(p).write_text(landmarks.to_json(mesh, mesh_file="tongue.vtu")))
+    if mesh is not None:
+        _write_atomic(out / "tongue.vtu", lambda p: meshio.write(
+            p, meshio.Mesh(mesh.points, [("tetra", mesh.tets.astype(np.int32))]), file_format="vtu",
+            binary=True, compression="zlib"))
+        landmarks = find_landmarks(mesh)
+        _write_atomic(out / "tongue_landmarks.json",
+                      lambda p: Path(p).write_text(landmarks.to_json(mesh, mesh_file="tongue.vtu")))
     for name, surface in (("jaw.stl", jaw), ("palate.stl", palate)):
         scaled = surface.copy()
         scaled.apply_scale(MM)
@@ -265,12 +267,11 @@ def render(folder: Path, png: Path) -> None:
     """Off-screen picture of the tongue with its landmarks and context surfaces."""
     import pyvista as pv
 
-    from tonguevis.mesh import load_default_landmarks, read_landmarks, read_mesh, read_surface
+    from tonguevis.mesh import read_landmarks, read_mesh, read_surface
 
     pv.OFF_SCREEN = True
     mesh = read_mesh(folder / "tongue.vtu", unit="m")
     landmarks = read_landmarks(folder / "tongue_landmarks.json", mesh)
-    del load_default_landmarks
     mm = mesh.points * 1e3
     grid = pv.UnstructuredGrid({pv.CellType.TETRA: mesh.tets}, mm)
     surface = grid.extract_surface(algorithm="dataset_surface")
@@ -308,9 +309,17 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=REPO / "meshes")
     parser.add_argument("--render", type=Path, default=REPO / "docs" / "images" / "tongue_mesh.png")
     parser.add_argument("--no-render", action="store_true")
+    parser.add_argument("--context-only", action="store_true",
+                        help="rewrite jaw/palate (and the rendering) but keep the existing tongue and landmarks")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
 
+    if args.context_only:
+        hashes = write_outputs(args.out, None, jaw_surface(), palate_surface())
+        if not args.no_render:
+            render(args.out, args.render)
+        print(hashes)
+        return 0
     surface = tongue_surface()
     print(f"surface: {len(surface.vertices)} vertices, {surface.volume / 1e3:.1f} cm3, "
           f"extent {np.ptp(surface.vertices, axis=0).round(1)} mm")

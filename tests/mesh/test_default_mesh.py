@@ -72,3 +72,33 @@ def test_context_surfaces_in_metres_around_the_tongue(mesh, name):
     assert np.ptp(points, axis=0).max() < 0.15
     centre = mesh.points.mean(axis=0)
     assert np.linalg.norm(points.mean(axis=0)[:2] - centre[:2]) < 0.04
+
+
+def test_proportions_follow_design_md(mesh):
+    """Measured on the shipped mesh like DESIGN.md measured the ArtiSynth tongue:
+    blade free for ~18 mm, half-widths, dorsum heights, root (all mm)."""
+    from tonguevis.mesh.surfaces import surface_heights
+
+    p = mesh.points * 1e3
+    tip, floor = p[:, 0].max(), p[:, 2].min()
+
+    def half_width(s):
+        ys = np.arange(0.0, 40.0, 0.25)
+        h = surface_heights(mesh, np.column_stack([np.full_like(ys, tip - s), ys]) * 1e-3)
+        return ys[~np.isnan(h[:, 0])].max()
+
+    def midline(s):
+        low, high = surface_heights(mesh, np.array([[tip - s, 0.0]]) * 1e-3)[0] * 1e3 - floor
+        return low, high
+
+    assert 7 <= half_width(2) <= 11
+    assert 12 <= half_width(15) <= 16
+    assert 21 <= half_width(40) <= 27
+    assert 31 <= half_width(65) <= 36
+    for s in (5, 10, 15):                                       # the blade hangs free
+        low, high = midline(s)
+        assert 30 < low < 44 and 48 < high < 55
+    for s in (25, 35, 45, 55):                                  # the body reaches the floor
+        low, high = midline(s)
+        assert low < 8 and 48 <= high <= 57
+    assert 20 <= midline(74)[1] <= 32                           # the root falls towards the hyoid

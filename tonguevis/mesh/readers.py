@@ -123,9 +123,14 @@ def quiet_meshio_read(path):
 
     import meshio
 
+    import warnings
+
     chatter = io.StringIO()
     try:
-        with contextlib.redirect_stderr(chatter), contextlib.redirect_stdout(chatter):
+        # meshio's STL sniffing overflows on some headers (a harmless RuntimeWarning).
+        with contextlib.redirect_stderr(chatter), contextlib.redirect_stdout(chatter), \
+                warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore", RuntimeWarning)
             return meshio.read(path)
     except SystemExit as exc:
         raise meshio.ReadError(" ".join(chatter.getvalue().split()) or "unreadable file") from exc
