@@ -141,9 +141,15 @@ def tetrahedralise(surface) -> TetMesh:
     """fTetWild tet mesh of a trimesh surface in mm -> TetMesh in metres."""
     import pytetwild
 
-    points, tets = pytetwild.tetrahedralize(
-        np.asarray(surface.vertices, dtype=np.float64), np.asarray(surface.faces, dtype=np.int32),
-        edge_length_fac=TETWILD_EDGE_FAC, epsilon=TETWILD_EPSILON, num_threads=1, quiet=True)
+    here = os.getcwd()
+    with tempfile.TemporaryDirectory() as scratch:            # fTetWild drops __tracked_surface.stl in cwd
+        os.chdir(scratch)
+        try:
+            points, tets = pytetwild.tetrahedralize(
+                np.asarray(surface.vertices, dtype=np.float64), np.asarray(surface.faces, dtype=np.int32),
+                edge_length_fac=TETWILD_EDGE_FAC, epsilon=TETWILD_EPSILON, num_threads=1, quiet=True)
+        finally:
+            os.chdir(here)
     mesh = TetMesh(points * MM, tets)
     volumes = mesh.tet_volumes()
     if np.any(volumes < 0):                                     # fTetWild's orientation convention
