@@ -68,14 +68,17 @@ def main() -> int:
     window.resize(1500, 950)
     window.show()
     done = {}
-    window.simulation_finished.connect(lambda ok: done.setdefault("ok", ok))
+
+    def finished(ok: bool) -> None:
+        done["ok"] = ok
+        app.quit()
+
+    window.simulation_finished.connect(finished)
     t0 = time.perf_counter()
     window.open_recording(args.recording)
-    while "ok" not in done:
-        app.processEvents()
-        time.sleep(0.01)
+    app.exec()  # until the simulation finishes
     prep = time.perf_counter() - t0
-    if not done["ok"]:
+    if not done.get("ok"):
         print("simulation failed:", window.statusBar().currentMessage())
         return 1
     session = window.session

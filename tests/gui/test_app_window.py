@@ -24,13 +24,19 @@ def test_play_moves_the_tongue_and_every_cursor_together(qtbot, window):
     state.set_time(5.2)  # just before the first syllable
     before = np.array(window.view3d.scene.surface.points)
     renders = window.view3d.renders
+    import time
+
+    started = time.perf_counter()
     state.set_playing(True)
     qtbot.waitUntil(lambda: state.time > 6.2, timeout=10000)  # a second of playback
     state.set_playing(False)
+    elapsed = time.perf_counter() - started
     after = np.array(window.view3d.scene.surface.points)
     # The rendered buffer moved (in place: same dataset object as at build time).
     assert np.abs(after - before).max() > 1e-4
-    assert window.view3d.renders - renders >= 3  # several frames, not one jump
+    assert window.view3d.renders > renders
+    # Driven by a clock, not by frame counting: never ahead of real time (speed 1).
+    assert state.time - 5.2 <= elapsed + 0.05
     i = session.frames.frame_at(state.time)
     assert np.allclose(after, session.frames.points[i])
     # Every view shows the same time.

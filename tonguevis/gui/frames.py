@@ -74,7 +74,9 @@ class MotionFrames:
         nodes = np.asarray(motion.sensor_nodes, dtype=np.int64)
         self.sensor_points = self.points[:, nodes, :]
         self.targets = np.asarray(motion.targets, dtype=np.float32)
-        self.clim = {name: _colour_range(values) for name, values in self.scalars.items()}
+        # Energy concentrates at the anchors: a lower percentile keeps the rest of the tongue readable.
+        self.clim = {"displacement": _colour_range(self.scalars["displacement"], 99.5),
+                     "energy": _colour_range(self.scalars["energy"], 98.0)}
 
     @property
     def n_frames(self) -> int:
@@ -90,8 +92,8 @@ class MotionFrames:
         return i if self.times[i] - t < t - self.times[i - 1] else i - 1
 
 
-def _colour_range(values: np.ndarray) -> tuple[float, float]:
-    """0 to the 99.5th percentile over all frames (a few extreme nodes do not wash out the rest)."""
+def _colour_range(values: np.ndarray, percentile: float) -> tuple[float, float]:
+    """0 to a high percentile over all frames (a few extreme nodes do not wash out the rest)."""
     finite = values[np.isfinite(values)]
-    high = float(np.percentile(finite, 99.5)) if finite.size else 1.0
+    high = float(np.percentile(finite, percentile)) if finite.size else 1.0
     return (0.0, high if high > 0 else 1.0)

@@ -13,15 +13,20 @@ from tonguevis.appstate import AppState
 from tonguevis.gui.timeplot import FACE, TimePlot
 
 #: Frames and modes drawn in the 3D surface (it is a picture, not a table).
-SURFACE_MAX_FRAMES = 240
-SURFACE_MAX_MODES = 40
-COLORMAP = "coolwarm"
+SURFACE_MAX_FRAMES = 300
+SURFACE_MAX_MODES = 20
+COLORMAP = "RdBu_r"
 
 
 def decimate(times: np.ndarray, q: np.ndarray, max_frames: int, max_modes: int):
-    """Every k-th frame so at most ``max_frames`` remain, and the first ``max_modes`` modes."""
+    """Means over blocks of k frames so at most ``max_frames`` remain (averaging, not
+    picking every k-th frame, so fast oscillations do not alias), first ``max_modes`` modes."""
     step = max(1, int(np.ceil(len(times) / max_frames)))
-    return times[::step], q[::step, :max_modes]
+    usable = (len(times) // step) * step
+    if usable == 0:
+        return times, q[:, :max_modes]
+    blocks = q[:usable, :max_modes].reshape(usable // step, step, -1).mean(axis=1)
+    return times[:usable].reshape(-1, step).mean(axis=1), blocks
 
 
 class ModalMap(TimePlot):
@@ -31,11 +36,15 @@ class ModalMap(TimePlot):
         self.set_time_axes([self.ax])
 
     def show_q(self, times: np.ndarray, q: np.ndarray) -> None:
+        """Each mode's row scaled by its own largest |q| (higher modes are orders of magnitude
+        smaller; unscaled, only the first few would show)."""
         self.ax.clear()
-        limit = float(np.percentile(np.abs(q), 99)) or 1.0
-        self.ax.imshow(q.T, origin="lower", aspect="auto", cmap=COLORMAP, vmin=-limit, vmax=limit,
+        peak = np.abs(q).max(axis=0)
+        peak[peak == 0] = 1.0
+        self.ax.imshow((q / peak).T, origin="lower", aspect="auto", cmap=COLORMAP, vmin=-1, vmax=1,
                        extent=(times[0], times[-1], 0.5, q.shape[1] + 0.5), interpolation="nearest")
         self.ax.set_ylabel("mode", fontsize=8)
+        self.ax.set_title("q(t) per mode, scaled to each mode's largest |q|", fontsize=8)
         self.ax.set_xlabel("time (s)", fontsize=8)
         self.ax.tick_params(labelsize=7)
         self.set_time_axes([self.ax])
@@ -73,14 +82,17 @@ class ModalTab(QWidget):
                             SURFACE_MAX_FRAMES, SURFACE_MAX_MODES)
         modes = np.arange(1, q.shape[1] + 1)
         T, M = np.meshgrid(times, modes, indexing="ij")
-        limit = float(np.percentile(np.abs(q), 99)) or 1.0
-        self.ax3d.plot_surface(M, T, q, cmap=COLORMAP, vmin=-limit, vmax=limit, linewidth=0,
+        # A few short spikes would flatten everything else: clip at the 97th percentile of |q|.
+        limit = float(np.percentile(np.abs(q), 97)) or 1.0
+        shown = np.clip(q, -limit, limit)
+        self.ax3d.plot_surface(M, T, shown, cmap=COLORMAP, vmin=-limit, vmax=limit, linewidth=0,
                                antialiased=False, rcount=len(modes), ccount=len(times))
+        self.ax3d.set_zlim(-limit, limit)
         self.ax3d.set_xlabel("mode index", fontsize=8)
         self.ax3d.set_ylabel("time (s)", fontsize=8)
         self.ax3d.set_zlabel("q (mm·kg$^{1/2}$)", fontsize=8)
         self.ax3d.tick_params(labelsize=7)
-        self.ax3d.set_title(f"modal displacement q(t), first {q.shape[1]} of {motion.q.shape[1]} modes",
-                            fontsize=9)
+        self.ax3d.set_title(f"modal displacement q(t), first {q.shape[1]} of {motion.q.shape[1]} modes "
+                            f"(clipped at ±{limit:.2g})", fontsize=9)
         self.surface_canvas.draw_idle()
         self.map.show_q(np.asarray(motion.times), np.asarray(motion.q) * scale)

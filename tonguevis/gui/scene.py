@@ -128,7 +128,7 @@ class TongueScene:
                 plotter.add_mesh(self.residuals, color=TARGET_COLOUR, line_width=2,
                                  name=f"residuals{index}", reset_camera=False)
             for name, surface in (context or {}).items():
-                plotter.add_mesh(surface, color=CONTEXT_COLOUR, opacity=0.22 if main else 0.15,
+                plotter.add_mesh(surface, color=CONTEXT_COLOUR, opacity=0.12 if main else 0.1,
                                  name=f"{name}{index}", reset_camera=False, show_scalar_bar=False)
             if main:
                 self.scalar_bar = plotter.add_scalar_bar(
@@ -136,6 +136,7 @@ class TongueScene:
                     position_x=0.9, position_y=0.25, width=0.045, height=0.5, title_font_size=12,
                     label_font_size=11,
                 )
+                self.scalar_bar.SetVerticalTitleSeparation(8)
                 self.time_text = plotter.add_text("", position="upper_left", font_size=10, name="time")
                 if n_sensors:
                     plotter.add_text("sensor node", position=(8, 26), font_size=8, name="legend_s",

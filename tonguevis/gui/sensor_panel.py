@@ -48,9 +48,9 @@ class SensorPlot(TimePlot):
         if len(times):
             self.axes[0].set_xlim(times[0], times[-1])
         self.axes[-1].set_xlabel("time (s)", fontsize=8)
-        self.axes[0].set_title(label, fontsize=9)
-        if signals:
-            self.axes[0].legend(loc="upper right", fontsize=7, ncol=min(len(signals), 6), framealpha=0.8)
+        if signals:  # above the plots, where it hides no data
+            self.axes[0].legend(loc="lower left", bbox_to_anchor=(0.0, 1.0), fontsize=7, ncol=min(len(signals), 8),
+                                frameon=False, borderaxespad=0.2, handlelength=1.5)
         self.set_time_axes(list(self.axes))
         self._highlight(draw=False)
         self.draw_idle()

@@ -68,7 +68,8 @@ class TransportBar(QWidget):
         where = ""
         if production is not None:
             where = f"  production {self.productions.index(production) + 1}/{len(self.productions)}"
-        self.label.setText(f"{t:7.3f} s / {self.state.end:.2f} s  frame {self._frame(t)}{where}")
+        last = self._frame(self.state.end) + 1
+        self.label.setText(f"{t:7.3f} s / {self.state.end:.2f} s  frame {self._frame(t) + 1}/{last}{where}")
 
     def _on_slider(self, value: int) -> None:
         self.state.set_time(self.state.start + value * self.state.frame_period, source=self)

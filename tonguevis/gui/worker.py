@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import time
 import traceback
 
 from PySide6.QtCore import QThread, Signal
@@ -25,10 +26,15 @@ class Worker(QThread):
     failed = Signal(str)
     cancelled = Signal()
 
+    #: Seconds between progress signals: callers may report every frame, and each
+    #: signal is a queued cross-thread call the GUI thread must process.
+    MIN_INTERVAL = 0.05
+
     def __init__(self, function, parent=None):
         super().__init__(parent)
         self.function = function
         self._cancel = False
+        self._last = 0.0
 
     def cancel(self) -> None:
         self._cancel = True
@@ -36,7 +42,10 @@ class Worker(QThread):
     def _progress(self, done: int, total: int, message: str = "") -> None:
         if self._cancel:
             raise Cancelled()
-        self.progressed.emit(int(done), int(total), str(message))
+        now = time.monotonic()
+        if now - self._last >= self.MIN_INTERVAL or done >= total:
+            self._last = now
+            self.progressed.emit(int(done), int(total), str(message))
 
     def run(self) -> None:
         try:

@@ -1,0 +1,72 @@
+#!/usr/bin/env python
+"""Screenshots of the desktop app for the README and docs (real window, real simulation).
+
+Writes docs/images/app.png (the demo /ta/ recording in mid-syllable, coloured by
+displacement) and docs/images/app_energy.png (same frame, energy density, modal
+q(t) tab).  Needs a display: run under ``xvfb-run -a -s "-screen 0 1600x1000x24"``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--recording", type=Path, default=REPO / "data" / "spk1_ta.tsv")
+    parser.add_argument("--out", type=Path, default=REPO / "docs" / "images")
+    parser.add_argument("--time", type=float, default=5.62, help="time shown, seconds (default: a /t/ release)")
+    parser.add_argument("--modes", type=int, default=100)
+    args = parser.parse_args()
+
+    from PySide6.QtCore import QSettings
+
+    from tonguevis.gui.app import application
+    from tonguevis.gui.tabs import add_feature_tabs
+    from tonguevis.gui.window import MainWindow
+
+    app = application()
+    window = MainWindow(settings=QSettings("/tmp/tonguevis-screenshots.ini", QSettings.Format.IniFormat),
+                        modes=args.modes)
+    add_feature_tabs(window)
+    window.resize(1600, 960)
+    window.show()
+    from PySide6.QtCore import QTimer
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    status = {"code": 1}
+
+    def first() -> None:
+        window.export_screenshot(args.out / "app.png")
+        window.state.set_color("energy")
+        window.tabs.setCurrentWidget(window.modal_tab)
+        QTimer.singleShot(1000, second)
+
+    def second() -> None:
+        window.export_screenshot(args.out / "app_energy.png")
+        print(f"wrote {args.out / 'app.png'} and {args.out / 'app_energy.png'}")
+        status["code"] = 0
+        app.quit()
+
+    def finished(ok: bool) -> None:
+        if not ok:
+            print("simulation failed:", window.statusBar().currentMessage(), file=sys.stderr)
+            app.quit()
+            return
+        window.state.set_time(args.time)
+        QTimer.singleShot(1000, first)  # everything inside the event loop: plots and GL settle
+
+    window.simulation_finished.connect(finished)
+    window.open_recording(args.recording)
+    app.exec()
+    window.close()
+    return status["code"]
+
+
+if __name__ == "__main__":
+    sys.exit(main())
