@@ -169,3 +169,18 @@ def test_read_artisynth_context_surface():
     points, triangles = read_surface(shared_file("artisynth", "ubcjaw_symmetric.obj"))
     assert 0.05 < np.ptp(points, axis=0).max() < 0.2            # metres
     assert triangles.shape[1] == 3 and triangles.max() < len(points)
+
+
+def test_boundary_faces_match_a_dict_reference():
+    from tonguevis.mesh import boundary_faces
+    from tonguevis.mesh.tetmesh import face_keys
+
+    for subset in _random_subsets():
+        count = defaultdict(list)
+        for t in subset:
+            for f in ((t[1], t[2], t[3]), (t[0], t[3], t[2]), (t[0], t[1], t[3]), (t[0], t[2], t[1])):
+                count[tuple(sorted(f))].append(f)
+        expected = sorted(tuple(int(i) for i in v[0]) for v in count.values() if len(v) == 1)
+        assert sorted(tuple(int(i) for i in f) for f in boundary_faces(subset)) == expected
+    keys = face_keys(np.array([[3, 1, 2], [2, 3, 1], [1, 2, 4], [2_000_000, 0, 1]]))
+    assert keys[0] == keys[1] and len(set(keys.tolist())) == 3

@@ -20,7 +20,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from tonguevis.errors import MeshError
-from tonguevis.mesh.tetmesh import TET_FACES, signed_tet_volumes
+from tonguevis.mesh.tetmesh import TET_FACES, face_keys, signed_tet_volumes
 
 log = logging.getLogger("tonguevis")
 
@@ -87,8 +87,7 @@ def checked_tets(points: np.ndarray, tets: np.ndarray, path: str | os.PathLike |
 def _check_manifold(tets: np.ndarray, path, id_offset: int) -> None:
     """Raise MeshError unless the boundary of positive ``tets`` is a closed 2-manifold."""
     faces = tets[:, TET_FACES].reshape(-1, 3)
-    keys = np.sort(faces, axis=1)
-    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    _, inverse, counts = np.unique(face_keys(faces), return_inverse=True, return_counts=True)
     face_count = counts[inverse.ravel()]
     crowded = np.nonzero(face_count > 2)[0] // 4
     if crowded.size:
@@ -100,7 +99,10 @@ def _check_manifold(tets: np.ndarray, path, id_offset: int) -> None:
 
     # Every boundary edge must border exactly two boundary faces.
     edges = np.sort(boundary[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1)
-    edge_keys, edge_inverse, edge_counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+    codes = (edges[:, 0] << 32) | edges[:, 1]                   # one int64 per edge: a 1-D unique
+    _, first, edge_inverse, edge_counts = np.unique(codes, return_index=True, return_inverse=True,
+                                                    return_counts=True)
+    edge_keys = edges[first]
     edge_inverse = edge_inverse.ravel()
     bad_edges = np.nonzero(edge_counts != 2)[0]
     if bad_edges.size:

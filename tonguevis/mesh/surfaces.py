@@ -37,16 +37,26 @@ def surface_heights(mesh: TetMesh, xy: np.ndarray, faces: np.ndarray | None = No
     det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
     valid = np.abs(det) > 1e-18                                 # vertical faces never cross a vertical line
     a, b, c, tri, det = a[valid], b[valid], c[valid], tri[valid], det[valid]
+    lo, hi = tri[:, :, :2].min(axis=1), tri[:, :, :2].max(axis=1)
+    xy = np.asarray(xy, dtype=np.float64)
+    order = np.lexsort((xy[:, 1], xy[:, 0]))                   # chunks of nearby queries ...
     out = np.full((xy.shape[0], 2), np.nan)
-    for start in range(0, xy.shape[0], 256):                   # chunks bound memory, not a hot path
-        q = xy[start:start + 256, None, :]
-        l1 = ((b[:, 0] - q[..., 0]) * (c[:, 1] - q[..., 1]) - (c[:, 0] - q[..., 0]) * (b[:, 1] - q[..., 1])) / det
-        l2 = ((c[:, 0] - q[..., 0]) * (a[:, 1] - q[..., 1]) - (a[:, 0] - q[..., 0]) * (c[:, 1] - q[..., 1])) / det
+    for start in range(0, xy.shape[0], 128):                   # chunks bound memory, not a hot path
+        rows = order[start:start + 128]
+        q = xy[rows]
+        # ... only meet the faces whose bounding box overlaps the chunk's
+        near = np.nonzero(np.all(lo <= q.max(axis=0) + 1e-12, axis=1) & np.all(hi >= q.min(axis=0) - 1e-12, axis=1))[0]
+        if near.size == 0:
+            continue
+        fa, fb, fc, ft, fd = a[near], b[near], c[near], tri[near], det[near]
+        q = q[:, None, :]
+        l1 = ((fb[:, 0] - q[..., 0]) * (fc[:, 1] - q[..., 1]) - (fc[:, 0] - q[..., 0]) * (fb[:, 1] - q[..., 1])) / fd
+        l2 = ((fc[:, 0] - q[..., 0]) * (fa[:, 1] - q[..., 1]) - (fa[:, 0] - q[..., 0]) * (fc[:, 1] - q[..., 1])) / fd
         l3 = 1.0 - l1 - l2
         hit = (l1 >= -1e-12) & (l2 >= -1e-12) & (l3 >= -1e-12)
-        z = l1 * tri[:, 0, 2] + l2 * tri[:, 1, 2] + l3 * tri[:, 2, 2]
-        out[start:start + 256, 0] = np.where(hit, z, np.inf).min(axis=1)
-        out[start:start + 256, 1] = np.where(hit, z, -np.inf).max(axis=1)
+        z = l1 * ft[:, 0, 2] + l2 * ft[:, 1, 2] + l3 * ft[:, 2, 2]
+        out[rows, 0] = np.where(hit, z, np.inf).min(axis=1)
+        out[rows, 1] = np.where(hit, z, -np.inf).max(axis=1)
     out[~np.isfinite(out)] = np.nan
     return out
 

@@ -66,6 +66,17 @@ def signed_tet_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
 def boundary_faces(tets: np.ndarray) -> np.ndarray:
     """(f, 3) faces used by exactly one tet, oriented outward for positive tets."""
     faces = tets[:, TET_FACES].reshape(-1, 3)
-    key = np.sort(faces, axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    _, inverse, counts = np.unique(face_keys(faces), return_inverse=True, return_counts=True)
     return faces[counts[inverse.ravel()] == 1]
+
+
+def face_keys(faces: np.ndarray) -> np.ndarray:
+    """(f,) int64 key per (f, 3) node triple, equal for the same nodes in any order.
+
+    One integer per face makes ``np.unique`` a 1-D sort, many times faster than
+    ``np.unique(..., axis=0)`` on rows.  Exact for up to 2,097,151 nodes.
+    """
+    key = np.sort(np.asarray(faces, dtype=np.int64), axis=1)
+    if key.size and key.max() >= 1 << 21:
+        raise ValueError("face_keys supports node indices below 2**21")
+    return (key[:, 0] << 42) | (key[:, 1] << 21) | key[:, 2]
