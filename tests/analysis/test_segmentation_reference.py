@@ -180,3 +180,20 @@ def test_local_connectivity_test_equals_the_global_search(small_bar):
                 assert graph.stays_connected_without(inside, int(tet)) == expected
                 outcomes.add(expected)
     assert outcomes == {True, False}  # both answers were exercised
+
+
+def test_smaller_internal_set_solved_through_a_cached_factorisation(small_bar):
+    """A proposal that lost a few nodes reuses the bigger factorisation: same fit as a fresh one."""
+    points, tets = small_bar
+    frames = _wavy_frames(points, 5, seed=17)
+    target = SegmentationTarget.sequence(frames, np.ones(5))
+    constrained = np.array([0, 7, 19])
+    fitter = make_fitter(points, tets, target, "constraint", constrained)
+    everything = fitter.interior_nodes(np.arange(len(tets) - 6))
+    fitter.system(everything)
+    smaller = everything[[i for i in range(len(everything)) if i not in (3, 10)]]
+    derived = fitter.system(smaller)
+    assert fitter.n_factorisations == 1 and fitter.n_reused == 1 and not derived.direct
+    fresh = make_fitter(points, tets, target, "constraint", constrained).system(smaller)
+    assert fresh.direct
+    np.testing.assert_allclose(derived.fit(frames), fresh.fit(frames), rtol=0, atol=1e-12 * np.abs(frames).max())

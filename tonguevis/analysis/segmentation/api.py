@@ -140,6 +140,7 @@ def segment(
         "fits_computed": fitter.n_computed,
         "fits_asked": fitter.n_evaluations,
         "factorisations": getattr(fitter, "n_factorisations", 0),
+        "solved_through_larger_factorisation": getattr(fitter, "n_reused", 0),
     })
     report(progress, 1, 1, f"{result.n_partitions} partitions, e_G {100 * result.relative_error:.1f} %")
     return result

@@ -47,21 +47,28 @@ SOLVE_THREADS = CORES
 #: Right-hand sides per SuperLU solve call (measured: 4 columns per call beat 1 and 27 on a
 #: 5,000-DOF tongue system by 1.7x and 7x).
 SOLVE_BLOCK = 4
+#: Largest number of internal nodes a cached factorisation may have beyond a new set for
+#: the new set to be solved through it (each costs 3 extra right-hand sides).
+MAX_DROPPED = 8
 
 
 @dataclass
 class InteriorSystem:
     """The factorised problem of one internal node set.
 
-    interior : (i,) sorted internal nodes; around : (a,) sorted nodes coupled
-    to them (the boundary nodes that matter); solve : callable on (3i, c)
-    arrays, or None when nothing is to be solved; k_ia : (3i, 3a) sparse;
-    weights : (i,) lumped volumes of the internal nodes, m³.
+    interior : (i,) sorted internal nodes; mask : (n,) bool of them; around :
+    (a,) sorted nodes coupled to them (the boundary nodes that matter);
+    solve : callable on (3i, c) arrays, or None when nothing is to be solved;
+    direct : whether ``solve`` is a plain factorisation (it can then serve
+    smaller internal sets); k_ia : (3i, 3a) sparse; weights : (i,) lumped
+    volumes of the internal nodes, m³.
     """
 
     interior: np.ndarray
+    mask: np.ndarray
     around: np.ndarray
     solve: object
+    direct: bool
     k_ia: sp.csr_matrix | None
     weights: np.ndarray
 
@@ -71,14 +78,7 @@ class InteriorSystem:
         if self.solve is None:
             return np.zeros((c, len(self.interior), 3))
         y_a = np.transpose(values[:, self.around, :], (1, 2, 0)).reshape(-1, c)
-        rhs = -(self.k_ia @ y_a)
-        # SciPy's SuperLU solves 4 columns at a time ~7x faster per column than 27 at once.
-        blocks = [np.ascontiguousarray(rhs[:, i:i + SOLVE_BLOCK]) for i in range(0, c, SOLVE_BLOCK)]
-        if SOLVE_THREADS > 1 and len(blocks) > 1 and len(self.interior) >= 300:
-            parts = list(worker_pool("tonguevis-solve", SOLVE_THREADS).map(self.solve, blocks))
-        else:
-            parts = [self.solve(block) for block in blocks]
-        x = np.concatenate(parts, axis=1)
+        x = self.solve(-(self.k_ia @ y_a))
         return np.transpose(x.reshape(len(self.interior), 3, c), (2, 0, 1))
 
     def error(self, values: np.ndarray) -> float:
@@ -87,6 +87,52 @@ class InteriorSystem:
             return 0.0
         diff = self.fit(values) - values[:, self.interior, :]
         return float(np.einsum("cpi,cpi,p->", diff, diff, self.weights))
+
+
+def _blocked(solve, threaded: bool):
+    """``solve`` applied 4 columns at a time (SciPy's SuperLU: ~7x faster per column than
+    27 at once), the blocks spread over threads when ``threaded``."""
+
+    def blocked(rhs: np.ndarray) -> np.ndarray:
+        if rhs.ndim == 1:
+            return solve(rhs)
+        blocks = [np.ascontiguousarray(rhs[:, i:i + SOLVE_BLOCK]) for i in range(0, rhs.shape[1], SOLVE_BLOCK)]
+        if threaded and SOLVE_THREADS > 1 and len(blocks) > 1:
+            parts = list(worker_pool("tonguevis-solve", SOLVE_THREADS).map(solve, blocks))
+        else:
+            parts = [solve(block) for block in blocks]
+        return np.concatenate(parts, axis=1)
+
+    return blocked
+
+
+def _principal(parent: InteriorSystem, interior: np.ndarray):
+    """Solve with the principal submatrix of ``parent``'s matrix on ``interior`` ⊂ its nodes.
+
+    A rival often takes a few tets off a proposal's ring, so the proposal's
+    internal set loses a few nodes ``D`` and its matrix is the old one without
+    their rows and columns.  With the old factorisation ``A``:
+    ``z = A⁻¹(b − E λ)``, ``(Eᵀ A⁻¹ E) λ = Eᵀ A⁻¹ b`` pins ``z_D = 0`` and
+    leaves the exact solution on the other DOFs: 3|D| extra columns instead of
+    a new factorisation.
+    """
+    keep = np.searchsorted(parent.interior, interior)
+    dropped = np.setdiff1d(np.arange(len(parent.interior)), keep)
+    keep_dofs, drop_dofs = _dofs(keep), _dofs(dropped)
+    n_old = 3 * len(parent.interior)
+    unit = np.zeros((n_old, len(drop_dofs)))
+    unit[drop_dofs, np.arange(len(drop_dofs))] = 1.0
+    z_unit = parent.solve(unit)
+    capacitance = z_unit[drop_dofs]
+
+    def solve(rhs: np.ndarray) -> np.ndarray:
+        wide = np.zeros((n_old,) + rhs.shape[1:])
+        wide[keep_dofs] = rhs
+        z = parent.solve(wide)
+        multipliers = np.linalg.solve(capacitance, z[drop_dofs])
+        return (z - z_unit @ multipliers)[keep_dofs]
+
+    return solve
 
 
 def _dofs(nodes: np.ndarray) -> np.ndarray:
@@ -137,6 +183,7 @@ class ConstraintFitter(LocalFitter):
         self._systems: OrderedDict[bytes, InteriorSystem] = OrderedDict()
         self._lock = threading.Lock()  # the system cache is shared by the fitting threads
         self.n_factorisations = 0
+        self.n_reused = 0  # systems solved through a larger cached factorisation
 
     def interior_nodes(self, members: np.ndarray) -> np.ndarray:
         """Sorted internal nodes of the set: all their tets inside, not constrained."""
@@ -165,27 +212,48 @@ class ConstraintFitter(LocalFitter):
         coupled = np.zeros(len(self.points), dtype=bool)
         coupled[rows.indices // 3] = True
         around = np.flatnonzero(coupled & ~mask)
-        solve, k_ia = None, None
+        solve, k_ia, direct, parent = None, None, False, None
         if len(interior) and len(around):
-            k_ii = rows[:, _dofs(interior)]
-            k_ii = sp.csc_matrix((k_ii.data, k_ii.indices, k_ii.indptr), shape=k_ii.shape)  # symmetric: CSR = CSC
             k_ia = rows[:, _dofs(around)].tocsr()
-            solve = None
-            if self._pinned(around):
-                try:
-                    solve = _factorise(k_ii).solve
-                except RuntimeError:  # exactly singular: a floating piece the rule did not see
-                    solve = None
-            if solve is None:
-                shift = SHIFT * k_ii.diagonal().mean()
-                solve = _refined(_factorise(k_ii + shift * sp.identity(k_ii.shape[0], format="csc")).solve, k_ii)
-        found = InteriorSystem(interior, around, solve, k_ia, self._lumped[interior])
+            threaded = len(interior) >= 300
+            pinned = self._pinned(around)
+            if pinned:
+                parent = self._parent(mask, len(interior))
+            if parent is not None:
+                solve = _principal(parent, interior)
+            else:
+                k_ii = rows[:, _dofs(interior)]
+                k_ii = sp.csc_matrix((k_ii.data, k_ii.indices, k_ii.indptr), shape=k_ii.shape)  # symmetric
+                if pinned:
+                    try:
+                        solve, direct = _blocked(_factorise(k_ii).solve, threaded), True
+                    except RuntimeError:  # exactly singular: a floating piece the rule did not see
+                        solve = None
+                if solve is None:
+                    shift = SHIFT * k_ii.diagonal().mean()
+                    shifted = _factorise(k_ii + shift * sp.identity(k_ii.shape[0], format="csc"))
+                    solve = _refined(_blocked(shifted.solve, threaded), k_ii)
+        found = InteriorSystem(interior, mask, around, solve, direct, k_ia, self._lumped[interior])
         with self._lock:
-            self.n_factorisations += solve is not None
+            if parent is not None:
+                self.n_reused += 1
+            else:
+                self.n_factorisations += solve is not None
             self._systems[key] = found
             if len(self._systems) > SYSTEM_CACHE:
                 self._systems.popitem(last=False)
         return found
+
+    def _parent(self, mask: np.ndarray, size: int) -> InteriorSystem | None:
+        """A cached plain factorisation whose internal nodes hold ``mask``'s and at most
+        MAX_DROPPED more (see :func:`_principal`)."""
+        with self._lock:
+            cached = list(self._systems.values())
+        for system in reversed(cached):
+            extra = len(system.interior) - size
+            if system.direct and 0 < extra <= MAX_DROPPED and not np.any(mask & ~system.mask):
+                return system
+        return None
 
     def _compute_error(self, members: np.ndarray) -> float:
         interior = self.interior_nodes(members)
