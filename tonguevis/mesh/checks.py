@@ -16,8 +16,6 @@ import logging
 import os
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from tonguevis.errors import MeshError
 from tonguevis.mesh.tetmesh import TET_FACES, face_keys, signed_tet_volumes
@@ -86,6 +84,9 @@ def checked_tets(points: np.ndarray, tets: np.ndarray, path: str | os.PathLike |
 
 def _check_manifold(tets: np.ndarray, path, id_offset: int) -> None:
     """Raise MeshError unless the boundary of positive ``tets`` is a closed 2-manifold."""
+    import scipy.sparse as sp  # lazy: keeps `import tonguevis` light
+    from scipy.sparse.csgraph import connected_components
+
     faces = tets[:, TET_FACES].reshape(-1, 3)
     _, inverse, counts = np.unique(face_keys(faces), return_inverse=True, return_counts=True)
     face_count = counts[inverse.ravel()]

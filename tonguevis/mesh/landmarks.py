@@ -32,7 +32,6 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from tonguevis.errors import MeshError
 from tonguevis.mesh.surfaces import dorsal_surface_nodes, inferior_surface_nodes, surface_heights
@@ -158,6 +157,8 @@ def midline_y(mesh: TetMesh) -> float:
     width of it, keep the one whose mirror image of the boundary nodes lies
     closest (median nearest-neighbour distance) to the boundary itself.
     """
+    from scipy.spatial import cKDTree  # lazy: keeps `import tonguevis` light
+
     centroids = mesh.points[mesh.tets].mean(axis=1)
     volumes = np.abs(mesh.tet_volumes())
     y_centroid = float(np.average(centroids[:, 1], weights=volumes))
