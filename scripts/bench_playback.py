@@ -48,6 +48,7 @@ def main() -> int:
     parser.add_argument("--modes", type=int, default=100)
     parser.add_argument("--seconds", type=float, default=5.0, help="playback time measured")
     parser.add_argument("--profile", action="store_true", help="print where playback spends its time")
+    parser.add_argument("--no-context", action="store_true", help="without the transparent jaw and palate")
     args = parser.parse_args()
 
     from PySide6.QtCore import QSettings
@@ -57,6 +58,10 @@ def main() -> int:
     from tonguevis.gui.window import MainWindow
 
     app = application()
+    if args.no_context:
+        import tonguevis.gui.view3d as view3d
+
+        view3d.context_surfaces = lambda: {}
     try:
         model, label, landmarks = load_model(args.model)
     except Exception as exc:  # e.g. meshes/ not built yet
@@ -67,16 +72,21 @@ def main() -> int:
     window.model, window.landmarks = model, landmarks
     window.resize(1500, 950)
     window.show()
+    from PySide6.QtCore import QEventLoop, QTimer
+
+    # Wait in local event loops: app.quit() would close pyvistaqt's plotter (aboutToQuit),
+    # and a busy processEvents() loop leaks references to None in PySide6.
+    loop = QEventLoop()
     done = {}
 
     def finished(ok: bool) -> None:
         done["ok"] = ok
-        app.quit()
+        loop.quit()
 
     window.simulation_finished.connect(finished)
     t0 = time.perf_counter()
     window.open_recording(args.recording)
-    app.exec()  # until the simulation finishes
+    loop.exec()  # until the simulation finishes
     prep = time.perf_counter() - t0
     if not done.get("ok"):
         print("simulation failed:", window.statusBar().currentMessage())
@@ -108,7 +118,6 @@ def main() -> int:
     render_window.AddObserver("EndEvent", render_end)
     state = window.state
     state.set_time(state.start + 5.0)
-    app.processEvents()
     start_frame = window.view3d.renders
     t0 = time.perf_counter()
     timings.update(render=0.0, renders=0, update=0.0, count=0)
@@ -119,8 +128,9 @@ def main() -> int:
 
         profiler = cProfile.Profile()
         profiler.enable()
-    while time.perf_counter() - t0 < args.seconds and state.playing:
-        app.processEvents()
+    QTimer.singleShot(int(1000 * args.seconds), loop.quit)
+    state.subscribe("playing", lambda e: None if e.value else loop.quit())
+    loop.exec()
     if profiler is not None:
         profiler.disable()
         import pstats
@@ -143,6 +153,7 @@ def main() -> int:
     frame_ms = 1e3 * wall / max(drawn, 1)
     print(f"model: {label}, {model.mesh.n_nodes} nodes, {model.mesh.n_tets} tets, {args.modes} modes")
     print(f"recording: {args.recording.name}, {frames.n_frames} frames; open + simulate + precompute: {prep:.2f} s")
+    print(f"clock: {window.statusBar().currentMessage()}")
     print(f"playback: {drawn} frames drawn in {wall:.2f} s = {drawn / wall:.1f} frames/s ({frame_ms:.1f} ms per frame)")
     print(f"  per frame: buffer update (copy precomputed points/scalars + normals) {1e3 * timings['update'] / n:.2f} ms, "
           f"VTK render of the four views {1e3 * timings['render'] / max(timings['renders'], 1):.1f} ms "

@@ -168,3 +168,50 @@ def test_recent_files_remembered(qtbot, window, tmp_path):
         window._cancel_worker()
         assert window.recent_files()[0] == str(DEMO.resolve())
         assert window.recent_menu.actions()[0].text() == str(DEMO.resolve())
+
+
+def test_half_speed_plays_at_half_speed(qtbot, window):
+    import time
+
+    show_and_simulate(qtbot, window, demo_session())
+    state = window.state
+    state.set_speed(0.5)
+    state.set_time(5.2)
+    started = time.perf_counter()
+    state.set_playing(True)
+    qtbot.waitUntil(lambda: state.time > 5.5, timeout=10000)
+    elapsed = time.perf_counter() - started
+    state.set_playing(False)
+    assert state.time - 5.2 <= 0.5 * elapsed + 0.05  # recording time runs at half the wall clock
+    assert elapsed >= 0.55
+
+
+def test_audio_device_drives_the_clock(qtbot, window):
+    from tonguevis.gui.playback import AudioClock, audio_output_available
+
+    if not audio_output_available():
+        pytest.skip("no audio output device (the wall-clock fallback is tested instead)")
+    show_and_simulate(qtbot, window, demo_session())
+    state = window.state
+    state.set_time(5.2)
+    state.set_playing(True)
+    qtbot.waitUntil(lambda: state.time > 5.6, timeout=10000)
+    clock = window.playback.clock
+    assert isinstance(clock, AudioClock)
+    assert "audio clock" in window.statusBar().currentMessage()
+    # The time shown is the sink's position: consumed audio, mapped to recording time.
+    position = clock._start + clock.sink.processedUSecs() * 1e-6
+    assert abs(state.time - position) < 0.1
+    state.set_playing(False)
+
+
+def test_jaw_and_palate_shown_and_hidden(qtbot, window):
+    show_and_simulate(qtbot, window, demo_session())
+    scene = window.view3d.scene
+    from tonguevis.gui.view3d import context_surfaces
+
+    if not context_surfaces():
+        pytest.skip("no jaw/palate surfaces in meshes/")
+    assert scene.context_actors and all(a.GetVisibility() for a in scene.context_actors)
+    window.context_action.setChecked(False)
+    assert not any(a.GetVisibility() for a in scene.context_actors)

@@ -111,6 +111,7 @@ class PlaybackController(QObject):
         self.state = state
         self.audio = None
         self.clock = None
+        self._audio_clock = None  # made once per recording: opening the device takes ~1 s
         self.timer = QTimer(self)
         self.timer.setTimerType(Qt.TimerType.PreciseTimer)
         self.timer.setInterval(TICK_MS)
@@ -124,6 +125,9 @@ class PlaybackController(QObject):
     def set_audio(self, audio) -> None:
         self.state.set_playing(False)
         self.audio = audio if audio is not None and len(audio.samples) else None
+        if self._audio_clock is not None:
+            self._audio_clock.stop()
+        self._audio_clock = None
 
     def _make_clock(self):
         if self.audio is None:
@@ -131,7 +135,9 @@ class PlaybackController(QObject):
         if not audio_output_available():
             return WallClock(), "no audio output device: playing silently on the wall clock"
         try:
-            return AudioClock(self.audio, self), "playing with sound (audio clock)"
+            if self._audio_clock is None:
+                self._audio_clock = AudioClock(self.audio, self)
+            return self._audio_clock, "playing with sound (audio clock)"
         except (RuntimeError, ImportError) as exc:
             return WallClock(), f"audio unavailable ({exc}): playing silently on the wall clock"
 

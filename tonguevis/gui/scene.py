@@ -25,6 +25,7 @@ CAMERAS = {
     FRONT: ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
     LATERAL: ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)),
 }
+CONTEXT_VIEWS = (MAIN, LATERAL)
 TONGUE_COLOUR = "#d98a8a"
 SENSOR_COLOUR = "#2ecc71"
 TARGET_COLOUR = "#ffd23f"
@@ -70,6 +71,8 @@ class TongueScene:
         self.targets: pv.PolyData | None = None
         self.residuals: pv.PolyData | None = None
         self.surface_actors: list = []
+        self.context_actors: list = []
+        self.context_visible = True
         self.scalar_bar = None
         self.time_text = None
         self._normals: VertexNormals | None = None
@@ -77,6 +80,11 @@ class TongueScene:
         self._clim: dict[str, tuple[float, float]] = {}
         self._titles: dict[str, str] = {}
         plotter.set_background(BACKGROUND[0], top=BACKGROUND[1])
+        for renderer in plotter.renderers:
+            # Plain alpha blending for the jaw and palate: VTK's order-independent
+            # transparency costs extra full-screen passes (3x the frame under software GL),
+            # and two convex-ish context shells need no exact ordering.
+            renderer.SetUseOIT(False)
 
     def _each_view(self):
         for index in (MAIN, TOP, FRONT, LATERAL):
@@ -112,6 +120,7 @@ class TongueScene:
         s = max(n_sensors, 1)
         self.residuals.lines = np.column_stack([np.full(s, 2), np.arange(s), np.arange(s) + s]).ravel()
         self.surface_actors = []
+        self.context_actors = []
         for index in self._each_view():
             main = index == MAIN
             actor = plotter.add_mesh(
@@ -127,9 +136,13 @@ class TongueScene:
                                  render_points_as_spheres=True, name=f"targets{index}", reset_camera=False)
                 plotter.add_mesh(self.residuals, color=TARGET_COLOUR, line_width=2,
                                  name=f"residuals{index}", reset_camera=False)
-            for name, surface in (context or {}).items():
-                plotter.add_mesh(surface, color=CONTEXT_COLOUR, opacity=0.12 if main else 0.1,
-                                 name=f"{name}{index}", reset_camera=False, show_scalar_bar=False)
+            # Transparent context costs a second render pass per view (most of a frame under
+            # software OpenGL): draw it where it tells most, the main and the lateral views.
+            for name, surface in (context or {}).items() if index in CONTEXT_VIEWS else ():
+                context_actor = plotter.add_mesh(surface, color=CONTEXT_COLOUR, opacity=0.12 if main else 0.1,
+                                                 name=f"{name}{index}", reset_camera=False, show_scalar_bar=False)
+                context_actor.SetVisibility(self.context_visible)
+                self.context_actors.append(context_actor)
             if main:
                 self.scalar_bar = plotter.add_scalar_bar(
                     title="", mapper=actor.mapper, vertical=True, n_labels=4, fmt="%.3g",
@@ -183,6 +196,12 @@ class TongueScene:
         if self.scalar_bar is not None:
             self.scalar_bar.SetVisibility(not plain)
             self.scalar_bar.SetTitle(self._titles.get(mode, ""))
+
+    def set_context_visible(self, visible: bool) -> None:
+        """Show or hide the jaw and palate (hiding them triples the frame rate under software GL)."""
+        self.context_visible = bool(visible)
+        for actor in self.context_actors:
+            actor.SetVisibility(self.context_visible)
 
     @property
     def mode(self) -> str:

@@ -149,6 +149,10 @@ class View3D(QWidget):
         self.frame = -1
         self.show_time(self.state.time)
 
+    def set_context_visible(self, visible: bool) -> None:
+        self.scene.set_context_visible(visible)
+        self.plotter.interactor.update()
+
     def reset_camera(self) -> None:
         self.scene.reset_cameras()
         self.plotter.render()

@@ -127,6 +127,11 @@ class MainWindow(QMainWindow):
         self._action(file_menu, "&Quit", self.close, QKeySequence.StandardKey.Quit)
         view = bar.addMenu("&View")
         self._action(view, "&Reset camera", self.view3d.reset_camera, "R")
+        context = self._action(view, "Show &jaw and palate", lambda: None, "J")
+        context.setCheckable(True)
+        context.setChecked(True)
+        context.toggled.connect(self.view3d.set_context_visible)
+        self.context_action = context
         group = QActionGroup(self)
         for mode in COLOR_MODES:
             action = self._action(view, f"Colour by {COLOUR_LABELS[mode]}", lambda m=mode: self.state.set_color(m))
