@@ -197,7 +197,7 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
         def newmark(lam: wp.array(dtype=f64), a_inv: wp.array(dtype=f64), damp: wp.array(dtype=f64),
                     phi: wp.array2d(dtype=f64), ws: wp.array2d(dtype=f64), qm: wp.array2d(dtype=f64),
                     pm: wp.array2d(dtype=f64), targets: wp.array3d(dtype=f64),
-                    h: f64, bn: f64, tol: f64, max_iter: int, max_rot: f64, warping: int,
+                    h: f64, bn: f64, tol: f64, stat_rtol: f64, max_iter: int, max_rot: f64, warping: int,
                     out_q: wp.array3d(dtype=f64), out_qd: wp.array3d(dtype=f64), out_qdd: wp.array3d(dtype=f64),
                     out_res: wp.array3d(dtype=f64), out_conv: wp.array2d(dtype=int), out_iter: wp.array2d(dtype=int),
                     vecs: wp.array3d(dtype=f64), svec: wp.array3d(dtype=f64), small: wp.array4d(dtype=f64),
@@ -279,6 +279,11 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                     if warping != 0:
                         merit = evaluate(t, _V_TRIAL, _W_MULT, _W_RCON, 0, n_act, warping, bn, act, phi, ws, a_inv,
                                          vecs, svec, rotb, dgb, wb)
+                        stat_scale = f64(0.0)
+                        for j in range(m):
+                            stat_scale = wp.max(stat_scale, wp.abs(vecs[t, _V_TRIAL, j] / a_inv[j]))
+                            stat_scale = wp.max(stat_scale, wp.abs(vecs[t, _V_B, j]))
+                        tol_stat = tol + stat_rtol * bn * stat_scale
                         conv = int(0)
                         done = int(0)
                         it = int(1)
@@ -286,9 +291,10 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                             worst = f64(0.0)
                             for k in range(n_c):
                                 worst = wp.max(worst, wp.abs(svec[t, _W_RCON, k]))
+                            worst_stat = f64(0.0)
                             for j in range(m):
-                                worst = wp.max(worst, wp.abs(bn * vecs[t, _V_RSTAT, j]))
-                            if worst < tol:
+                                worst_stat = wp.max(worst_stat, wp.abs(bn * vecs[t, _V_RSTAT, j]))
+                            if worst < tol and worst_stat < tol_stat:
                                 conv = int(1)
                                 done = int(1)
                             elif it > max_iter:
@@ -456,7 +462,7 @@ def integrate_warp(
     targets : (F, S, 3) for one trial, or (T, F, S, 3) for T trials integrated
     in one launch (then a list of results is returned).
     """
-    from tonguevis.sim.newmark import MAX_ROTATION_STEP
+    from tonguevis.sim.newmark import MAX_ROTATION_STEP, STATIONARITY_RTOL
 
     _build()
     wp = _wp
@@ -493,7 +499,8 @@ def integrate_warp(
         inputs=[
             arr(lam), arr(a_inv), arr(damp), arr(phi2), arr(w_s.reshape(n_c, m)), arr(q_full), arr(p_full),
             arr(tg.reshape(n_trials, n_frames, n_c)),
-            h, bn, float(settings.tolerance), int(settings.max_iterations), float(MAX_ROTATION_STEP),
+            h, bn, float(settings.tolerance), float(STATIONARITY_RTOL), int(settings.max_iterations),
+            float(MAX_ROTATION_STEP),
             int(bool(settings.warping)),
             out_q, out_qd, out_qdd, out_res, out_conv, out_iter, vecs, svec, small, rotb, dgb, wb, act,
         ],
