@@ -19,6 +19,7 @@ logger = logging.getLogger("tonguevis")
 
 TONGUE_SENSORS = ("TT", "TB", "TD", "TBK", "TL", "TR")
 LATERAL_SENSORS = ("TL", "TR")
+VOLUME_WARNING = 0.05  # relative volume change past which the motion is flagged as implausible
 
 
 @dataclass
@@ -152,6 +153,11 @@ def simulate(
         logger.warning(
             "%d of %d frames did not converge (first at t = %.2f s)", len(bad), len(result.q),
             recording.times[bad[0]])
+    worst_volume = float(np.abs(volume_change).max()) if len(volume_change) else 0.0
+    if worst_volume > VOLUME_WARNING:
+        logger.warning(
+            "the tongue changes volume by up to %.1f %% to follow the sensors: too few modes (%d) or sensor "
+            "nodes far from the speaker's layout make it bend unnaturally", 100 * worst_volume, modes)
     rest_nodes = model.mesh.points[prep.nodes]
     metadata = {
         "recording": dict(recording.metadata),
