@@ -94,3 +94,21 @@ def test_recording_on_uniform_grid_fills_the_real_gap():
     assert regular.n_samples == rec.n_samples + 1
     assert np.all(np.abs(np.diff(regular.times) - 0.01) < 1e-9)
     assert regular.valid_fraction("S0") == pytest.approx(100 / 101)
+
+
+def test_atomic_write_gives_normal_permissions_and_keeps_the_old_file_on_failure(tmp_path):
+    import os
+
+    import pytest
+
+    from tonguevis._files import atomic_write, atomic_write_text
+
+    path = tmp_path / "out.csv"
+    atomic_write_text(path, "a\n")
+    mask = os.umask(0)
+    os.umask(mask)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~mask
+    with pytest.raises(RuntimeError):
+        atomic_write(path, lambda tmp: (tmp.write_text("half"), (_ for _ in ()).throw(RuntimeError("disk full"))))
+    assert path.read_text() == "a\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.csv"]

@@ -11,7 +11,6 @@ imageio-ffmpeg.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -85,16 +84,9 @@ def morph_bounds(morph: Morph, ts) -> tuple[np.ndarray, float]:
 
 def _atomic(path: Path, write) -> None:
     """``write(tmp)`` into a temporary file with the same suffix (ffmpeg and VTK pick formats by it), then rename."""
-    import tempfile
+    from tonguevis._files import atomic_write
 
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent if str(path.parent) else ".")
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    atomic_write(path, lambda tmp: write(str(tmp)))
 
 
 def render_png(morph: Morph, path, steps=(0.0, 0.25, 0.5, 0.75, 1.0), view: str = "oblique",

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import logging
 import os
-import tempfile
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from tonguevis.errors import RecordingError
+
+from tonguevis._files import atomic_write  # noqa: F401  (re-exported for the readers)
 
 log = logging.getLogger("tonguevis")
 
@@ -172,22 +173,6 @@ def parse_number_table(
                     f"line {first_line + r}, column {c + 1}: {what} {cell[:40]!r} is not a number", path
                 ) from None
     raise RecordingError("could not parse the numbers", path)  # pragma: no cover
-
-
-def atomic_write(path: str | os.PathLike, write: Callable[[Path], None]) -> None:
-    """Call ``write(tmp_path)`` then move the finished file onto ``path`` (never a half file)."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
 
 
 def sensor_names_in_order(sensors: dict) -> list[str]:

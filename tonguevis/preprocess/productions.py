@@ -14,10 +14,10 @@ from __future__ import annotations
 import csv
 import io
 import logging
-import os
-import tempfile
 from dataclasses import astuple, dataclass, field, fields
 from pathlib import Path
+
+from tonguevis._files import atomic_write_text
 
 import numpy as np
 from scipy.signal import find_peaks, peak_prominences
@@ -99,16 +99,7 @@ class ProductionTable:
         writer.writerow(self.columns)
         for p in self.productions:
             writer.writerow([p.train, p.index] + [f"{t:.4f}" for t in astuple(p)[2:]])
-        path = Path(path)
-        handle, temp = tempfile.mkstemp(dir=path.parent or ".", prefix=f".{path.name}.", suffix=".tmp")
-        try:
-            with os.fdopen(handle, "w", encoding="utf-8", newline="") as out:
-                out.write(buffer.getvalue())
-            os.replace(temp, path)
-        except BaseException:
-            if os.path.exists(temp):
-                os.unlink(temp)
-            raise
+        atomic_write_text(Path(path), buffer.getvalue())
 
 
 def _zero_crossing(times: np.ndarray, velocity: np.ndarray, near: int, falling: bool) -> float:

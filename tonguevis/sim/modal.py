@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import logging
-import os
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from tonguevis._files import atomic_write
 from tonguevis._progress import ProgressCallback, report
 from tonguevis.errors import ModelError
 from tonguevis.sim.material import Material
@@ -154,9 +153,8 @@ def save_basis(basis: ModalBasis, path: Path) -> None:
     """Write the basis as ``.npz`` atomically (temporary file, then rename)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
-    os.close(fd)
-    try:
+
+    def write(tmp):
         with open(tmp, "wb") as fh:
             np.savez(
                 fh,
@@ -166,10 +164,8 @@ def save_basis(basis: ModalBasis, path: Path) -> None:
                 key=np.array(basis.key),
                 version=np.array(CACHE_VERSION),
             )
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+
+    atomic_write(path, write)
 
 
 def load_basis(path: Path, key: str | None = None) -> ModalBasis | None:

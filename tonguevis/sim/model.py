@@ -6,7 +6,7 @@ import logging
 import os
 import time
 from functools import cached_property
-from pathlib import Path
+
 from typing import Any
 
 import numpy as np

@@ -80,9 +80,9 @@ class Motion:
         solved again, deterministically).
         """
         import json
-        import os
-        import tempfile
         from pathlib import Path
+
+        from tonguevis._files import atomic_write
 
         path = Path(path)
         model = self.model
@@ -95,9 +95,7 @@ class Motion:
             "format": "tonguevis-motion",
             "version": 1,
         }
-        fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=".tmp")
-        os.close(fd)
-        try:
+        def write(tmp):
             with open(tmp, "wb") as fh:
                 np.savez_compressed(
                     fh,
@@ -114,10 +112,8 @@ class Motion:
                     anchors=model.anchors,
                     meta=np.array(json.dumps(meta, default=_json_default)),
                 )
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.remove(tmp)
+
+        atomic_write(path, write)
 
     @classmethod
     def load(cls, path) -> "Motion":
@@ -150,18 +146,17 @@ class Motion:
             converged=arrays["converged"].astype(bool), metadata=meta["metadata"],
         )
 
-    def to_vtk_series(self, folder, frames=None, progress=None) -> "Path":
+    def to_vtk_series(self, folder, frames=None, progress=None):
         """Write ``motion.pvd`` + one ``.vtu`` per frame (ParaView); returns the .pvd path.
 
         Point data: displacement (m) and its magnitude; field time = the frame's time (s).
         """
-        import os
-        import tempfile
         from pathlib import Path
         from xml.sax.saxutils import quoteattr
 
         import meshio
 
+        from tonguevis._files import atomic_write_text
         from tonguevis._progress import report
 
         folder = Path(folder)
@@ -187,10 +182,7 @@ class Motion:
             + "\n".join(entries)
             + "\n  </Collection>\n</VTKFile>\n"
         )
-        fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, pvd)
+        atomic_write_text(pvd, text)
         return pvd
 
 
