@@ -215,3 +215,40 @@ def test_jaw_and_palate_shown_and_hidden(qtbot, window):
     assert scene.context_actors and all(a.GetVisibility() for a in scene.context_actors)
     window.context_action.setChecked(False)
     assert not any(a.GetVisibility() for a in scene.context_actors)
+
+
+def test_stalled_audio_clock_falls_back_to_the_wall_clock(qtbot, monkeypatch):
+    from PySide6.QtCore import QObject
+
+    import tonguevis.gui.playback as playback
+    from tonguevis.appstate import AppState
+
+    class StuckAudio:
+        kind = "audio"
+
+        def start(self, t0, t1, speed):
+            self.t0 = t0
+
+        def time(self):
+            return self.t0  # a device that never consumes a sample
+
+        def exhausted(self):
+            return False
+
+        def stop(self):
+            pass
+
+    monkeypatch.setattr(playback, "STARTUP_S", 0.2)
+    parent = QObject()
+    state = AppState(0.0, 10.0, 0.01)
+    controller = playback.PlaybackController(state, parent)
+    monkeypatch.setattr(controller, "_make_clock", lambda: (StuckAudio(), "playing with sound (audio clock)"))
+    messages = []
+    controller.status.connect(messages.append)
+    state.set_time(1.0)
+    state.set_playing(True)
+    qtbot.waitUntil(lambda: state.time > 1.2, timeout=5000)
+    state.set_playing(False)
+    assert isinstance(controller.clock, playback.WallClock)
+    assert any("stalled" in m for m in messages)
+    controller.shutdown()

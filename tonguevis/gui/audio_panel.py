@@ -44,7 +44,7 @@ class AudioPlot(TimePlot):
             peak = float(np.max(np.abs(samples))) or 1.0
             self.wave_ax.set_ylim(-peak * 1.05, peak * 1.05)
             # Spectrogram: 25 ms windows; cheap even for minutes of 44.1 kHz audio.
-            nperseg = int(2 ** np.ceil(np.log2(0.025 * audio.rate)))
+            nperseg = int(2 ** np.floor(np.log2(0.025 * audio.rate)))  # ≤ 25 ms: formants and bursts show
             f, st, power = spectrogram(samples, fs=audio.rate, nperseg=nperseg, noverlap=nperseg // 2)
             keep = f <= min(SPECTROGRAM_MAX_HZ, audio.rate / 2)
             db = 10 * np.log10(power[keep] + 1e-12)

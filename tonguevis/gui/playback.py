@@ -19,6 +19,13 @@ from tonguevis.appstate import AppState, Event
 
 log = logging.getLogger("tonguevis")
 TICK_MS = 15
+PAD_S = 0.3
+#: An audio clock that has not moved for this long (device stalled, e.g. a virtual
+#: sink under load) is replaced by the wall clock so the picture never freezes.
+STALL_S = 0.6
+#: Before its first sample plays, a device may take longer (stream set-up): the picture
+#: waits for the sound that long.
+STARTUP_S = 2.0
 
 
 class WallClock:
@@ -36,6 +43,9 @@ class WallClock:
 
     def time(self) -> float:
         return self._start + self._timer.nsecsElapsed() * 1e-9 * self._speed
+
+    def exhausted(self) -> bool:
+        return False
 
     def stop(self) -> None:
         pass
@@ -85,12 +95,21 @@ class AudioClock:
     def start(self, t0: float, t1: float, speed: float) -> None:
         self.stop()
         self._start, self._speed = t0, speed
-        self.buffer.setData(QByteArray(pcm16(self.audio.samples, self.rate, t0, t1, self.audio.offset, speed)))
+        # Trailing silence keeps the sink (and so its clock) running past the slice's end,
+        # so the end is reached by time, not by a sink that stopped consuming.
+        pcm = pcm16(self.audio.samples, self.rate, t0, t1, self.audio.offset, speed)
+        self.buffer.setData(QByteArray(pcm + bytes(2 * int(PAD_S * self.rate))))
         self.buffer.open(QIODevice.OpenModeFlag.ReadOnly)
         self.sink.start(self.buffer)
 
     def time(self) -> float:
         return self._start + self.sink.processedUSecs() * 1e-6 * self._speed
+
+    def exhausted(self) -> bool:
+        """True once the sink has played all it was given (its clock then stops)."""
+        from PySide6.QtMultimedia import QAudio
+
+        return self.sink.state() == QAudio.State.IdleState
 
     def stop(self) -> None:
         self.sink.stop()
@@ -117,6 +136,9 @@ class PlaybackController(QObject):
         self.timer.setInterval(TICK_MS)
         self.timer.timeout.connect(self.tick)
         self.ticks = 0
+        self._last_clock_time = 0.0
+        self._advanced = False
+        self._last_advance = QElapsedTimer()
         state.subscribe("playing", self._on_playing)
         state.subscribe("speed", self._restart_if_playing)
         state.subscribe("loop", self._restart_if_playing)
@@ -158,7 +180,26 @@ class PlaybackController(QObject):
             self.clock.stop()
         self.clock, message = self._make_clock()
         self.clock.start(self.state.time, self.state.playback_bounds()[1], self.state.speed)
+        self._last_clock_time = self.clock.time()
+        self._advanced = False
+        self._last_advance.start()
         self.status.emit(message)
+
+    def _check_stall(self, t: float) -> float:
+        """Switch to the wall clock if the audio clock stopped advancing; returns the time to show."""
+        if t != self._last_clock_time:
+            self._advanced = True
+            self._last_clock_time = t
+            self._last_advance.start()
+            return t
+        patience = STARTUP_S if not self._advanced else STALL_S
+        if self.clock.kind == "audio" and self._last_advance.elapsed() > 1000 * patience:
+            self.clock.stop()
+            self.clock = WallClock()
+            self.clock.start(self.state.time, self.state.playback_bounds()[1], self.state.speed)
+            self.status.emit("the audio device stalled: playing silently on the wall clock")
+            return self.clock.time()
+        return t
 
     def _restart_if_playing(self, _event: Event) -> None:
         if self.state.playing:
@@ -174,8 +215,10 @@ class PlaybackController(QObject):
             return
         self.ticks += 1
         start, end = self.state.playback_bounds()
-        t = self.clock.time()
-        if t >= end:
+        t = self._check_stall(self.clock.time())
+        # The audio slice ends at `end` to within a sample, and an emptied sink stops its
+        # clock: half a frame early, or an idle sink, counts as the end.
+        if t >= end - 0.5 * self.state.frame_period or self.clock.exhausted():
             if self.state.loop is not None:
                 self.state.set_time(start, source=self)
                 self._start_clock()

@@ -14,9 +14,9 @@ from tonguevis.appstate import AppState
 from tonguevis.gui.session import SIGNAL_KINDS, Session
 from tonguevis.gui.timeplot import TimePlot
 
-SENSOR_COLOURS = ["#c0392b", "#2980b9", "#27ae60", "#8e44ad", "#e67e22", "#16a085", "#2c3e50", "#7f8c8d"]
+SENSOR_COLOURS = ["#b8860b", "#ff69b4", "#6b8e23", "#4682b4", "#a0522d", "#2c3e50", "#7f8c8d", "#9370db"]
 #: Fixed colours of the canonical sensors, so a sensor keeps its colour across recordings.
-NAMED_COLOURS = {"TT": "#c0392b", "TB": "#e67e22", "TD": "#2980b9", "TBK": "#16a085", "TL": "#27ae60",
+NAMED_COLOURS = {"TT": "#c0392b", "TB": "#e67e22", "TD": "#2980b9", "TBK": "#1abc9c", "TL": "#27ae60",
                  "TR": "#8e44ad", "JAW": "#555555"}
 AXIS_NAMES = ("x (anterior)", "y (left)", "z (up)")
 
