@@ -36,14 +36,30 @@ METHODS = ("model", "linear", "static", "kinematic")
 LABEL = {"model": "model (warped)", "linear": "linear modal", "static": "quasi-static", "kinematic": "kinematic RBF"}
 
 
-def load_model(args, poisson: float | None = None):
-    from tonguevis.sim import Material, TongueModel
+def load_model(args):
+    from tonguevis.sim import TongueModel
 
-    material = Material(poisson=poisson) if poisson is not None else None
     if args.mesh is None:
-        return TongueModel.default(material)
+        return TongueModel.default()
     options = {"axes": args.axes} if args.axes else {}
-    return TongueModel.from_mesh(args.mesh, material=material, **options)
+    return TongueModel.from_mesh(args.mesh, **options)
+
+
+def with_poisson(model, poisson: float):
+    """The same mesh and landmarks with another Poisson's ratio (never re-read: the files could change mid-run)."""
+    from dataclasses import replace
+
+    from tonguevis.sim import TongueModel
+
+    return TongueModel(model.mesh, model.landmarks, replace(model.material, poisson=poisson))
+
+
+SENSITIVITY = (("100 modes, ν = 0.49", 100, None), ("40 modes", 40, None), ("200 modes", 200, None),
+               ("100 modes, ν = 0.45", 100, 0.45))
+
+
+def tag_of(label: str) -> str:
+    return label.replace(" ", "").replace(",", "-")
 
 
 def run_one(path: Path, sensor_map, model, modes: int, landmarks: str, json_dir: Path | None, tag: str):
@@ -56,6 +72,7 @@ def run_one(path: Path, sensor_map, model, modes: int, landmarks: str, json_dir:
     doc = result.as_dict()
     doc["recording"]["file"] = path.name  # no local paths in the report
     doc["elapsed_s"] = time.perf_counter() - t0
+    doc["run"] = {"recording": path.stem, "tag": tag, "data": "demo" if path.parent == REPO / "data" else "real"}
     if json_dir is not None:
         json_dir.mkdir(parents=True, exist_ok=True)
         (json_dir / f"{path.stem}-{landmarks}-{tag}.json").write_text(json.dumps(doc, indent=1))
@@ -168,11 +185,13 @@ def conclusions(groups, sensitivity) -> list[str]:
                 km = np.mean([s["kinematic_rmse_mm"] for *_, s in part])
                 out.append(f"  Held-out sensors {label}: model {fmt(mm)} mm, kinematic {fmt(km)} mm ({len(part)} run{'s' if len(part) > 1 else ''}).")
         d_lin = model - lin
+        verdict = ("modal warping changes the held-out prediction very little at these amplitudes."
+                   if np.abs(d_lin).max() < 0.2 else
+                   "no difference on average, though single runs differ by up to that much."
+                   if abs(d_lin.mean()) < 0.05 else
+                   "warping helps on average." if d_lin.mean() < 0 else "warping does worse on average.")
         out.append(f"  Warped vs linear modal: mean difference {fmt(d_lin.mean(), 3)} mm (largest "
-                   f"{fmt(np.abs(d_lin).max(), 3)} mm); "
-                   + ("modal warping changes the held-out prediction very little at these amplitudes."
-                      if np.abs(d_lin).max() < 0.2 else
-                      ("warping helps on average." if d_lin.mean() < 0 else "warping does worse on average.")))
+                   f"{fmt(np.abs(d_lin).max(), 3)} mm); " + verdict)
         d_sta = model - sta
         out.append(f"  Quasi-static vs dynamic: mean |difference| {fmt(np.abs(d_sta).mean(), 3)} mm, largest "
                    f"{fmt(np.abs(d_sta).max(), 3)} mm: "
@@ -227,6 +246,30 @@ def conclusions(groups, sensitivity) -> list[str]:
     return out
 
 
+def from_json(folder: Path):
+    """(groups, sensitivity, elapsed) from the documents of an earlier ``--json-dir`` run."""
+    real_stems = {Path(rel).stem for rel, _ in REAL}
+    groups: dict[tuple[str, str], list] = {}
+    by_tag: dict[str, dict[str, dict]] = {}
+    elapsed = 0.0
+    for path in sorted(folder.glob("*.json")):
+        doc = json.loads(path.read_text())
+        stem = Path(doc["recording"]["file"]).stem
+        tag = path.stem[len(stem) + 1:].split("-", 1)[1]
+        elapsed += doc.get("elapsed_s", 0.0)
+        if tag == "main":
+            data = "real" if stem in real_stems else "demo"
+            groups.setdefault((data, doc["settings"]["landmarks"]), []).append(doc)
+        else:
+            by_tag.setdefault(stem, {})[tag] = doc
+    order = {("real", "speaker"): 0, ("demo", "speaker"): 1, ("real", "rule"): 2, ("demo", "rule"): 3}
+    groups = dict(sorted(groups.items(), key=lambda kv: order[kv[0]]))
+    stems = sorted(by_tag, key=lambda s: (s not in real_stems, s))
+    sensitivity = {stem: [(label, float(scores([by_tag[stem][tag_of(label)]], "model").mean()))
+                          for label, _, _ in SENSITIVITY if tag_of(label) in by_tag[stem]] for stem in stems}
+    return groups, sensitivity, elapsed
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--mesh", type=Path, help="tongue mesh (default: the shipped tongue)")
@@ -235,33 +278,38 @@ def main(argv=None) -> int:
     parser.add_argument("--demo-files", nargs="*", help="demo file stems (default: all spk*_*)")
     parser.add_argument("--no-sensitivity", action="store_true")
     parser.add_argument("--json-dir", type=Path, help="keep each run's JSON here (not in the repository)")
+    parser.add_argument("--from-json", type=Path, metavar="DIR",
+                        help="only rewrite the report from the JSON documents a --json-dir run kept")
     parser.add_argument("--out", type=Path, default=REPO / "docs" / "validation.md")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s: %(message)s")
-    model = load_model(args)
     demo = sorted((REPO / "data").glob("spk*_*.tsv"))
     if args.demo_files:
         demo = [p for p in demo if p.stem in set(args.demo_files)]
     real = [(SHARED / rel, smap) for rel, smap in REAL if (SHARED / rel).exists()]
     groups: dict[tuple[str, str], list] = {}
-    t0 = time.perf_counter()
-    for landmarks in ("speaker", "rule"):
-        groups[("real", landmarks)] = [run_one(p, m, model, args.modes, landmarks, args.json_dir, "main") for p, m in real]
-        groups[("demo", landmarks)] = [run_one(p, None, model, args.modes, landmarks, args.json_dir, "main")
-                                       for p in demo]
     sensitivity: dict[str, list] = {}
-    if not args.no_sensitivity:
-        picks = [(p, m) for p, m in real[:1]] + [(p, None) for p in demo[:1]]
-        for path, smap in picks:
-            rows = []
-            for label, modes, poisson in ((f"{args.modes} modes, ν = 0.49", args.modes, None),
-                                          ("40 modes", 40, None), ("200 modes", 200, None),
-                                          (f"{args.modes} modes, ν = 0.45", args.modes, 0.45)):
-                mdl = model if poisson is None else load_model(args, poisson)
-                doc = run_one(path, smap, mdl, modes, "speaker", args.json_dir, label.replace(" ", "").replace(",", "-"))
-                rows.append((label, float(scores([doc], "model").mean())))
-            sensitivity[path.stem] = rows
-    text = render(args, model, groups, sensitivity, time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    if args.from_json:
+        groups, sensitivity, elapsed = from_json(args.from_json)
+    else:
+        model = load_model(args)
+        for landmarks in ("speaker", "rule"):
+            groups[("real", landmarks)] = [run_one(p, m, model, args.modes, landmarks, args.json_dir, "main")
+                                           for p, m in real]
+            groups[("demo", landmarks)] = [run_one(p, None, model, args.modes, landmarks, args.json_dir, "main")
+                                           for p in demo]
+        if not args.no_sensitivity:
+            picks = [(p, m) for p, m in real[:1]] + [(p, None) for p in demo[:1]]
+            for path, smap in picks:
+                rows = []
+                for label, modes, poisson in SENSITIVITY:
+                    mdl = model if poisson is None else with_poisson(model, poisson)
+                    doc = run_one(path, smap, mdl, modes, "speaker", args.json_dir, tag_of(label))
+                    rows.append((label, float(scores([doc], "model").mean())))
+                sensitivity[path.stem] = rows
+        elapsed = time.perf_counter() - t0
+    text = render(groups, sensitivity, elapsed)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     from tonguevis.analysis.validation_report import atomic_write_text
 
@@ -270,17 +318,19 @@ def main(argv=None) -> int:
     return 0
 
 
-def render(args, model, groups, sensitivity, elapsed) -> str:
+def render(groups, sensitivity, elapsed) -> str:
     from tonguevis.analysis.validation_scores import MIN_AXIS_STD_MM
 
-    mesh = model.mesh
+    first = next(d for docs in groups.values() for d in docs)["settings"]
+    mesh, material = first["mesh"], first["material"]
+    source = "the shipped tongue" if "meshes" in mesh["source"] or mesh["source"] == "default" else Path(mesh["source"]).name
     lines = [
         "# Validation: leave-one-sensor-out",
         "",
         "*Generated by `scripts/validate_all.py`; do not edit by hand. "
-        f"Mesh: {mesh.n_nodes} nodes, {mesh.n_tets} tets ({args.mesh.name if args.mesh else 'the shipped tongue'}); "
-        f"{args.modes} modes; E = {model.material.young:g} Pa, ν = {model.material.poisson:g}; "
-        f"run time {elapsed / 60:.1f} min.*",
+        f"Mesh: {mesh['nodes']} nodes, {mesh['tets']} tets ({source}); {first['modes']} modes; "
+        f"E = {material['young']:g} Pa, ν = {material['poisson']:g}; validation time {elapsed / 60:.1f} min. "
+        "Regenerate with `python scripts/validate_all.py` (needs ../shared/data for the real recording).*",
         "",
         "## What is measured",
         "",
