@@ -34,50 +34,15 @@ PAPER_RIGID_S = 40.7
 PAPER_CONSTRAINT_S = 8.3 * 60
 
 
-def _fallback_landmarks(mesh):
-    """Landmarks when the finder is not available: anchors low at the back (hyoid, 3 nodes)
-    and low in front (jaw, 2 nodes); TT, TD, TL, TR on the dorsum by the placement rule."""
-    from types import SimpleNamespace
-
-    p = mesh.points
-    x, z = p[:, 0], p[:, 2]
-
-    def nearest(q):
-        return int(np.argmin(np.linalg.norm(p - q, axis=1)))
-
-    def top(at_x, at_y):
-        return nearest([at_x, at_y, z[np.abs(x - at_x) < 4e-3].max()])
-
-    front, low, back = x.max(), z.min(), x.min()
-    anchors = [nearest([back + 0.01, y, low]) for y in (0.0, 0.01, -0.01)]
-    anchors += [nearest([front - 0.03, y, low]) for y in (0.005, -0.005)]
-    sensors = {"TT": top(front - 0.01, 0.0), "TD": top(front - 0.03, 0.0),
-               "TL": top(front - 0.02, 0.008), "TR": top(front - 0.02, -0.008)}
-    return SimpleNamespace(anchors=np.array(anchors), sensors=sensors)
-
-
-def load_model():
+def load_model(ours: bool = False):
+    """The ArtiSynth tongue (the paper's mesh) when present and not ``ours``, else our shipped tongue."""
     from tonguevis.sim import TongueModel
 
-    if ARTISYNTH.exists():
-        from tonguevis.mesh.axes import ARTISYNTH_AXES
-        from tonguevis.mesh.readers import read_mesh
+    if ARTISYNTH.exists() and not ours:
+        from tonguevis.mesh import ARTISYNTH_AXES
 
-        mesh = read_mesh(ARTISYNTH, axes=ARTISYNTH_AXES)
-        try:
-            from tonguevis.mesh import find_landmarks
-
-            return TongueModel(mesh, find_landmarks(mesh)), "ArtiSynth tongue3.1"
-        except ImportError:
-            return TongueModel(mesh, _fallback_landmarks(mesh)), "ArtiSynth tongue3.1 (fallback landmarks)"
+        return TongueModel.from_mesh(ARTISYNTH, axes=ARTISYNTH_AXES), "ArtiSynth tongue3.1"
     return TongueModel.default(), "tonguevis default tongue"
-
-
-def landmark_mode() -> str:
-    """'speaker' (snap sensors to the speaker's layout) when the library can, else 'rule'."""
-    import tonguevis.mesh
-
-    return "speaker" if hasattr(tonguevis.mesh, "dorsal_surface_nodes") else "rule"
 
 
 def simulate_file(model, name: str):
@@ -88,7 +53,7 @@ def simulate_file(model, name: str):
 
     path = REPO / "data" / f"{name}.tsv"
     rec = read_recording(path, sensor_map=REPO / "data" / "sensor_map.json")
-    motion = simulate(rec, model, modes=100, landmarks=landmark_mode())
+    motion = simulate(rec, model, modes=100)
     references = reference_names(rec.sensor_names)
     timing = correct_head(rec, references) if len(references) >= 3 else rec
     return motion, find_productions(timing)
@@ -177,6 +142,9 @@ def main(argv=None) -> int:
     parser.add_argument("--png", type=Path, help="render the Fig. 17 setting (rigid and constraint rows)")
     parser.add_argument("--survey-png", type=Path, help="render the survey (a panel per file)")
     parser.add_argument("--bar-png", type=Path, help="render the bent bar of Fig. 8 and stop")
+    parser.add_argument("--ours", action="store_true",
+                        help="use our shipped tongue even when the ArtiSynth mesh is present (pictures for the "
+                             "repository must not show third-party meshes)")
     args = parser.parse_args(argv)
     if args.bar_png:
         render_bar(args.bar_png)
@@ -184,9 +152,9 @@ def main(argv=None) -> int:
 
     from tonguevis.analysis.segmentation import peak_energy_target, production_target, segment
 
-    model, mesh_name = load_model()
+    model, mesh_name = load_model(args.ours)
     print(f"mesh: {mesh_name}: {model.mesh.n_nodes} nodes, {model.mesh.n_tets} tets, anchors "
-          f"{model.anchors.tolist()}; sensor landmarks: {landmark_mode()}")
+          f"{model.anchors.tolist()}; sensor nodes snapped to the speaker's layout")
     motion, productions = simulate_file(model, "spk1_ta")
     target = peak_energy_target(motion)
     seeds = fig17_seeds(model)
