@@ -57,7 +57,7 @@ def main() -> int:
     from tonguevis.gui.scene import TongueScene
     from tonguevis.gui.window import MainWindow
 
-    app = application()
+    application()  # the QApplication must exist before any widget
     if args.no_context:
         import tonguevis.gui.view3d as view3d
 

@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 
-from tonguevis._progress import ProgressCallback, report
 from tonguevis.errors import RecordingError, TonguevisError
 from tonguevis.io.recording import Recording
 

@@ -1,0 +1,76 @@
+"""The main window's menus and its recent-files list (QSettings), as a mixin of MainWindow."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PySide6.QtGui import QAction, QActionGroup, QKeySequence
+
+from tonguevis.appstate import COLOR_MODES
+from tonguevis.gui.view3d import COLOUR_LABELS
+
+MAX_RECENT = 8
+
+
+class MenusMixin:
+    """Needs ``self.state``, ``self.settings``, ``self.view3d``, ``self.transport`` and the
+    window's open/export methods."""
+
+    def _build_menus(self) -> None:
+        bar = self.menuBar()
+        file_menu = bar.addMenu("&File")
+        self._action(file_menu, "&Open recording…", self.ask_open_recording, QKeySequence.StandardKey.Open)
+        self._action(file_menu, "Open &mesh…", self.ask_open_mesh)
+        self.recent_menu = file_menu.addMenu("Open &recent")
+        self._fill_recent()
+        self._action(file_menu, "Open &demo", self.open_demo)
+        file_menu.addSeparator()
+        self._action(file_menu, "Export &screenshot (PNG)…", self.ask_export_screenshot)
+        self._action(file_menu, "Export &video (MP4)…", self.ask_export_video)
+        self._action(file_menu, "Export motion as VTK &series…", self.ask_export_vtk)
+        file_menu.addSeparator()
+        self._action(file_menu, "&Quit", self.close, QKeySequence.StandardKey.Quit)
+        view = bar.addMenu("&View")
+        self._action(view, "&Reset camera", self.view3d.reset_camera, "R")
+        context = self._action(view, "Show &jaw and palate", lambda: None, "J")
+        context.setCheckable(True)
+        context.setChecked(True)
+        context.toggled.connect(self.view3d.set_context_visible)
+        self.context_action = context
+        group = QActionGroup(self)
+        for mode in COLOR_MODES:
+            action = self._action(view, f"Colour by {COLOUR_LABELS[mode]}", lambda m=mode: self.state.set_color(m))
+            action.setCheckable(True)
+            action.setChecked(mode == self.state.color)
+            group.addAction(action)
+        play = bar.addMenu("&Playback")
+        self._action(play, "&Play / pause", lambda: self.state.toggle_playing(self), "Space")
+        self._action(play, "Step &forward", lambda: self.state.step(1, self), "Right")
+        self._action(play, "Step &back", lambda: self.state.step(-1, self), "Left")
+        self._action(play, "&Loop current production", self.transport.loop.toggle, "L")
+
+    def _action(self, menu, text: str, slot, shortcut=None) -> QAction:
+        action = QAction(text, self)
+        if shortcut is not None:
+            action.setShortcut(QKeySequence(shortcut))
+        action.triggered.connect(lambda _checked=False: slot())
+        menu.addAction(action)
+        return action
+
+    def recent_files(self) -> list[str]:
+        value = self.settings.value("recent", [])
+        if isinstance(value, str):
+            value = [value]
+        return [str(v) for v in (value or [])]
+
+    def _remember(self, path: Path) -> None:
+        recent = [str(path)] + [p for p in self.recent_files() if p != str(path)]
+        self.settings.setValue("recent", recent[:MAX_RECENT])
+        self._fill_recent()
+
+    def _fill_recent(self) -> None:
+        self.recent_menu.clear()
+        for path in self.recent_files():
+            self._action(self.recent_menu, path, lambda p=path: self.open_recording(p))
+        self.recent_menu.setEnabled(bool(self.recent_files()))
+
