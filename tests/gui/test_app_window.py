@@ -252,3 +252,17 @@ def test_stalled_audio_clock_falls_back_to_the_wall_clock(qtbot, monkeypatch):
     assert isinstance(controller.clock, playback.WallClock)
     assert any("stalled" in m for m in messages)
     controller.shutdown()
+
+
+def test_feature_tabs_join_the_window_and_get_the_apps_motion(qtbot, window):
+    from tonguevis.gui.tabs import add_feature_tabs
+
+    add_feature_tabs(window)
+    titles = [window.tabs.tabText(i) for i in range(window.tabs.count())]
+    assert titles[:2] == ["Sensors", "Modal q(t)"] and {"Energy", "Morph"} <= set(titles)
+    session = show_and_simulate(qtbot, window, demo_session())
+    assert session.productions
+    # The Energy tab got the curves of the productions this window simulated.
+    curves = window.energy_tab.curves
+    assert curves and {c.recording for c in curves} == {"spk1_ta"}
+    assert "spk1_ta" in window.morph_tab.motions
