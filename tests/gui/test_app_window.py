@@ -266,3 +266,32 @@ def test_feature_tabs_join_the_window_and_get_the_apps_motion(qtbot, window):
     curves = window.energy_tab.curves
     assert curves and {c.recording for c in curves} == {"spk1_ta"}
     assert "spk1_ta" in window.morph_tab.motions
+
+
+def test_drop_a_file_and_open_a_mesh(qtbot, window, tmp_path):
+    from PySide6.QtCore import QMimeData, QPointF, Qt, QUrl
+    from PySide6.QtGui import QDropEvent
+
+    bad = tmp_path / "dropped.tsv"
+    bad.write_text("not a recording\n")
+    mime = QMimeData()
+    mime.setUrls([QUrl.fromLocalFile(str(bad))])
+    event = QDropEvent(QPointF(10, 10), Qt.DropAction.CopyAction, mime, Qt.MouseButton.LeftButton,
+                       Qt.KeyboardModifier.NoModifier)
+    window.dropEvent(event)
+    assert "dropped.tsv" in window.last_dialog.text()
+    window.last_dialog.close()
+    # A mesh (by extension) replaces the model; a broken one gives a dialog naming it.
+    broken = tmp_path / "broken.vtu"
+    broken.write_text("<VTKFile>")
+    model = window.model
+    window.open_path(broken)
+    assert window.model is model and "broken.vtu" in window.last_dialog.text()
+    window.last_dialog.close()
+    from tonguevis.paths import MESH_DIR
+
+    shipped = MESH_DIR / "tongue.vtu"
+    if not shipped.exists():
+        pytest.skip("meshes/tongue.vtu not built")
+    window.open_path(shipped)
+    assert window.model is not model and window.model.mesh.n_nodes > 1000
