@@ -115,12 +115,12 @@ def solve_modes(
     report(progress, 2, 4, f"Lanczos for {m} modes")
     rng = np.random.default_rng(0)  # deterministic start vector: reproducible bases
     v0 = rng.standard_normal(nfree)
-    from threadpoolctl import threadpool_limits
+    from tonguevis._blas import single_threaded_blas
 
     try:
         # ARPACK's vector operations are too small for threaded BLAS: one thread
         # is 3x faster on two cores (and far faster when the machine is busy).
-        with threadpool_limits(limits=1, user_api="blas"):
+        with single_threaded_blas():
             vals, vecs = spla.eigsh(kff, k=m, M=mff, sigma=sigma, which="LM", OPinv=op_inv, v0=v0)
     except spla.ArpackNoConvergence as exc:  # pragma: no cover - rare
         raise ModelError(f"the eigen-solver did not converge for {m} modes: {exc}") from exc

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from contextlib import nullcontext
 import os
 import time
 from functools import cached_property
@@ -12,6 +13,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from tonguevis._blas import single_threaded_blas
 from tonguevis._progress import ProgressCallback
 from tonguevis.errors import ModelError
 from tonguevis.mesh.tetmesh import TetMesh, signed_tet_volumes
@@ -24,6 +26,7 @@ from tonguevis.sim.rotation import rotate_accumulated
 logger = logging.getLogger("tonguevis")
 
 CHUNK_FRAMES = 256  # frames reconstructed per batch: bounds memory at ~30 MB for 1,800 nodes
+SMALL_BATCH = 16  # up to this many frames the products run on one BLAS thread (see tonguevis._blas)
 
 
 class TongueModel:
@@ -165,11 +168,13 @@ class TongueModel:
         out = np.empty((len(q), n, 3), dtype=dtype)
         phi_t, w_t = self._reconstruction_matrices(basis, dtype)
         q = q.astype(dtype, copy=False)
+        small = len(q) <= SMALL_BATCH
         for start in range(0, len(q), CHUNK_FRAMES):
             chunk = q[start : start + CHUNK_FRAMES]
-            lin = (chunk @ phi_t).reshape(len(chunk), n, 3)
+            with single_threaded_blas() if small else nullcontext():
+                lin = (chunk @ phi_t).reshape(len(chunk), n, 3)
+                w = (chunk @ w_t).reshape(len(chunk), n, 3) if warping else None
             if warping:
-                w = (chunk @ w_t).reshape(len(chunk), n, 3)
                 if use_warp:
                     from tonguevis.sim.warp_kernels import rotate_accumulated_warp
 
