@@ -127,7 +127,7 @@ def validate(
     report(progress, 0, 4, "simulating with every sensor")
     motion = simulate(recording, model, modes=modes, warping=True, landmarks=landmarks,
                       rest_interval=interval, tolerance=tolerance)
-    centres = _aligned_rest(recording, prep)
+    centres = prep.aligned_rest
     s = len(names)
     dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
     phi_s = basis.phi[dofs].reshape(s, 3, -1)
@@ -217,26 +217,6 @@ def _node_trajectory(basis, w_full, node: int, q: np.ndarray, warping: bool) -> 
     if not warping:
         return d
     return rotate_accumulated(q @ w_full[rows].T, d)
-
-
-def _aligned_rest(recording: Recording, prep) -> np.ndarray:
-    """(S, 3) rest positions of the prepared sensors in the model frame, metres.
-
-    Mirrors the corrections of ``prepare_targets`` (head when >= 3 references,
-    jaw when present) so that the kinematic baseline uses the same rest pose.
-    """
-    aligned = getattr(prep, "aligned_rest", None)
-    if aligned is not None:
-        return np.asarray(aligned)
-    from tonguevis import preprocess as pp
-
-    rec = recording
-    if sum(n.upper().startswith("REF") for n in rec.sensors) >= 3:
-        rec = pp.correct_head(rec, rest_interval=prep.rest_interval)
-    if "JAW" in rec.sensors:
-        rec = pp.correct_jaw(rec, rest_interval=prep.rest_interval)
-    rest = pp.rest_pose(rec, prep.rest_interval, sensors=prep.names)
-    return prep.transform.apply(np.array([rest[n] for n in prep.names]))
 
 
 def _settings(model, basis, modes, landmarks, quasi_static, tolerance) -> dict[str, Any]:

@@ -31,6 +31,7 @@ class PreparedTargets:
     transform : the similarity fit recording -> model; ignored : sensors without a node;
     rest_interval : (start_s, end_s); midsagittal : whether the fit kept the midsagittal plane;
     alignment_rms : RMS distance (m) between aligned rest sensors and their nodes before snapping.
+    aligned_rest : (S, 3) rest positions of the sensors in the model frame (m).
     """
 
     names: list[str]
@@ -41,6 +42,7 @@ class PreparedTargets:
     rest_interval: tuple[float, float]
     midsagittal: bool
     alignment_rms: float
+    aligned_rest: np.ndarray
 
 
 def prepare_targets(
@@ -101,7 +103,9 @@ def prepare_targets(
     positions = np.stack([rec.sensors[n] for n in names], axis=1)  # (F, S, 3)
     # Displacement from rest, rotated and scaled into the model frame.
     displacement = transform.scale * (positions - source[None]) @ transform.rotation.T
-    return PreparedTargets(names, nodes, displacement, transform, ignored, tuple(rest_interval), midsagittal, alignment_rms)
+    return PreparedTargets(
+        names, nodes, displacement, transform, ignored, tuple(rest_interval), midsagittal, alignment_rms, aligned_rest
+    )
 
 
 def simulate(
