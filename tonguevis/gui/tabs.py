@@ -51,3 +51,6 @@ def add_feature_tabs(window) -> None:
             log.warning("energy curves of %s not added: %s", session.name, exc)
 
     window.simulation_finished.connect(simulated)
+    from tonguevis.gui.segmentation_tab import SegmentationTab
+    window.segmentation_tab = SegmentationTab(window.state)
+    window.register_tab("Segmentation", window.segmentation_tab)

@@ -1,0 +1,84 @@
+"""Drawing data of the Segmentation tab, without Qt: surfaces, colours, the partition table.
+
+The target surface is the boundary of the tet mesh at the target shape; the
+approximation surface is the boundary of the *split* mesh (every partition has
+its own node copies) at the approximated shape, so rigid pieces show their
+gaps and overlaps, while constraint modes, which keep the target on interface
+nodes, close them.  Both carry per-face ``colour`` (partition, the palette of
+:mod:`tonguevis.analysis.segmentation.render`), ``partition`` and
+``error_mm`` (sqrt of the tet's e_E, mm) taken from the tet behind the face,
+and ``tet`` (that tet's id), which is how a clicked face becomes a seed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tonguevis.analysis.segmentation.render import _grid, _partition_colours
+from tonguevis.errors import TonguevisError
+
+ERROR_FIELD = "error_mm"
+#: Targets the tab offers: key -> label.
+TARGETS = {"frame": "current frame", "peak": "peak-energy frame of the production under the cursor",
+           "production": "whole production under the cursor (energy-weighted)"}
+
+
+def production_at(productions, time: float) -> tuple[float, float] | None:
+    """The (start_s, end_s) production containing ``time``, else None."""
+    for start, end in productions or []:
+        if start <= time <= end:
+            return float(start), float(end)
+    return None
+
+
+def make_target(kind: str, motion, productions, time: float):
+    """The SegmentationTarget of ``kind`` (a key of :data:`TARGETS`) at cursor ``time`` (s)."""
+    from tonguevis.analysis.segmentation.targets import frame_target, peak_energy_target, production_target
+
+    if motion is None:
+        raise TonguevisError("no simulated motion yet: open a recording and let it simulate first")
+    if kind == "frame":
+        return frame_target(motion, time=time)
+    if kind not in TARGETS:
+        raise TonguevisError(f"unknown segmentation target {kind!r}")
+    production = production_at(productions, time)
+    if production is None:
+        raise TonguevisError(f"no production under the cursor at {time:.2f} s: move the cursor into a "
+                             "production (the shaded spans of the time line) or segment the current frame")
+    return peak_energy_target(motion, production) if kind == "peak" else production_target(motion, production)
+
+
+def _surface(points: np.ndarray, tets: np.ndarray, result):
+    grid = _grid(points, tets)
+    grid.cell_data["tet"] = np.arange(len(tets), dtype=np.int64)
+    surface = grid.extract_surface(pass_pointid=True, pass_cellid=False, algorithm="dataset_surface")
+    tet = np.asarray(surface.cell_data["tet"], dtype=np.int64)
+    surface.cell_data["partition"] = result.labels[tet]
+    surface.cell_data["colour"] = _partition_colours(result.labels)[tet]
+    surface.cell_data[ERROR_FIELD] = 1000.0 * np.sqrt(result.element_errors[tet])
+    return surface
+
+
+def target_surface(result, frame: int | None = None):
+    """pyvista PolyData: the target shape's boundary (peak frame by default), coloured per face."""
+    return _surface(result.target_points(frame), result.tets, result)
+
+
+def approximation_surface(result, frame: int | None = None):
+    """pyvista PolyData: the approximated shape on the split mesh (its point ``node`` = mesh node)."""
+    points = result.approximated_points(frame)
+    surface = _surface(points, result.split_tets, result)
+    # Which mesh node each drawn point is a copy of (interfaces can be checked against the target).
+    surface.point_data["node"] = result.split_nodes[np.asarray(surface.point_data["vtkOriginalPointIds"])]
+    return surface
+
+
+def partition_table(result) -> str:
+    """A monospaced table: one line per partition (tets, volume, rms error) and the global error."""
+    lines = [f"{'part':>4} {'tets':>5} {'cm³':>7} {'rms mm':>7} {'seed':>5}"]
+    for row in result.partition_rows():
+        lines.append(f"{row['partition']:>4} {row['tets']:>5} {row['volume_cm3']:>7.2f} "
+                     f"{row['rms_error_mm']:>7.3f} {row['seed']:>5}")
+    lines.append(f"{result.mode} modes, {result.n_partitions} partitions")
+    lines.append(f"relative e_G {100 * result.relative_error:.2f} %")
+    return "\n".join(lines)
