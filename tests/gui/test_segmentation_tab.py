@@ -83,12 +83,15 @@ def test_rigid_auto_colours_partitions_and_fills_table(qtbot, tab):
     assert f"{100 * result.relative_error:.2f} %" in lines[-1]
     # Rigid pieces do not meet: some interface node copies are drawn apart.
     assert _copy_spread(approx) > 1e-6
-    # Colour by local error: the scalar is sqrt(e_E) in mm of the tet behind each face.
+    # Colour by local error: the approximation shows sqrt(e_E) in mm of the tet behind each face,
+    # with a scalar bar; the target stays coloured by partition.
     _choose(tab.colour_box, "error")
-    surface = tab.surfaces["target"]
+    surface = tab.surfaces["approximation"]
     tets = np.asarray(surface.cell_data["tet"])
     np.testing.assert_allclose(surface.cell_data["error_mm"], 1000 * np.sqrt(result.element_errors[tets]))
-    assert tab.plotter.scalar_bars
+    assert tab.surfaces["approximation_actor"].mapper.GetArrayName() == "error_mm"
+    assert tab.surfaces["target_actor"].mapper.GetArrayName() == "colour"
+    assert list(tab.plotter.scalar_bars.keys()) == ["local error sqrt(e_E), mm"]
 
 
 def _copy_spread(approx) -> float:
@@ -136,20 +139,28 @@ def test_cancel_leaves_the_tab_usable(qtbot, tab):
 
 def test_picked_seeds_grow_their_partitions(qtbot, tab):
     _choose(tab.mode_box, "rigid")
-    tab.max_partitions.setValue(2)
-    _run(qtbot, tab)
+    # Before any run the left view shows the current frame, so seeds can be picked at once.
     surface = tab.surfaces["target"]
+    motion = tab.session.motion
+    assert surface.n_cells > 0
+    frame = motion.frame_at(tab.state.time)
+    ids = np.asarray(surface.point_data["vtkOriginalPointIds"])
+    np.testing.assert_allclose(surface.points, (motion.model.mesh.points + motion.displacement(frame))[ids],
+                               atol=1e-9)
     faces = [0, surface.n_cells - 1]
     picked = [tab.pick_cell(face) for face in faces]
-    assert picked == [int(surface.cell_data["tet"][f]) for f in faces]
+    assert picked == [int(surface.cell_data["tet"][f]) for f in faces] and picked[0] != picked[1]
     assert tab.seeds == picked and tab.seeding_box.currentData() == "picked"
     assert str(picked[0]) in tab.seeds_label.text()
     assert tab.pick_cell(10 ** 9) is None and len(tab.seeds) == 2
+    # The picked seeds are marked in the left view.
+    assert tab.plotter.renderers[0].actors["picked seeds"].GetMapper().GetInput().GetNumberOfPoints() == 2
     _run(qtbot, tab)
     assert tab.result.n_partitions == 2
     assert sorted(tab.result.seeds.tolist()) == sorted(picked)
+    assert tab.result.labels[picked[0]] != tab.result.labels[picked[1]]
     tab.clear_seeds()
-    assert tab.seeds == []
+    assert tab.seeds == [] and "picked seeds" not in tab.plotter.renderers[0].actors
 
 
 def test_errors_open_a_dialog(qtbot, window):

@@ -19,19 +19,17 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from tonguevis.errors import TonguevisError
-from tonguevis.gui.segmentation_view import (ERROR_FIELD, TARGETS, approximation_surface, make_target,
-                                             partition_table, target_surface)
+from tonguevis.gui.segmentation_view import (TARGETS, draw_frame, draw_result, draw_seed_markers, make_target,
+                                             move_frame, partition_table)
 
 log = logging.getLogger("tonguevis")
-#: Direction from the tongue to the camera: its right side, a little in front and above.
-VIEW = (0.45, -1.0, 0.5)
 
 
 class SegmentationTab(QtWidgets.QWidget):
     """Segment the session's simulated motion; ``set_session`` is called by the window."""
 
     segmented = QtCore.Signal(object)  # the SegmentationResult shown
-    finished = QtCore.Signal(str)  # "ok", "failed" or "cancelled"
+    finished = QtCore.Signal(str)  # "ok", "failed" or "cancelled", once the worker thread has ended
 
     def __init__(self, state=None, parent=None):
         super().__init__(parent)
@@ -45,6 +43,7 @@ class SegmentationTab(QtWidgets.QWidget):
         self.plotter = None
         self.surfaces: dict = {}
         self._pick_observer = None
+        self._outcome = "failed"
 
         self.target_box = QtWidgets.QComboBox()
         for key, label in TARGETS.items():
@@ -78,6 +77,7 @@ class SegmentationTab(QtWidgets.QWidget):
         self.colour_box = QtWidgets.QComboBox()
         self.colour_box.addItem("partition", "partition")
         self.colour_box.addItem("local error sqrt(e_E), mm", "error")
+        self.colour_box.setToolTip("the target (left) is always coloured by partition")
         self.colour_box.currentIndexChanged.connect(lambda _i: self._draw())
         self.table = QtWidgets.QPlainTextEdit()
         self.table.setReadOnly(True)
@@ -86,21 +86,26 @@ class SegmentationTab(QtWidgets.QWidget):
         self.status = QtWidgets.QLabel("Choose a target, a mode and seeds, then press Run.")
         self.status.setWordWrap(True)
 
-        form = QtWidgets.QGridLayout()
-        form.addWidget(QtWidgets.QLabel("target"), 0, 0)
-        form.addWidget(self.target_box, 0, 1, 1, 3)
-        form.addWidget(QtWidgets.QLabel("mode"), 0, 4)
-        form.addWidget(self.mode_box, 0, 5)
-        form.addWidget(QtWidgets.QLabel("seeds"), 1, 0)
-        form.addWidget(self.seeding_box, 1, 1)
-        form.addWidget(self.threshold, 1, 2)
-        form.addWidget(self.max_partitions, 1, 3)
-        form.addWidget(self.pick_button, 1, 4)
-        form.addWidget(self.clear_button, 1, 5)
-        form.addWidget(self.seeds_label, 2, 1, 1, 5)
-        form.addWidget(QtWidgets.QLabel("colour by"), 2, 6)
-        form.addWidget(self.colour_box, 2, 7)
-        form.addWidget(self.run_button, 0, 6, 2, 2)
+        first = QtWidgets.QHBoxLayout()
+        first.addWidget(QtWidgets.QLabel("target"))
+        first.addWidget(self.target_box, 2)
+        first.addWidget(QtWidgets.QLabel("mode"))
+        first.addWidget(self.mode_box, 1)
+        first.addWidget(self.run_button)
+        second = QtWidgets.QHBoxLayout()
+        second.addWidget(QtWidgets.QLabel("seeds"))
+        second.addWidget(self.seeding_box)
+        second.addWidget(self.threshold)
+        second.addWidget(self.max_partitions)
+        second.addWidget(self.pick_button)
+        second.addWidget(self.clear_button)
+        second.addStretch(1)
+        second.addWidget(QtWidgets.QLabel("colour the approximation by"))
+        second.addWidget(self.colour_box)
+        form = QtWidgets.QVBoxLayout()
+        form.addLayout(first)
+        form.addLayout(second)
+        form.addWidget(self.seeds_label)
         self.views_box = QtWidgets.QHBoxLayout()
         self.views_box.addWidget(self.table)
         layout = QtWidgets.QVBoxLayout(self)
@@ -109,10 +114,19 @@ class SegmentationTab(QtWidgets.QWidget):
         layout.addWidget(self.status)
         self.seeding_box.currentIndexChanged.connect(lambda _i: self._update_seeding())
         self._update_seeding()
+        self._unsubscribe = state.subscribe("time", self._on_time) if state is not None else None
+        app = QtWidgets.QApplication.instance()
+        if app is not None:
+            app.aboutToQuit.connect(self.stop_worker)
 
     # ------------------------------------------------------------------ inputs
     def set_session(self, session) -> None:
+        """The window's session (called when a recording opens and when its simulation ends)."""
+        if session is not self.session:
+            self.result = None
+            self.table.clear()
         self.session = session
+        self._draw()
 
     def _update_seeding(self) -> None:
         auto = self.seeding_box.currentData() == "auto"
@@ -120,6 +134,7 @@ class SegmentationTab(QtWidgets.QWidget):
         self.max_partitions.setEnabled(auto)
         shown = ", ".join(str(s) for s in self.seeds) if self.seeds else "none (turn on Pick seeds, click the left view)"
         self.seeds_label.setText(f"picked seed tets: {shown}")
+        self._draw_seeds()
 
     def clear_seeds(self) -> None:
         self.seeds = []
@@ -142,6 +157,7 @@ class SegmentationTab(QtWidgets.QWidget):
         if self._pick_observer is not None:
             plotter.iren.remove_observer(self._pick_observer)
             self._pick_observer = None
+        self._outcome = "failed"
         if on:
             self._pick_observer = plotter.iren.add_observer("LeftButtonPressEvent", self._on_click)
 
@@ -176,6 +192,7 @@ class SegmentationTab(QtWidgets.QWidget):
     def showEvent(self, event) -> None:
         super().showEvent(event)
         self.ensure_views()
+        self._on_time()
 
     def _draw(self) -> None:
         plotter, result = self.plotter, self.result
@@ -183,32 +200,49 @@ class SegmentationTab(QtWidgets.QWidget):
             return
         plotter.clear()
         self.surfaces = {}
-        if result is None:
-            plotter.subplot(0, 0)
-            plotter.add_text("target: run a segmentation", font_size=9, color="black")
-            plotter.render()
-            return
-        by_error = self.colour_box.currentData() == "error"
-        top = float(1000.0 * np.sqrt(result.element_errors.max())) or 1.0
-        summary = (f"{result.mode} modes, {result.n_partitions} partitions, "
-                   f"relative e_G {100 * result.relative_error:.2g} %")
-        panels = [("target", target_surface(result), f"target: {result.metadata.get('description', '')}"),
-                  ("approximation", approximation_surface(result), f"approximation: {summary}")]
-        for column, (name, surface, caption) in enumerate(panels):
-            plotter.subplot(0, column)
-            if by_error:
-                actor = plotter.add_mesh(surface, scalars=ERROR_FIELD, cmap="viridis", clim=(0.0, top),
-                                         show_scalar_bar=column == 1,
-                                         scalar_bar_args={"title": "local error (mm)", "color": "black",
-                                                          "vertical": False, "position_x": 0.2, "width": 0.6})
+        if result is not None:
+            self.surfaces = draw_result(plotter, result, self.colour_box.currentData() == "error")
+        else:
+            motion = None if self.session is None else self.session.motion
+            if motion is None:
+                plotter.subplot(0, 0)
+                plotter.add_text("no simulated motion yet", font_size=9, color="black")
             else:
-                actor = plotter.add_mesh(surface, scalars="colour", rgb=True, lighting=True)
-            plotter.add_text(caption, font_size=9, color="black", position="upper_left")
-            self.surfaces[name], self.surfaces[f"{name}_actor"] = surface, actor
-        plotter.subplot(0, 0)
-        plotter.view_vector(VIEW, viewup=(0.0, 0.0, 1.0))
-        plotter.reset_camera()
-        plotter.camera.zoom(1.3)
+                frame = motion.frame_at(self.current_time())
+                self.surfaces = draw_frame(plotter, self._frame_points(motion, frame), motion.model.mesh.tets,
+                                           float(motion.times[frame]))
+        self._draw_seeds()
+
+    @staticmethod
+    def _frame_points(motion, frame: int) -> np.ndarray:
+        return motion.model.mesh.points + motion.displacement(frame)
+
+    def _on_time(self, _event=None) -> None:
+        """Before any result the left view follows the cursor (points moved in place, one render)."""
+        motion = None if self.session is None else self.session.motion
+        surface = self.surfaces.get("target")
+        if self.result is not None or motion is None or surface is None or not self.isVisible():
+            return
+        frame = motion.frame_at(self.current_time())
+        move_frame(self.plotter, surface, self._frame_points(motion, frame), float(motion.times[frame]))
+        self._draw_seeds()
+
+    def _draw_seeds(self) -> None:
+        """Black dots at the result's seed tets, red ones at the picked seeds (left view)."""
+        plotter, surface = self.plotter, self.surfaces.get("target")
+        if plotter is None or surface is None:
+            return
+        if self.result is not None:
+            points, tets = self.result.target_points(), self.result.tets
+        else:
+            tets = self.session.motion.model.mesh.tets
+            points = np.zeros((int(tets.max()) + 1, 3))
+            points[np.asarray(surface.point_data["vtkOriginalPointIds"])] = surface.points
+        groups = {"picked seeds": (self.seeds, "red")}
+        if self.result is not None:
+            groups["result seeds"] = (self.result.seeds, "black")
+        # Seeds inside the mesh are marked at their tet's centre (drawn over the surface).
+        draw_seed_markers(plotter, points[tets].mean(axis=1), groups)
         plotter.render()
 
     # ------------------------------------------------------------------ running
@@ -270,6 +304,8 @@ class SegmentationTab(QtWidgets.QWidget):
         self.worker.failed.connect(self._on_failed)
         self.worker.cancelled.connect(self._on_cancelled)
         self.worker.finished.connect(dialog.reset)
+        self.worker.finished.connect(self._on_thread_finished)
+        self._outcome = "failed"
         self.run_button.setEnabled(False)
         self.status.setText("segmenting…")
         self.worker.start()
@@ -286,18 +322,21 @@ class SegmentationTab(QtWidgets.QWidget):
 
     def _on_done(self, result) -> None:
         self.run_button.setEnabled(True)
+        self._outcome = "ok"
         self.show_result(result)
-        self.finished.emit("ok")
 
     def _on_failed(self, message: str) -> None:
         self.run_button.setEnabled(True)
         self.show_error("Segmentation failed", message)
-        self.finished.emit("failed")
 
     def _on_cancelled(self) -> None:
         self.run_button.setEnabled(True)
+        self._outcome = "cancelled"
         self.status.setText("segmentation cancelled")
-        self.finished.emit("cancelled")
+
+    def _on_thread_finished(self) -> None:
+        # Emitted once the thread has ended, so a listener may close the tab at once.
+        self.finished.emit(self._outcome)
 
     def show_result(self, result) -> None:
         """Show a SegmentationResult: both views, the partition table, the status line."""
@@ -312,10 +351,17 @@ class SegmentationTab(QtWidgets.QWidget):
         self._draw()
         self.segmented.emit(result)
 
-    def closeEvent(self, event) -> None:
+    def stop_worker(self) -> None:
+        """Cancel a running segmentation and wait for its thread (before quitting)."""
         if self.worker is not None and self.worker.isRunning():
             self.worker.cancel()
             self.worker.wait(30000)
+
+    def closeEvent(self, event) -> None:
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+        self.stop_worker()
         if self.plotter is not None:
             self.plotter.close()
         super().closeEvent(event)

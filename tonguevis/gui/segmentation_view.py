@@ -18,6 +18,10 @@ from tonguevis.analysis.segmentation.render import _grid, _partition_colours
 from tonguevis.errors import TonguevisError
 
 ERROR_FIELD = "error_mm"
+ERROR_TITLE = "local error sqrt(e_E), mm"
+#: Direction from the tongue to the camera: its right side, a little in front and above.
+VIEW = (0.45, -1.0, 0.5)
+REST_COLOUR = "#c8b4a0"
 #: Targets the tab offers: key -> label.
 TARGETS = {"frame": "current frame", "peak": "peak-energy frame of the production under the cursor",
            "production": "whole production under the cursor (energy-weighted)"}
@@ -49,14 +53,19 @@ def make_target(kind: str, motion, productions, time: float):
 
 
 def _surface(points: np.ndarray, tets: np.ndarray, result):
-    grid = _grid(points, tets)
-    grid.cell_data["tet"] = np.arange(len(tets), dtype=np.int64)
-    surface = grid.extract_surface(pass_pointid=True, pass_cellid=False, algorithm="dataset_surface")
+    surface = frame_surface(points, tets)
     tet = np.asarray(surface.cell_data["tet"], dtype=np.int64)
     surface.cell_data["partition"] = result.labels[tet]
     surface.cell_data["colour"] = _partition_colours(result.labels)[tet]
     surface.cell_data[ERROR_FIELD] = 1000.0 * np.sqrt(result.element_errors[tet])
     return surface
+
+
+def frame_surface(points: np.ndarray, tets: np.ndarray):
+    """pyvista PolyData: the boundary of a tet mesh at ``points`` with per-face ``tet`` (for picking)."""
+    grid = _grid(points, tets)
+    grid.cell_data["tet"] = np.arange(len(tets), dtype=np.int64)
+    return grid.extract_surface(pass_pointid=True, pass_cellid=False, algorithm="dataset_surface")
 
 
 def target_surface(result, frame: int | None = None):
@@ -82,3 +91,70 @@ def partition_table(result) -> str:
     lines.append(f"{result.mode} modes, {result.n_partitions} partitions")
     lines.append(f"relative e_G {100 * result.relative_error:.2f} %")
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------- drawing (a pyvista plotter of shape (1, 2))
+def _place_camera(plotter) -> None:
+    plotter.subplot(0, 0)
+    plotter.view_vector(VIEW, viewup=(0.0, 0.0, 1.0))
+    plotter.reset_camera()
+    plotter.camera.zoom(1.3)
+
+
+def draw_result(plotter, result, by_error: bool = False) -> dict:
+    """Target (left, by partition) and approximation (right, by partition or local error).
+
+    Returns {"target", "approximation"} surfaces and their ``*_actor``s; the views are
+    expected linked, so one camera serves both.
+    """
+    top = float(1000.0 * np.sqrt(result.element_errors.max())) or 1.0
+    panels = [("target", target_surface(result), f"target: {result.metadata.get('description', '')}"),
+              ("approximation", approximation_surface(result),
+               f"approximation ({result.mode} modes), relative e_G {100 * result.relative_error:.2g} %")]
+    drawn = {}
+    for column, (name, surface, caption) in enumerate(panels):
+        plotter.subplot(0, column)
+        if by_error and name == "approximation":
+            actor = plotter.add_mesh(surface, scalars=ERROR_FIELD, cmap="viridis", clim=(0.0, top),
+                                     scalar_bar_args={"title": ERROR_TITLE, "color": "black", "vertical": False,
+                                                      "position_x": 0.2, "width": 0.6, "title_font_size": 14,
+                                                      "label_font_size": 12, "fmt": "%.2f"})
+        else:
+            actor = plotter.add_mesh(surface, scalars="colour", rgb=True, lighting=True)
+        plotter.add_text(caption, font_size=9, color="black", position="upper_left")
+        drawn[name], drawn[f"{name}_actor"] = surface, actor
+    _place_camera(plotter)
+    return drawn
+
+
+def frame_caption(time: float) -> str:
+    return f"frame at {time:.3f} s (not segmented yet)"
+
+
+def draw_frame(plotter, points: np.ndarray, tets: np.ndarray, time: float) -> dict:
+    """Before any result: one frame's shape on the left (pickable), plain colour."""
+    surface = frame_surface(points, tets)
+    plotter.subplot(0, 0)
+    actor = plotter.add_mesh(surface, color=REST_COLOUR, lighting=True)
+    plotter.add_text(frame_caption(time), font_size=9, color="black", position="upper_left", name="frame caption")
+    _place_camera(plotter)
+    return {"target": surface, "target_actor": actor}
+
+
+def move_frame(plotter, surface, points: np.ndarray, time: float) -> None:
+    """Move the drawn frame to new (n, 3) mesh points in place and re-caption it."""
+    surface.points = np.asarray(points)[np.asarray(surface.point_data["vtkOriginalPointIds"])]
+    plotter.subplot(0, 0)
+    plotter.add_text(frame_caption(time), font_size=9, color="black", position="upper_left", name="frame caption")
+
+
+def draw_seed_markers(plotter, centres: np.ndarray, groups: dict) -> None:
+    """Dots in the left view at tet centres ``centres`` (k, 3): ``groups`` = name -> (tets, colour)."""
+    plotter.subplot(0, 0)
+    for name, (tets, colour) in groups.items():
+        tets = np.asarray(tets, dtype=np.int64)
+        if len(tets) == 0 or tets.max() >= len(centres):
+            plotter.remove_actor(name, render=False)
+            continue
+        plotter.add_points(centres[tets], color=colour, point_size=9, render_points_as_spheres=True,
+                           name=name, reset_camera=False, pickable=False)
