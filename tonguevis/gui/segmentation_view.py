@@ -98,7 +98,7 @@ def _place_camera(plotter) -> None:
     plotter.subplot(0, 0)
     plotter.view_vector(VIEW, viewup=(0.0, 0.0, 1.0))
     plotter.reset_camera()
-    plotter.camera.zoom(1.3)
+    plotter.camera.zoom(1.25)
 
 
 def draw_result(plotter, result, by_error: bool = False) -> dict:
@@ -108,16 +108,16 @@ def draw_result(plotter, result, by_error: bool = False) -> dict:
     expected linked, so one camera serves both.
     """
     top = float(1000.0 * np.sqrt(result.element_errors.max())) or 1.0
-    panels = [("target", target_surface(result), f"target: {result.metadata.get('description', '')}"),
+    panels = [("target", target_surface(result), f"target\n{result.metadata.get('description', '')}"),
               ("approximation", approximation_surface(result),
-               f"approximation ({result.mode} modes), relative e_G {100 * result.relative_error:.2g} %")]
+               f"approximation, {result.mode} modes\nrelative e_G {100 * result.relative_error:.2g} %")]
     drawn = {}
     for column, (name, surface, caption) in enumerate(panels):
         plotter.subplot(0, column)
         if by_error and name == "approximation":
             actor = plotter.add_mesh(surface, scalars=ERROR_FIELD, cmap="viridis", clim=(0.0, top),
                                      scalar_bar_args={"title": ERROR_TITLE, "color": "black", "vertical": False,
-                                                      "position_x": 0.2, "width": 0.6, "title_font_size": 14,
+                                                      "position_x": 0.2, "position_y": 0.06, "width": 0.6, "title_font_size": 12,
                                                       "label_font_size": 12, "fmt": "%.2f"})
         else:
             actor = plotter.add_mesh(surface, scalars="colour", rgb=True, lighting=True)
