@@ -101,3 +101,10 @@ def test_a_file_that_is_not_a_motion_is_refused(tmp_path):
     (tmp_path / "y.npz").write_bytes(b"not a zip")
     with pytest.raises(SimulationError, match="y.npz"):
         Motion.load(tmp_path / "y.npz")
+
+
+def test_nearest_frame_rounds_and_clips():
+    from tonguevis.sim.motion import nearest_frame
+
+    times = np.array([0.0, 0.01, 0.02, 0.03])
+    assert [nearest_frame(times, t) for t in (-1.0, 0.004, 0.006, 0.0149, 0.03, 5.0)] == [0, 0, 1, 1, 3, 3]

@@ -84,12 +84,9 @@ class MotionFrames:
 
     def frame_at(self, t: float) -> int:
         """Index of the frame nearest time ``t`` (seconds), clipped."""
-        i = int(np.searchsorted(self.times, t))
-        if i <= 0:
-            return 0
-        if i >= self.n_frames:
-            return self.n_frames - 1
-        return i if self.times[i] - t < t - self.times[i - 1] else i - 1
+        from tonguevis.sim.motion import nearest_frame
+
+        return nearest_frame(self.times, t)
 
 
 def _colour_range(values: np.ndarray, percentile: float) -> tuple[float, float]:

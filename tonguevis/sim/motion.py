@@ -11,6 +11,16 @@ if TYPE_CHECKING:  # pragma: no cover
     from tonguevis.sim.model import TongueModel
 
 
+def nearest_frame(times: np.ndarray, t: float) -> int:
+    """Index of the sample of the sorted ``times`` (s) nearest ``t``, clipped to the ends."""
+    i = int(np.searchsorted(times, t))
+    if i <= 0:
+        return 0
+    if i >= len(times):
+        return len(times) - 1
+    return i if times[i] - t < t - times[i - 1] else i - 1
+
+
 @dataclass
 class Motion:
     """A simulated tongue motion on one :class:`TongueModel`.
@@ -51,12 +61,7 @@ class Motion:
 
     def frame_at(self, t: float) -> int:
         """Index of the frame nearest time ``t`` (seconds), clipped to the motion."""
-        i = int(np.searchsorted(self.times, t))
-        if i <= 0:
-            return 0
-        if i >= self.n_frames:
-            return self.n_frames - 1
-        return i if self.times[i] - t < t - self.times[i - 1] else i - 1
+        return nearest_frame(self.times, t)
 
     def displacement(self, i: int) -> np.ndarray:
         """(n, 3) displacement of every mesh node at frame ``i``, metres."""
