@@ -185,3 +185,33 @@ def test_errors_open_a_dialog(qtbot, window):
     tab.run()
     assert "no production under the cursor" in tab.last_dialog.text()
     tab.last_dialog.close()
+
+
+def test_click_in_pick_mode_adds_the_tet_under_the_mouse(qtbot, tab):
+    tab.pick_button.setChecked(True)
+    renderer = tab.plotter.renderers[0]
+    tab.plotter.render()
+    # Click the middle of the left view, where the tongue is.
+    width, height = tab.plotter.render_window.GetSize()
+    x0, y0, x1, y1 = renderer.GetViewport()
+    x, y = int((x0 + x1) / 2 * width), int((y0 + y1) / 2 * height)
+    tab.plotter.iren.interactor.SetEventPosition(x, y)
+    tab._on_click()
+    assert len(tab.seeds) == 1
+    surface = tab.surfaces["target"]
+    assert tab.seeds[0] in set(np.asarray(surface.cell_data["tet"]).tolist())
+    # The picked tet is under the mouse: the surface point the depth buffer finds there
+    # (an independent picker) lies in it (barycentric coordinates >= 0, up to the z-buffer's precision).
+    import vtk
+
+    world = vtk.vtkWorldPointPicker()
+    world.Pick(x, y, 0, renderer)
+    hit = np.array(world.GetPickPosition())
+    motion = tab.session.motion
+    points = motion.model.mesh.points + motion.displacement(motion.frame_at(tab.state.time))
+    corners = points[motion.model.mesh.tets[tab.seeds[0]]]
+    weights = np.linalg.solve(np.vstack([corners.T, np.ones(4)]), np.append(hit, 1.0))
+    assert weights.min() > -0.05, weights
+    tab.pick_button.setChecked(False)
+    tab.plotter.iren.interactor.SetEventPosition(x + 5, y)
+    assert tab._pick_observer is None
