@@ -311,7 +311,7 @@ def main(argv=None) -> int:
         elapsed = time.perf_counter() - t0
     text = render(groups, sensitivity, elapsed)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    from tonguevis.analysis.validation_report import atomic_write_text
+    from tonguevis._files import atomic_write_text
 
     atomic_write_text(args.out, text)
     print(f"wrote {args.out}", file=sys.stderr)

@@ -87,7 +87,7 @@ class ValidationResult:
         """Write :meth:`as_dict` as JSON (temporary file, then rename)."""
         import json
 
-        from tonguevis.analysis.validation_report import atomic_write_text
+        from tonguevis._files import atomic_write_text
 
         atomic_write_text(path, json.dumps(self.as_dict(), indent=1, allow_nan=False) + "\n")
 

@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
+
 from pathlib import Path
 from typing import Any, Iterable
 
@@ -15,19 +14,6 @@ METHOD_LABELS = {
     "static": "quasi-static (warped)",
     "kinematic": "kinematic RBF",
 }
-
-
-def atomic_write_text(path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same folder, then rename."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
 
 
 def fmt(value: Any, digits: int = 2) -> str:

@@ -36,7 +36,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
     from tonguevis.analysis.validation import validate
-    from tonguevis.analysis.validation_report import atomic_write_text, axis_table, recording_markdown
+    from tonguevis._files import atomic_write_text
+    from tonguevis.analysis.validation_report import axis_table, recording_markdown
     from tonguevis.errors import TonguevisError
 
     if args.modes < 1:

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from tonguevis._files import atomic_write
 from tonguevis.analysis.segmentation.errors import SegmentationError
 
 FORMAT = "tonguevis-segmentation-1"
@@ -138,15 +138,11 @@ class SegmentationResult:
         arrays = {f.name: np.asarray(getattr(self, f.name)) for f in fields(self) if f.name != "metadata"}
         arrays["metadata"] = np.array(json.dumps(self.metadata, default=_jsonable))
         arrays["format"] = np.array(FORMAT)
-        fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=".npz.tmp")
-        try:
-            with os.fdopen(fd, "wb") as handle:
+        def write(tmp: Path) -> None:
+            with open(tmp, "wb") as handle:
                 np.savez_compressed(handle, **arrays)
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-            raise
+
+        atomic_write(path, write)
         return path
 
     @classmethod
@@ -224,15 +220,7 @@ class SegmentationResult:
         """Write :meth:`to_meshio` as ``.vtu`` (temporary file, then renamed)."""
         path = Path(path)
         mesh = self.to_meshio(frame, split)
-        fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=".vtu")
-        os.close(fd)
-        try:
-            mesh.write(tmp, file_format="vtu")
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-            raise
+        atomic_write(path, lambda tmp: mesh.write(tmp, file_format="vtu"))
         return path
 
 
