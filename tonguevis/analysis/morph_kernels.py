@@ -26,10 +26,9 @@ def _build():
     with _lock:
         if _kernels:
             return
-        import warp as wp
+        from tonguevis._warp import load_warp
 
-        wp.config.quiet = True
-        wp.init()
+        wp = load_warp()
 
         @wp.func
         def warped_blend(t: wp.float64, ls: wp.vec3d, lt: wp.vec3d, ws: wp.vec3d, wt: wp.vec3d):
