@@ -134,7 +134,22 @@ def test_cancel_leaves_the_tab_usable(qtbot, tab):
     assert blocker.args == ["cancelled"]
     assert tab.result is None and tab.run_button.isEnabled()
     _run(qtbot, tab)
+    assert tab.result is not None and tab.table.toPlainText()
+    # A newly simulated motion drops the result of the old one ...
+    import copy
+    from dataclasses import replace
+
+    session = tab.session
+    tab.set_session(session)  # the same motion again (e.g. the window republishing): kept
     assert tab.result is not None
+    tab.set_session(replace(session, motion=copy.copy(session.motion)))
+    assert tab.result is None and not tab.table.toPlainText()
+    assert tab.surfaces["target"].n_cells > 0  # the new motion's frame is shown, ready for seeds
+    # ... and a run that ends after its motion was replaced is discarded.
+    with qtbot.waitSignal(tab.finished, timeout=90000):
+        tab.run()
+        tab.set_session(session)
+    assert tab.result is None and "discarded" in tab.status.text()
 
 
 def test_picked_seeds_grow_their_partitions(qtbot, tab):

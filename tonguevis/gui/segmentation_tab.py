@@ -44,6 +44,7 @@ class SegmentationTab(QtWidgets.QWidget):
         self.surfaces: dict = {}
         self._pick_observer = None
         self._outcome = "failed"
+        self._running_motion = self._segmented_motion = None
 
         self.target_box = QtWidgets.QComboBox()
         for key, label in TARGETS.items():
@@ -122,8 +123,9 @@ class SegmentationTab(QtWidgets.QWidget):
     # ------------------------------------------------------------------ inputs
     def set_session(self, session) -> None:
         """The window's session (called when a recording opens and when its simulation ends)."""
-        if session is not self.session:
-            self.result = None
+        motion = None if session is None else session.motion
+        if motion is not self._segmented_motion:  # another recording, or re-simulated
+            self.result, self._segmented_motion = None, None
             self.table.clear()
         self.session = session
         self._draw()
@@ -274,6 +276,7 @@ class SegmentationTab(QtWidgets.QWidget):
                                      "or choose automatic seeding")
             options = {"seeds": list(self.seeds)}
         model = motion.model
+        self._running_motion = motion
 
         def function(progress):
             return segment(model, target, mode, progress=progress, **options)
@@ -323,6 +326,11 @@ class SegmentationTab(QtWidgets.QWidget):
     def _on_done(self, result) -> None:
         self.run_button.setEnabled(True)
         self._outcome = "ok"
+        current = None if self.session is None else self.session.motion
+        if self._running_motion is not current:
+            self.status.setText("segmentation of a motion no longer shown: discarded")
+            return
+        self._segmented_motion = current
         self.show_result(result)
 
     def _on_failed(self, message: str) -> None:
