@@ -230,3 +230,24 @@ def test_click_in_pick_mode_adds_the_tet_under_the_mouse(qtbot, tab):
     tab.pick_button.setChecked(False)
     tab.plotter.iren.interactor.SetEventPosition(x + 5, y)
     assert tab._pick_observer is None
+
+
+def test_exaggerated_displacements_widen_rigid_gaps(qtbot, tab):
+    _choose(tab.mode_box, "rigid")
+    tab.threshold.setValue(1.0)
+    tab.max_partitions.setValue(3)
+    _run(qtbot, tab)
+    result = tab.result
+    gap = _copy_spread(tab.surfaces["approximation"])
+    _choose(tab.scale_box, 5.0)
+    # Both shapes are drawn with five times the displacement; rigid gaps grow five-fold.
+    target = tab.surfaces["target"]
+    ids = np.asarray(target.point_data["vtkOriginalPointIds"])
+    np.testing.assert_allclose(target.points, (result.points + 5 * result.target[result.peak_frame])[ids],
+                               atol=1e-9)
+    assert _copy_spread(tab.surfaces["approximation"]) == pytest.approx(5 * gap, rel=1e-6)
+    # Seed markers sit at the seed tets' centres of the drawn shape.
+    markers = tab.plotter.renderers[0].actors["result seeds"].GetMapper().GetInput()
+    drawn = np.array([markers.GetPoint(i) for i in range(markers.GetNumberOfPoints())])
+    expected = (result.points + 5 * result.target[result.peak_frame])[result.tets[result.seeds]].mean(axis=1)
+    np.testing.assert_allclose(drawn, expected, atol=1e-9)

@@ -80,6 +80,11 @@ class SegmentationTab(QtWidgets.QWidget):
         self.colour_box.addItem("local error sqrt(e_E), mm", "error")
         self.colour_box.setToolTip("the target (left) is always coloured by partition")
         self.colour_box.currentIndexChanged.connect(lambda _i: self._draw())
+        self.scale_box = QtWidgets.QComboBox()
+        for factor in (1, 2, 5, 10):
+            self.scale_box.addItem(f"displacement ×{factor}", float(factor))
+        self.scale_box.setToolTip("exaggerate the displacements of both shapes: rigid pieces' gaps become visible")
+        self.scale_box.currentIndexChanged.connect(lambda _i: self.result is not None and self._draw())
         self.table = QtWidgets.QPlainTextEdit()
         self.table.setReadOnly(True)
         self.table.setFont(QtGui.QFontDatabase.systemFont(QtGui.QFontDatabase.SystemFont.FixedFont))
@@ -103,6 +108,7 @@ class SegmentationTab(QtWidgets.QWidget):
         second.addStretch(1)
         second.addWidget(QtWidgets.QLabel("colour the approximation by"))
         second.addWidget(self.colour_box)
+        second.addWidget(self.scale_box)
         form = QtWidgets.QVBoxLayout()
         form.addLayout(first)
         form.addLayout(second)
@@ -203,7 +209,8 @@ class SegmentationTab(QtWidgets.QWidget):
         plotter.clear()
         self.surfaces = {}
         if result is not None:
-            self.surfaces = draw_result(plotter, result, self.colour_box.currentData() == "error")
+            self.surfaces = draw_result(plotter, result, self.colour_box.currentData() == "error",
+                                        float(self.scale_box.currentData()))
         else:
             motion = None if self.session is None else self.session.motion
             if motion is None:
@@ -235,11 +242,11 @@ class SegmentationTab(QtWidgets.QWidget):
         if plotter is None or surface is None:
             return
         if self.result is not None:
-            points, tets = self.result.target_points(), self.result.tets
+            result, scale = self.result, float(self.scale_box.currentData())
+            tets, points = result.tets, result.points + scale * result.target[result.peak_frame]
         else:
-            tets = self.session.motion.model.mesh.tets
-            points = np.zeros((int(tets.max()) + 1, 3))
-            points[np.asarray(surface.point_data["vtkOriginalPointIds"])] = surface.points
+            motion = self.session.motion
+            tets, points = motion.model.mesh.tets, self._frame_points(motion, motion.frame_at(self.current_time()))
         groups = {"picked seeds": (self.seeds, "red")}
         if self.result is not None:
             groups["result seeds"] = (self.result.seeds, "black")

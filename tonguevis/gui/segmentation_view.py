@@ -68,14 +68,18 @@ def frame_surface(points: np.ndarray, tets: np.ndarray):
     return grid.extract_surface(pass_pointid=True, pass_cellid=False, algorithm="dataset_surface")
 
 
-def target_surface(result, frame: int | None = None):
-    """pyvista PolyData: the target shape's boundary (peak frame by default), coloured per face."""
-    return _surface(result.target_points(frame), result.tets, result)
+def target_surface(result, frame: int | None = None, scale: float = 1.0):
+    """pyvista PolyData: the target shape's boundary (peak frame by default), coloured per face.
+
+    scale : factor on the displacement (1 = true shape; more makes small gaps visible)."""
+    frame = result.peak_frame if frame is None else int(frame)
+    return _surface(result.points + scale * result.target[frame], result.tets, result)
 
 
-def approximation_surface(result, frame: int | None = None):
+def approximation_surface(result, frame: int | None = None, scale: float = 1.0):
     """pyvista PolyData: the approximated shape on the split mesh (its point ``node`` = mesh node)."""
-    points = result.approximated_points(frame)
+    frame = result.peak_frame if frame is None else int(frame)
+    points = result.points[result.split_nodes] + scale * result.approximation[frame]
     surface = _surface(points, result.split_tets, result)
     # Which mesh node each drawn point is a copy of (interfaces can be checked against the target).
     surface.point_data["node"] = result.split_nodes[np.asarray(surface.point_data["vtkOriginalPointIds"])]
@@ -101,15 +105,17 @@ def _place_camera(plotter) -> None:
     plotter.camera.zoom(1.25)
 
 
-def draw_result(plotter, result, by_error: bool = False) -> dict:
+def draw_result(plotter, result, by_error: bool = False, scale: float = 1.0) -> dict:
     """Target (left, by partition) and approximation (right, by partition or local error).
 
     Returns {"target", "approximation"} surfaces and their ``*_actor``s; the views are
     expected linked, so one camera serves both.
     """
     top = float(1000.0 * np.sqrt(result.element_errors.max())) or 1.0
-    panels = [("target", target_surface(result), f"target\n{result.metadata.get('description', '')}"),
-              ("approximation", approximation_surface(result),
+    shown = "" if scale == 1 else f", displacement ×{scale:g}"
+    panels = [("target", target_surface(result, scale=scale),
+               f"target{shown}\n{result.metadata.get('description', '')}"),
+              ("approximation", approximation_surface(result, scale=scale),
                f"approximation, {result.mode} modes\nrelative e_G {100 * result.relative_error:.2g} %")]
     drawn = {}
     for column, (name, surface, caption) in enumerate(panels):
