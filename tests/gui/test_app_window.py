@@ -123,6 +123,15 @@ def test_malformed_file_gives_a_dialog_and_the_app_keeps_running(qtbot, window, 
     show_and_simulate(qtbot, window, demo_session(3.5, 5.8))
 
 
+@pytest.mark.gui
+@pytest.mark.timeout(180)
+def test_a_second_recording_opens_after_the_first(qtbot, window):
+    """Rebuilding the scene for a new motion must recreate its colour bar (pyvista remembers titles)."""
+    show_and_simulate(qtbot, window, demo_session(3.5, 5.8))
+    show_and_simulate(qtbot, window, demo_session(4.0, 6.0))
+    assert window.view3d.scene.scalar_bar is not None
+
+
 def test_unknown_channels_ask_for_a_sensor_map(qtbot, window, tmp_path):
     import shutil
 

@@ -106,6 +106,9 @@ class TongueScene:
         plotter = self.plotter
         for index in self._each_view():
             plotter.renderer.clear_actors()
+        # clear_actors drops the bar's actor but pyvista still remembers the title and would
+        # hand back None instead of a new bar: forget it too (a second recording must open).
+        plotter.scalar_bars.clear()
         self._clim = dict(clim or {})
         self._titles = dict(titles or {})
         points = np.asarray(points, dtype=np.float32)
