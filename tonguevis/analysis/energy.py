@@ -239,7 +239,7 @@ def write_curves_csv(curves: Sequence[EnergyCurve], path) -> None:
     """Write the curves as long-format CSV (:data:`CSV_COLUMNS`); temporary file, then rename."""
     import csv
 
-    from tonguevis.io._common import atomic_write
+    from tonguevis._files import atomic_write
 
     def write(tmp):
         with open(tmp, "w", newline="") as fh:
@@ -254,7 +254,7 @@ def write_summary_csv(summaries: Sequence[GroupSummary], by: Sequence[str], path
     """One row per group: the keys, n, then mean and std of each statistic."""
     import csv
 
-    from tonguevis.io._common import atomic_write
+    from tonguevis._files import atomic_write
 
     stats = list(summaries[0].mean) if summaries else []
     header = [*by, "n"] + [f"{s}_{kind}" for s in stats for kind in ("mean", "std")]

@@ -71,7 +71,7 @@ def save_energy_png(curves: Sequence[EnergyCurve], path, by: Sequence[str] = ("s
 
 def save_figure(fig, path, dpi: int = 120) -> None:
     """fig.savefig to a temporary file in the target folder, then rename."""
-    from tonguevis.io._common import atomic_write
+    from tonguevis._files import atomic_write
 
     path = Path(path)
     atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format=(path.suffix.lstrip(".") or "png")))

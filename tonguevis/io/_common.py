@@ -11,8 +11,6 @@ import numpy as np
 
 from tonguevis.errors import RecordingError
 
-from tonguevis._files import atomic_write  # noqa: F401  (re-exported for the readers)
-
 log = logging.getLogger("tonguevis")
 
 #: metres per unit, for the units EMA files use.

@@ -31,8 +31,9 @@ from pathlib import Path
 import numpy as np
 
 from tonguevis.errors import RecordingError
+from tonguevis._files import atomic_write
 from tonguevis.io._common import (
-    atomic_write, decode_text, format_rows, parse_axes, read_bytes, regrid_dropped_frames, unit_scale,
+    decode_text, format_rows, parse_axes, read_bytes, regrid_dropped_frames, unit_scale,
     unterminated_row_complete,
 )
 from tonguevis.io.recording import Recording

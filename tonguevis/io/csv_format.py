@@ -36,8 +36,9 @@ from pathlib import Path
 import numpy as np
 
 from tonguevis.errors import RecordingError
+from tonguevis._files import atomic_write
 from tonguevis.io._common import (
-    atomic_write, check_times, decode_text, format_rows, dropped_frames, estimate_rate, parse_number_table,
+    check_times, decode_text, format_rows, dropped_frames, estimate_rate, parse_number_table,
     read_bytes, unit_scale, unterminated_row_complete,
 )
 from tonguevis.io.recording import Recording

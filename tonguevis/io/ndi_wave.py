@@ -33,8 +33,9 @@ from pathlib import Path
 import numpy as np
 
 from tonguevis.errors import RecordingError
+from tonguevis._files import atomic_write
 from tonguevis.io._common import (
-    atomic_write, check_times, format_rows, decode_text, dropped_frames, estimate_rate, parse_axes,
+    check_times, format_rows, decode_text, dropped_frames, estimate_rate, parse_axes,
     parse_number_table, read_bytes, rotate_quaternions, split_lines, unit_scale, unterminated_row_complete,
 )
 from tonguevis.io.recording import Audio, Recording

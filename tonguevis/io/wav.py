@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from tonguevis.errors import RecordingError
-from tonguevis.io._common import atomic_write
+from tonguevis._files import atomic_write
 from tonguevis.io.recording import Audio
 
 

@@ -59,12 +59,6 @@ class ModalBasis:
         """(m,) natural frequencies in Hz."""
         return np.sqrt(np.maximum(self.eigenvalues, 0.0)) / (2 * np.pi)
 
-    def truncated(self, m: int) -> "ModalBasis":
-        """The first ``m`` modes (the lowest ones)."""
-        if m > self.n_modes:
-            raise ModelError(f"asked for {m} modes, the basis has {self.n_modes}")
-        return ModalBasis(self.phi[:, :m].copy(), self.eigenvalues[:m].copy(), self.free_dofs, self.key, dict(self.info))
-
 
 def free_dofs_for(n_nodes: int, anchors: np.ndarray) -> np.ndarray:
     """(3n - 3a,) DOF indices of the nodes that are not anchors."""
