@@ -68,6 +68,23 @@ def test_view_command_reports_a_bad_file(tmp_path):
     assert not (tmp_path / "x.png").exists()
 
 
+def test_view_screenshot_of_unmapped_channels_is_a_one_line_error(tmp_path):
+    """Headless, nobody can answer the sensor-mapping dialog: the run ends like any other command's error."""
+    from tests.io.synthetic import make_recording
+    from tonguevis.io import write_recording
+
+    path = tmp_path / "unmapped.tsv"  # NDI Wave Ids 11-13 match no preset; no sensor_map.json beside it
+    write_recording(make_recording(n=60, names=("S11", "S12", "S13"), audio_rate=None), path)
+    result = _run("view", str(path), "--screenshot", str(tmp_path / "x.png"))
+    assert result.returncode == 2, result.stderr[-2000:]
+    assert "Traceback" not in result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("tonguevis view: error:")
+    assert str(path) in lines[0] and "--sensors" in lines[0] and "S11" in lines[0]
+    assert not (tmp_path / "x.png").exists()
+
+
 def test_export_video_command(tmp_path):
     if not (DEMO.exists() and _default_model_available()):
         pytest.skip("needs the demo corpus and the shipped mesh")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import sys
@@ -52,6 +53,28 @@ def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings
     return window
 
 
+def opening_problem(window, file):
+    """What stopped ``window`` opening ``file``, as the error a headless run ends with.
+
+    Without a screen to answer it, the sensor-mapping dialog becomes an error that
+    says how to give the map on the command line.
+    """
+    from tonguevis.errors import RecordingError, TonguevisError
+    from tonguevis.gui.dialogs import SensorMapDialog
+    from tonguevis.gui.session import TONGUE_NAMES
+
+    dialog = window.last_dialog
+    if isinstance(dialog, SensorMapDialog):
+        channels = list(dialog.boxes)
+        example = json.dumps(dict(zip(("TT", "TD"), channels)))
+        return RecordingError(
+            f"no channel is a known tongue sensor ({', '.join(TONGUE_NAMES)}); the channels are "
+            f"{', '.join(channels)}. Give a sensor map with --sensors: a preset (paper, haskins, mngu0) "
+            f"or a JSON file of name -> channel such as {example} "
+            "(a sensor_map.json beside the file is used when there is one)", file)
+    return TonguevisError(" ".join(dialog.text().split()))
+
+
 def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None) -> int:
     """``tonguevis view``: run the app; with ``screenshot``, save the window at ``frame`` and exit."""
     app = application()
@@ -82,8 +105,9 @@ def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=No
         QTimer.singleShot(600, save)  # let the plots draw at their final size
 
     if window.session is None and window.last_dialog is not None:
-        print(f"tonguevis view: {window.last_dialog.text()}", file=sys.stderr)
-        return 2
+        problem = opening_problem(window, file)
+        window.close()
+        raise problem  # the CLI prints it as one line and exits with status 2
     window.simulation_finished.connect(shoot)
     code = app.exec()
     return code if code else status["code"]
