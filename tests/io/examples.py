@@ -226,7 +226,52 @@ def make_csv_long(folder: Path) -> Example:
     return _written(folder, "long.csv", "csv", "S1", layout="long")
 
 
+def _optispeech_cell(v) -> str:
+    return "" if not np.isfinite(v) else repr(float(v))
+
+
+def make_optispeech_markers(folder: Path, n_frames: int = 12) -> Example:
+    """Opti-Speech 1 marker layout: Unity x right, y up, z forward (mm), 10 ms clock."""
+    xyz = _truth(n_frames, 3)  # ours: x anterior, y left, z up (mm)
+    unity = np.stack([-xyz[..., 1], xyz[..., 2], xyz[..., 0]], axis=-1)
+    header = ["timestamp"] + ["Marker Number", "Qw", "Qx", "Qy", "Qz", "X", "Y", "Z"] * 6 + ["Landmark Number", "X", "Y", "Z"]
+    lines = ["\t".join(header)]
+    for k in range(n_frames):
+        row = [str(10 * k + 3)]
+        row += ["1", "0", "0", "0", "0", "-100", "0", "-100", "2", "0", "0", "0", "0", "100", "0", "-100"]
+        for j, marker in enumerate((3, 4, 5)):
+            row += [str(marker), "0", "0", "0", "0"] + [_optispeech_cell(v) for v in unity[k, j]]
+        row += ["10", "0", "0", "0", "0", "-3.1E+28", "3.3E+28", "-4.4E+28"]  # the unused probe slot
+        row += ["0", "1.5", "-87.7", "5.4"]
+        lines.append("\t".join(row))
+    path = folder / "sweep_markers.tsv"
+    path.write_text("\n".join(lines) + "\n")
+    truth = {name: xyz[:, j] / 1000 for j, name in enumerate(("TT", "TB", "TR"))}
+    return Example(path, "optispeech", truth, 100.0, map_value="TT")
+
+
+def make_optispeech_sensors(folder: Path, n_frames: int = 12) -> Example:
+    """Opti-Speech 2 sensor layout: the file's X, Y, Z are Unity's y (up), z (forward), x (right)."""
+    xyz = _truth(n_frames, 3, seed=4)
+    file_xyz = np.stack([xyz[..., 2], xyz[..., 0], -xyz[..., 1]], axis=-1)
+    header = ["timestamp", "Placeholder1", "Placeholder2"]
+    header += ["Sensor", "Status", "X", "Y", "Z", "Qw", "Qx", "Qy", "Qz"] * 3
+    lines = ["\t".join(header)]
+    for k in range(n_frames):
+        row = [str(10 * k), "0", "0"]
+        for j, sensor in enumerate((4, 6, 9)):
+            status = "55" if np.all(np.isfinite(file_xyz[k, j])) else "119"
+            row += [str(sensor), status] + [_optispeech_cell(v) for v in file_xyz[k, j]] + ["1", "0", "0", "0"]
+        lines.append("\t".join(row))
+    path = folder / "sweep_sensors.tsv"
+    path.write_text("\n".join(lines) + "\n")
+    truth = {name: xyz[:, j] / 1000 for j, name in enumerate(("TT", "TR", "JAW"))}
+    return Example(path, "optispeech", truth, 100.0, map_value="TT")
+
+
 MAKERS = {
+    "optispeech_markers": make_optispeech_markers,
+    "optispeech_sensors": make_optispeech_sensors,
     "ag501_v1": lambda d: make_ag501(d, version=1),
     "ag501_v2": make_ag501,
     "ag501_v3": lambda d: make_ag501(d, version=3),

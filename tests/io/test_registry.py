@@ -13,7 +13,7 @@ from tests.io.synthetic import make_recording
 def test_every_format_registers_reader_and_sniffer():
     formats = registered_formats()
     assert formats == FORMATS and "csv" in supported_formats()
-    assert set(FORMATS) == {"ndi_wave", "carstens", "est_track", "mview", "bvh", "csv"}
+    assert set(FORMATS) == {"ndi_wave", "optispeech", "carstens", "est_track", "mview", "bvh", "csv"}
     assert {n for n, f in FORMATS.items() if f.write} == {"ndi_wave", "bvh", "csv"}
     for fmt in FORMATS.values():
         assert fmt.read is not None and fmt.extensions and fmt.description

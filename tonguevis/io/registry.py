@@ -47,7 +47,7 @@ def register_format(fmt: RecordingFormat) -> None:
 
 
 #: Modules that register formats, in dispatch-priority order.
-FORMAT_MODULES = ("ndi_wave", "carstens", "est_track", "mview", "bvh", "csv_format")
+FORMAT_MODULES = ("ndi_wave", "optispeech", "carstens", "est_track", "mview", "bvh", "csv_format")
 
 
 def _ensure_registered() -> None:
