@@ -51,6 +51,23 @@ def test_a_constant_prediction_has_zero_correlation():
     assert s["rmse_mm"] == pytest.approx(1e3 * np.sqrt(np.mean(np.sum(measured**2, axis=1))))
 
 
+def test_proportional_trajectories_correlate_within_plus_minus_one():
+    """p = c m + offset has r = sign(c) exactly up to rounding, and never beyond ±1.
+
+    The plain quotient Σmp / (|m||p|) comes out as 1.0000000000000002 for
+    about a third of such axes; the JSON promises -1 <= r <= 1.
+    """
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        measured = 1e-3 * rng.normal(size=(50, 3))
+        for c in (0.3, 1.0, 2.7, -1.9):
+            s = trajectory_scores(measured, c * measured + 0.01)
+            r = np.array(s["corr_axes"])
+            assert np.all((-1.0 <= r) & (r <= 1.0)), (c, r.tolist())
+            np.testing.assert_allclose(r, np.sign(c), rtol=0, atol=1e-14)
+            assert -1.0 <= s["corr"] <= 1.0
+
+
 def _moving_recording(still_from: float, still_to: float, duration: float = 2.0) -> Recording:
     rate = 100.0
     t = np.arange(int(duration * rate)) / rate

@@ -32,13 +32,17 @@ MOVED_MM = 2.0  # ... after having moved at least this far
 
 
 def pearson_axes(measured: np.ndarray, predicted: np.ndarray) -> np.ndarray:
-    """(3,) Pearson r per axis of (F, 3) trajectories; 0 where the prediction is constant, NaN if the measurement is."""
+    """(3,) Pearson r per axis of (F, 3) trajectories; 0 where the prediction is constant, NaN if the measurement is.
+
+    r is clipped to [-1, 1]: for proportional trajectories the rounding of the
+    quotient can otherwise give 1.0000000000000002.
+    """
     m = measured - measured.mean(axis=0)
     p = predicted - predicted.mean(axis=0)
     sm = np.sqrt(np.sum(m * m, axis=0))
     sp = np.sqrt(np.sum(p * p, axis=0))
     with np.errstate(invalid="ignore", divide="ignore"):
-        r = np.sum(m * p, axis=0) / (sm * sp)
+        r = np.clip(np.sum(m * p, axis=0) / (sm * sp), -1.0, 1.0)
     r = np.where(sp > 0, r, 0.0)
     return np.where(sm > 0, r, np.nan)
 
