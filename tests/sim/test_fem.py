@@ -59,11 +59,76 @@ def test_mass_sums_to_density_times_volume():
     assert ones @ (m @ ones) == pytest.approx(1000.0 * 0.02 * 0.03 * 0.01, rel=1e-12)
 
 
+def test_element_mass_entries_are_the_consistent_closed_form():
+    """Linear tet: M[3a+i, 3b+j] = ρV/20 (1 + δ_ab) δ_ij (a lumped matrix has ρV/4 on the diagonal only)."""
+    rng = np.random.default_rng(8)
+    density = 1050.0
+    for _ in range(3):
+        pts = rng.random((4, 3)) * 0.01
+        volume = abs(np.linalg.det(pts[1:] - pts[0])) / 6.0
+        m = assemble_mass(pts, np.array([[0, 1, 2, 3]]), density).toarray()
+        for a in range(4):
+            for b in range(4):
+                for i in range(3):
+                    for j in range(3):
+                        expected = density * volume / 20.0 * (1 + (a == b)) * (i == j)
+                        assert m[3 * a + i, 3 * b + j] == pytest.approx(expected, rel=1e-12, abs=1e-30)
+
+
+def test_mass_integrates_a_linear_field_exactly():
+    """uᵀMu = ρ∫|u|² dV for a linear u: ∫x² over the box is a³bc/3 (lumped masses overshoot it)."""
+    a, b, c = 0.03, 0.02, 0.01
+    mesh = box_mesh(3, 2, 2, (a, b, c))
+    m = assemble_mass(mesh.points, mesh.tets, 1000.0)
+    u = np.zeros_like(mesh.points)
+    u[:, 0] = mesh.points[:, 0]
+    assert u.ravel() @ (m @ u.ravel()) == pytest.approx(1000.0 * a**3 * b * c / 3, rel=1e-12)
+
+
 def test_nodal_curl_of_a_rigid_rotation_is_the_rotation_everywhere():
     mesh = box_mesh(3, 3, 2, (0.05, 0.03, 0.02), origin=(-0.02, 0.01, 0.0))
     theta = np.array([0.01, -0.03, 0.02])
     w = (nodal_curl_operator(mesh.points, mesh.tets) @ np.cross(theta, mesh.points).ravel()).reshape(-1, 3)
     np.testing.assert_allclose(w, np.broadcast_to(theta, w.shape), atol=1e-15)
+
+
+def _element_rotation(corners: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """½ curl u of the linear field through the 4 corners: from F = ∂u/∂x solved on the edges."""
+    dx = (corners[1:] - corners[0]).T  # columns x_a - x_0
+    du = (u[1:] - u[0]).T  # columns u_a - u_0 = F (x_a - x_0)
+    f = du @ np.linalg.inv(dx)
+    return 0.5 * np.array([f[2, 1] - f[1, 2], f[0, 2] - f[2, 0], f[1, 0] - f[0, 1]])
+
+
+def _reference_nodal_rotations(points, tets, u, weighted=True):
+    """w_i = Σ_{e∋i} V_e w_e / Σ_{e∋i} V_e, one node at a time (a plain loop)."""
+    out = np.zeros_like(points)
+    for i in range(len(points)):
+        total, weight = np.zeros(3), 0.0
+        for tet in tets:
+            if i in tet:
+                v = abs(np.linalg.det(points[tet[1:]] - points[tet[0]])) / 6.0 if weighted else 1.0
+                total += v * _element_rotation(points[tet], u[tet])
+                weight += v
+        out[i] = total / weight
+    return out
+
+
+def test_nodal_curl_equals_volume_weighted_mean_on_a_jittered_mesh():
+    """Unequal tets and a non-rigid field: the volume weighting decides the answer."""
+    from tests.jittered import jittered, volume_spread
+
+    mesh = box_mesh(3, 3, 2, (0.03, 0.03, 0.02), origin=(-0.01, 0.005, 0.0))
+    points = jittered(mesh.points, mesh.tets, 0.2, seed=4)
+    assert volume_spread(points, mesh.tets) > 3
+    x, y, z = (points / 0.03).T
+    u = 1e-3 * np.stack([np.sin(2 * y) * z**2, np.cos(3 * x) + x * z, np.exp(x) * y**2 - np.sin(z)], axis=1)
+    w = (nodal_curl_operator(points, mesh.tets) @ u.ravel()).reshape(-1, 3)
+    expected = _reference_nodal_rotations(points, mesh.tets, u)
+    np.testing.assert_allclose(w, expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+    # the check can tell: without the weights the rotations differ by far more than the tolerance
+    unweighted = _reference_nodal_rotations(points, mesh.tets, u, weighted=False)
+    assert np.abs(unweighted - expected).max() > 1e-3 * np.abs(expected).max()
 
 
 def _cantilever_frequencies(nx, ny, length, height, n_modes=4):
