@@ -44,6 +44,37 @@ def test_real_export_quirks():
     assert rec.audio is None
 
 
+def test_a_status_other_than_ok_makes_a_filled_sample_nan(tmp_path):
+    """A bad-fit coil reports numbers with a status other than 55: a dropout, not a position."""
+    status = {0: [55, 55, 56, 55, 0], 4: [55, 119, 55, 23, 55]}
+    header = ["AudioTime[s]", "MeasId", "WavId"]
+    for sensor_id in status:
+        k = sensor_id + 1
+        header += [f"Sensor {k} Id", f"Sensor {k} Status", "X[mm]", "Y[mm]", "Z[mm]", "Q0", "Qx", "Qy", "Qz"]
+    lines, xyz_mm = ["\t".join(header)], {s: [] for s in status}
+    for row in range(5):
+        fields = [f"{0.01 * row:.6f}", f"{row + 1}.000000", f"{220 * row}.000000"]
+        for sensor_id, codes in status.items():
+            xyz = [10.0 * sensor_id + row + 0.25, -20.0 + row, 30.5 - 2 * row]
+            xyz_mm[sensor_id].append(xyz)
+            fields += [f"{sensor_id}.000000", f"{codes[row]}.000000"] + [f"{v:.6f}" for v in xyz]
+            fields += ["0.500000", "0.500000", "0.500000", "0.500000"]
+        lines.append("\t".join(fields))
+    path = tmp_path / "status.tsv"
+    path.write_text("\n".join(lines) + "\n")
+    rec = read_recording(path)
+    assert rec.sensor_names == ["S0", "S4"]
+    for sensor_id, codes in status.items():
+        name = f"S{sensor_id}"
+        ok = np.array(codes) == 55
+        positions, quats = rec.sensors[name], rec.orientations[name]
+        assert np.all(np.isnan(positions[~ok])) and np.all(np.isnan(quats[~ok])), name
+        np.testing.assert_allclose(positions[ok], np.array(xyz_mm[sensor_id])[ok] / 1000.0, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(quats[ok], 0.5, rtol=0, atol=1e-12)
+        assert rec.valid(name).tolist() == ok.tolist()
+    assert rec.metadata["ndi_status"].tolist() == [list(pair) for pair in zip(*status.values())]
+
+
 def test_round_trip_with_audio(tmp_path):
     rec = make_recording()
     out = tmp_path / "take.tsv"
