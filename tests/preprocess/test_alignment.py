@@ -6,7 +6,7 @@ import pytest
 from tests.preprocess._synthetic import random_rotations
 from tonguevis.errors import TonguevisError
 from tonguevis.preprocess import SimilarityTransform, align_paper, fit_similarity
-from tonguevis.preprocess.alignment import _best_scale
+from tonguevis.preprocess.alignment import _best_scale, _rotation_between
 
 RHOMBUS = {"TT": [-0.010, 0.0, 0.003], "TD": [-0.030, 0.0, 0.008],
            "TL": [-0.020, 0.006, 0.005], "TR": [-0.020, -0.006, 0.005]}
@@ -99,6 +99,41 @@ def test_align_paper_recovers_a_known_transform():
         assert fitted.scale == pytest.approx(t.scale, rel=1e-9)
         for n, p in RHOMBUS.items():
             np.testing.assert_allclose(fitted.apply(np.asarray(p)), nodes[n], atol=1e-11)
+
+
+def _assert_proper_rotation_taking(r, u, v):
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(r) == pytest.approx(1.0, abs=1e-12)
+    np.testing.assert_allclose(r @ (u / np.linalg.norm(u)), v / np.linalg.norm(v), atol=1e-12)
+
+
+@pytest.mark.parametrize("u", [[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, 0, -2.5], [0.9, 0.1, 0.0],
+                               [0.95, -0.2, 0.1], [3.0, -1.0, 2.0], [-0.2, 0.7, -0.4]])
+def test_rotation_between_opposite_directions_is_a_proper_half_turn(u):
+    """u onto -u: no smallest rotation exists, so the branch picks a half turn; it must not reflect."""
+    u = np.asarray(u, dtype=float)
+    r = _rotation_between(u, -u)
+    _assert_proper_rotation_taking(r, u, -u)
+    # a half turn about an axis perpendicular to u: applied twice it is the identity
+    np.testing.assert_allclose(r @ r, np.eye(3), atol=1e-12)
+    assert np.trace(r) == pytest.approx(-1.0, abs=1e-12)
+    # generic and equal directions too
+    rng = np.random.default_rng(int(1000 * abs(u).sum()))
+    for v in (rng.normal(size=3), 2.0 * u):
+        _assert_proper_rotation_taking(_rotation_between(u, v), u, v)
+
+
+def test_align_paper_recovers_a_half_turn_of_the_midline():
+    """Rest TT-TD pointing exactly backwards from the mesh's: the opposite-vectors branch runs."""
+    half_turn = np.diag([-1.0, 1.0, -1.0])  # about y, which is perpendicular to TT-TD
+    t = SimilarityTransform(1.2, half_turn, np.array([0.01, -0.02, 0.005]))
+    nodes = {n: t.apply(np.asarray(p)) for n, p in RHOMBUS.items()}
+    rest = {n: np.asarray(p) for n, p in RHOMBUS.items()}
+    assert np.cross(rest["TT"] - rest["TD"], nodes["TT"] - nodes["TD"]) == pytest.approx(np.zeros(3), abs=1e-15)
+    fitted = align_paper(rest, nodes)
+    np.testing.assert_allclose(fitted.rotation, half_turn, atol=1e-9)
+    for n, p in rest.items():
+        np.testing.assert_allclose(fitted.apply(p), nodes[n], atol=1e-11)
 
 
 def test_align_paper_steps():
