@@ -104,6 +104,32 @@ def test_grouping_and_summary():
         group_curves(curves, ("colour",))
 
 
+def _skewed(scale, power, n, duration, **labels):
+    """A curve whose samples have mean != median (a triangle's do not), on its own time grid."""
+    t = np.linspace(0, duration, n)
+    e = scale * (t / duration) ** power + 1e-5 * np.sin(7 * t)
+    base = dict(recording="r", speaker="s", syllable="ta", trial=1, train=1, index=2)
+    base.update(labels)
+    return EnergyCurve(**base, times=t + 2.0, time_s=t, time_norm=t / duration, energy=e,
+                       frames=np.arange(n), start=2.0, end=2.0 + duration)
+
+
+def test_mean_energy_and_curve_spread_match_numpy():
+    curves = [_skewed(4e-3, 3, 41, 0.3), _skewed(1e-3, 5, 57, 0.45), _skewed(2.5e-3, 2, 33, 0.25)]
+    for c in curves:
+        assert c.stats()["mean_J"] == pytest.approx(np.mean(c.energy), rel=1e-12)
+        assert abs(np.mean(c.energy) - np.median(c.energy)) > 0.05 * np.mean(c.energy)  # the two differ here
+    (group,) = summarize(curves, grid_points=51)
+    grid = np.linspace(0.0, 1.0, 51)
+    on_grid = np.array([np.interp(grid, c.time_norm, c.energy) for c in curves])
+    np.testing.assert_allclose(group.grid, grid, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(group.mean_curve, on_grid.mean(axis=0), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(group.std_curve, on_grid.std(axis=0, ddof=1), rtol=1e-12, atol=1e-20)
+    means = [np.mean(c.energy) for c in curves]
+    assert group.mean["mean_J"] == pytest.approx(np.mean(means), rel=1e-12)
+    assert group.std["mean_J"] == pytest.approx(np.std(means, ddof=1), rel=1e-12)
+
+
 def test_vowel_windows_put_the_consonant_inside():
     from tonguevis.analysis.energy import vowel_windows
 
