@@ -14,6 +14,7 @@ from tests.analysis.segmentation_support import (
     reference_one_ring,
     reference_rigid_fit,
 )
+from tests.jittered import jittered, volume_spread
 from tonguevis.analysis.segmentation import SegmentationTarget, TetGraph, make_fitter
 from tonguevis.analysis.segmentation.greedy import grow_partitions
 
@@ -29,9 +30,13 @@ def _wavy_frames(points: np.ndarray, n_frames: int, seed: int = 0) -> np.ndarray
     return np.array(frames)
 
 
-@pytest.fixture(scope="module")
-def small_bar():
+@pytest.fixture(scope="module", params=["structured", "jittered"])
+def small_bar(request):
+    """A 5 x 2 x 2 bar; 'jittered' moves its nodes so tet volumes (and lumped weights) differ."""
     points, tets = bar_mesh(5, 2, 2, length=0.05)
+    if request.param == "jittered":
+        points = jittered(points, tets, 0.2, seed=3)
+        assert volume_spread(points, tets) > 3
     rng = np.random.default_rng(1)
     # shuffle tet and node order so that nothing relies on the structured numbering
     node_order = rng.permutation(len(points))
