@@ -1,4 +1,4 @@
-"""NDI Wave (WaveFront) TSV export, read and write, with the paired WAV.
+"""NDI Wave (WaveFront) TSV export, read and write (the writer adds the WAV).
 
 Layout (one header line, then one tab-separated row per frame)::
 
@@ -17,8 +17,9 @@ Layout (one header line, then one tab-separated row per frame)::
 * Frames the system dropped show as time gaps; they are listed in
   ``metadata['dropped_frames']`` as (time before the gap, frames missing).
   The samples are not re-gridded.
-* A WAV with the same stem (``x.tsv`` -> ``x.wav``) is attached as ``rec.audio``,
-  its first sample at AudioTime 0.
+* The paired WAV (``x.tsv`` -> ``x.wav``, first sample at AudioTime 0) is attached
+  by :func:`~tonguevis.io.registry.read_recording`, as for every format (see
+  :mod:`tonguevis.io.companions`); this reader reads the TSV only.
 * ``metadata['ndi_status']`` is the (N, S) int status of every sample (-1 where
   empty), columns in the order of ``metadata['ndi_ids']``; ``metadata['meas_id']``
   the (N,) MeasId column.
@@ -40,7 +41,7 @@ from tonguevis.io._common import (
 )
 from tonguevis.io.recording import Audio, Recording
 from tonguevis.io.registry import RecordingFormat, register_format
-from tonguevis.io.wav import read_wav, write_wav
+from tonguevis.io.wav import write_wav
 
 log = logging.getLogger("tonguevis")
 
@@ -103,11 +104,10 @@ def _parse_header(header: list[str], path) -> tuple[list[dict], str]:
     return blocks, (units.pop() if units else "mm")
 
 
-def read_ndi_wave(path, axes=None, audio=True, rate: float | None = None) -> Recording:
+def read_ndi_wave(path, axes=None, rate: float | None = None) -> Recording:
     """Read an NDI Wave TSV export (see the module docstring).
 
     axes : None (device frame) or an axis mapping for :func:`parse_axes`.
-    audio : True (pair ``<stem>.wav`` if it exists), False, or a WAV path.
     rate : sample rate in Hz; default estimated from the times (100 Hz if one frame).
     """
     path = Path(path)
@@ -183,15 +183,6 @@ def read_ndi_wave(path, axes=None, audio=True, rate: float | None = None) -> Rec
             orientations[name] = rotate_quaternions(quats, A)
         plausible = np.isfinite(status) & (np.abs(status) < 2**31)
         status_all.append(np.where(plausible, status, -1).astype(np.int64))
-    if isinstance(audio, (str, bytes)) or hasattr(audio, "__fspath__"):
-        wav_path = Path(audio)
-        if not wav_path.exists():
-            raise RecordingError(f"audio file {wav_path} does not exist", path)
-    elif audio:
-        wav_path = next((p for p in (path.with_suffix(".wav"), path.with_suffix(".WAV")) if p.exists()), None)
-    else:
-        wav_path = None
-    rec_audio = read_wav(wav_path) if wav_path is not None else None
     metadata = {
         "format": "ndi_wave",
         "file": str(path),
@@ -203,11 +194,10 @@ def read_ndi_wave(path, axes=None, audio=True, rate: float | None = None) -> Rec
         "ndi_ids": ids,
         "ndi_status": np.stack(status_all, axis=1),
         "meas_id": table[:, 1].copy() if blocks[0]["id_col"] > 1 else None,
-        "audio_file": None if wav_path is None else str(wav_path),
         "truncated": truncated is not None,
     }
     return Recording(rate=rate, times=times.copy(), sensors=sensors, orientations=orientations,
-                     audio=rec_audio, metadata=metadata)
+                     metadata=metadata)
 
 
 def _assign_ids(names: list[str], sensor_map) -> dict[str, int]:

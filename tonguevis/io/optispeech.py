@@ -97,12 +97,11 @@ def _sensor_blocks(header: list[str]) -> list[dict]:
     return blocks
 
 
-def read_optispeech(path, rate: float = DEFAULT_RATE, max_gap: float = DEFAULT_MAX_GAP, audio=None) -> Recording:
+def read_optispeech(path, rate: float = DEFAULT_RATE, max_gap: float = DEFAULT_MAX_GAP) -> Recording:
     """Read an Opti-Speech sweep export (see the module docstring); positions in metres, our axes.
 
     rate : the uniform clock (Hz) the samples are resampled onto.
     max_gap : longest hole (s) between distinct samples that interpolation bridges.
-    audio : ignored (the exports carry none; pair a WAV with ``--audio``).
     """
     path = Path(path)
     text = decode_text(read_bytes(path), path)

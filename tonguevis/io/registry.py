@@ -130,9 +130,11 @@ def read_recording(
     path: str | os.PathLike,
     sensor_map: dict | str | os.PathLike | None = None,
     format: str | None = None,
+    audio: Any = None,
+    labels: Any = None,
     **format_options: Any,
 ) -> Recording:
-    """Read an EMA recording in any supported format.
+    """Read an EMA recording in any supported format, with its sound and labels.
 
     Parameters
     ----------
@@ -144,12 +146,18 @@ def read_recording(
         None and a ``sensor_map.json`` lies beside the file (as in a corpus
         folder), that map is used; pass ``{}`` to read the raw channel names.
     format : force a format by name instead of detecting it.
+    audio : None/True (the file's own audio, else a WAV with the same stem
+        beside it or in the Carstens ``wav`` folder), a WAV path, or False
+        (none); see :mod:`tonguevis.io.companions`.
+    labels : None/True (a ``.TextGrid`` with the same stem beside it), a
+        TextGrid path, or False (no labels at all).
     **format_options : passed to the reader (e.g. ``axes=`` for NDI Wave,
-        ``channels=`` for headerless Carstens AG500, ``audio=False``).
+        ``channels=`` for headerless Carstens AG500).
 
     Returns a :class:`Recording` with positions in metres.
     Raises :class:`RecordingError` naming the file and the problem.
     """
+    from tonguevis.io.companions import attach_audio, attach_labels
     from tonguevis.io.sensor_map import apply_sensor_map, load_sensor_map
 
     path = Path(path)
@@ -178,6 +186,8 @@ def read_recording(
         raise RecordingError(f"malformed {fmt.name} file ({type(exc).__name__}: {exc})", path) from exc
     rec.metadata.setdefault("format", fmt.name)
     rec.metadata.setdefault("file", str(path))
+    attach_audio(rec, path, audio)
+    attach_labels(rec, path, labels)
     if mapping is not None:
         rec = apply_sensor_map(rec, mapping, fmt.channel_name, path)
         rec.metadata["sensor_map"] = dict(mapping)
