@@ -9,6 +9,9 @@ PACKAGE_DIR = Path(__file__).resolve().parent
 REPO_DIR = PACKAGE_DIR.parent
 MESH_DIR = REPO_DIR / "meshes"
 DATA_DIR = REPO_DIR / "data"
+#: The demo plain ``tonguevis`` opens: speaker 1's synthetic /ta/ train with its sound
+#: (the tongue tip's closure against the ridge is the clearest first look at the model).
+DEMO_RECORDING = DATA_DIR / "spk1_ta.tsv"
 
 
 def cache_dir() -> Path:

@@ -132,6 +132,19 @@ def test_a_second_recording_opens_after_the_first(qtbot, window):
     assert window.view3d.scene.scalar_bar is not None
 
 
+def test_plain_tonguevis_opens_the_ta_train_with_its_sound(qtbot, window):
+    """The README's first command promises the /ta/ train: chosen by name, not the first file in data/."""
+    from tonguevis.paths import DATA_DIR
+
+    if not (DATA_DIR / "spk1_ta.tsv").exists():
+        pytest.skip("demo corpus not built")
+    with qtbot.waitSignal(window.simulation_finished, timeout=60000):
+        window.open_demo()  # what `tonguevis` (no arguments) runs
+    assert window.session.path == DATA_DIR / "spk1_ta.tsv"
+    assert window.session.recording.audio is not None
+    assert "spk1_ta.tsv" in window.windowTitle()
+
+
 def test_unknown_channels_ask_for_a_sensor_map(qtbot, window, tmp_path):
     import shutil
 

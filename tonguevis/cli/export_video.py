@@ -6,7 +6,7 @@ from pathlib import Path
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the first demo recording)")
+    parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the demo /ta/ train, spk1_ta)")
     parser.add_argument("--out", type=Path, required=True, metavar="MP4", help="the video to write")
     parser.add_argument("--start", type=float, metavar="S", help="first second (default: the start)")
     parser.add_argument("--end", type=float, metavar="S", help="last second (default: the end)")

@@ -6,7 +6,7 @@ from pathlib import Path
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the first demo recording)")
+    parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the demo /ta/ train, spk1_ta)")
     parser.add_argument("--sensors", metavar="MAP",
                         help="sensor map: a preset (paper, haskins, mngu0) or a JSON file of name -> channel")
     parser.add_argument("--mesh", type=Path, metavar="PATH", help="tetrahedral tongue mesh (default: the shipped one)")

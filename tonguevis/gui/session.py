@@ -176,11 +176,7 @@ def remap_session(session: Session, mapping: dict[str, str]) -> Session:
 
 
 def demo_recording_path() -> Path | None:
-    """The first demo recording shipped in ``data/`` (sorted by name), or None."""
-    from tonguevis.paths import DATA_DIR
+    """The demo recording (:data:`tonguevis.paths.DEMO_RECORDING`, the /ta/ train), or None if not shipped."""
+    from tonguevis.paths import DEMO_RECORDING
 
-    for pattern in ("*.tsv", "*.csv", "*.pos", "*.ema", "*.mat"):
-        found = sorted(DATA_DIR.glob(pattern))
-        if found:
-            return found[0]
-    return None
+    return DEMO_RECORDING if DEMO_RECORDING.exists() else None
