@@ -144,10 +144,26 @@ def test_malformed_json(tmp_path, text):
         read_landmarks(tmp_path / "absent.json")
 
 
-def test_upside_down_mesh_is_refused_or_differs(ours):
-    """The rule needs z up: a mesh turned upside down has no tip contour on top."""
+def test_upside_down_mesh_is_not_refused_its_floor_gets_the_sensors(ours):
+    """find_landmarks trusts the frame it is given (z up, module docstring): it is not refused.
+
+    A mesh carries no anatomy to tell the dorsum from the floor, and the only
+    "is z up?" checks count upward- and downward-facing nodes, which a tongue
+    turned over (a half turn about x) has plenty of.  So the rule runs as
+    written on the surface now facing up: every sensor lands on the real
+    tongue's underside and every anchor on its dorsum.  Orienting the mesh is
+    the reader's job (``read_mesh(..., axes=...)``).
+    """
     flipped = TetMesh(ours.points * [1, -1, -1], ours.tets)
-    landmarks = find_landmarks(flipped)
-    # the 'dorsum' is now the floor: TT lands far from where it should
+    landmarks = find_landmarks(flipped)  # no MeshError
+    dorsum = set(dorsal_surface_nodes(ours).tolist())
+    underside = set(inferior_surface_nodes(ours).tolist())
+    assert set(dorsal_surface_nodes(flipped).tolist()) == underside
+    assert set(landmarks.sensors) == {"TT", "TB", "TD", "TBK", "TL", "TR"}
+    for name, node in landmarks.sensors.items():
+        assert node in underside and node not in dorsum, name
+    for node in landmarks.anchors.tolist():
+        assert node in dorsum and node not in underside
+    # the right-side-up mesh is the mirror case: sensors on the dorsum, anchors underneath
     right = find_landmarks(ours)
-    assert landmarks.sensors["TT"] != right.sensors["TT"]
+    assert set(right.sensors.values()) <= dorsum and set(right.anchors.tolist()) <= underside
