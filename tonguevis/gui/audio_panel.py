@@ -1,4 +1,4 @@
-"""The sound: waveform and spectrogram with the shared cursor."""
+"""The sound: waveform and spectrogram with the shared cursor, and the label tiers under them."""
 
 from __future__ import annotations
 
@@ -6,11 +6,14 @@ import numpy as np
 from scipy.signal import spectrogram
 
 from tonguevis.appstate import AppState
+from tonguevis.gui.label_tiers import draw_tiers, fit_texts, tiers
 from tonguevis.gui.timeplot import TimePlot
 
 #: Waveform drawn as a min/max envelope over this many bins (fast at any length).
 ENVELOPE_BINS = 3000
 SPECTROGRAM_MAX_HZ = 8000.0
+#: Height of one label tier's row relative to the waveform's axes.
+TIER_ROW_RATIO = 0.3
 
 
 def envelope(samples: np.ndarray, rate: float, offset: float, bins: int = ENVELOPE_BINS):
@@ -24,13 +27,42 @@ def envelope(samples: np.ndarray, rate: float, offset: float, bins: int = ENVELO
 
 
 class AudioPlot(TimePlot):
+    """Waveform and spectrogram; with labels, a third axes ``tiers_ax`` holds one row per tier."""
+
     def __init__(self, state: AppState, parent=None):
         super().__init__(state, parent, height=1.8)
-        self.wave_ax, self.spec_ax = self.figure.subplots(2, 1, sharex=True, height_ratios=[1, 1.3])
-        self.set_time_axes([self.wave_ax, self.spec_ax])
+        self.tiers_ax = None
+        self.n_tiers = 0
+        self._tier_texts: list = []
+        self._time_range = (0.0, 1.0)
+        self._layout(0)
 
-    def show_audio(self, audio, time_range: tuple[float, float], productions=()) -> None:
-        for ax in (self.wave_ax, self.spec_ax):
+    def _layout(self, n_tiers: int) -> None:
+        """(Re)make the axes: waveform, spectrogram and, when there are tiers, their rows."""
+        self.figure.clear()
+        if n_tiers:
+            self.wave_ax, self.spec_ax, self.tiers_ax = self.figure.subplots(
+                3, 1, sharex=True, height_ratios=[1, 1.3, TIER_ROW_RATIO * n_tiers])
+        else:
+            self.wave_ax, self.spec_ax = self.figure.subplots(2, 1, sharex=True, height_ratios=[1, 1.3])
+            self.tiers_ax = None
+        self.n_tiers = n_tiers
+        self.set_time_axes(self.time_axes)
+
+    @property
+    def time_axes(self) -> list:
+        return [ax for ax in (self.wave_ax, self.spec_ax, self.tiers_ax) if ax is not None]
+
+    def show_audio(self, audio, time_range: tuple[float, float], productions=(), labels=()) -> None:
+        """Draw ``audio`` over ``time_range`` (s), production starts as dashed lines and the
+        label tiers of ``labels`` (a list of :class:`~tonguevis.io.Label`) in rows below."""
+        labels = list(labels or ())
+        n_tiers = len(tiers(labels))
+        if n_tiers != self.n_tiers:
+            self._layout(n_tiers)
+        self._time_range = (float(time_range[0]), float(time_range[1]))
+        self._tier_texts = []
+        for ax in self.time_axes:
             ax.clear()
             ax.tick_params(labelsize=7)
         if audio is None or len(audio.samples) == 0:
@@ -56,7 +88,24 @@ class AudioPlot(TimePlot):
         for start, end in productions:
             for ax in (self.wave_ax, self.spec_ax):
                 ax.axvline(start, color="#2980b9", lw=0.6, ls="--")
-        self.spec_ax.set_xlabel("time (s)", fontsize=8)
+        bottom = self.spec_ax
+        if self.tiers_ax is not None:
+            self._tier_texts = draw_tiers(self.tiers_ax, labels, self._time_range)
+            self._fit_tier_texts()
+            bottom = self.tiers_ax
+        bottom.set_xlabel("time (s)", fontsize=8)
         self.wave_ax.set_xlim(*time_range)
-        self.set_time_axes([self.wave_ax, self.spec_ax])
+        self.set_time_axes(self.time_axes)
         self.draw_idle()
+
+    def _fit_tier_texts(self) -> None:
+        """Hide the interval texts wider than their interval at the plot's present width."""
+        if not self._tier_texts:
+            return
+        start, end = self._time_range
+        width_px = self.figure.get_figwidth() * self.figure.dpi * 0.85  # the axes span ~85 % of the figure
+        fit_texts(self._tier_texts, width_px / max(end - start, 1e-9))
+
+    def resizeEvent(self, event) -> None:  # noqa: N802 (Qt name)
+        super().resizeEvent(event)  # resizes the figure and redraws
+        self._fit_tier_texts()

@@ -208,7 +208,8 @@ class MainWindow(MenusMixin, QMainWindow):
         self.state.set_range(start, end, period, self)
         self.playback.set_audio(session.recording.audio)
         self.transport.set_productions(session.productions)
-        self.audio.show_audio(session.recording.audio, (start, end), session.productions)
+        self.audio.show_audio(session.recording.audio, (start, end), session.productions,
+                              session.recording.labels)
         self._publish()
         self._simulate(session)
 
