@@ -1,0 +1,89 @@
+"""The README's commands stay true for someone with a fresh clone: every command parses, reads
+only the demo in data/ or a placeholder, and the cheap ones run as written."""
+
+from __future__ import annotations
+
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+
+from tonguevis.cli import build_parser, main
+from tonguevis.paths import DATA_DIR, REPO_DIR
+
+README = REPO_DIR / "README.md"
+#: Commands quick enough to run here (the others simulate; their own tests run them).
+CHEAP = ("info", "syllables", "convert")
+#: Arguments of the commands that name the recordings they read.
+INPUTS = ("file", "input", "paths", "source", "target")
+
+
+def readme_commands() -> list[list[str]]:
+    """The arguments of every ``tonguevis ...`` line of the README's bash blocks."""
+    commands = []
+    for block in re.findall(r"```bash\n(.*?)```", README.read_text(encoding="utf-8"), flags=re.S):
+        for line in block.splitlines():
+            words = shlex.split(line, comments=True)
+            if words and words[0] == "tonguevis":
+                commands.append(words[1:])
+    return commands
+
+
+COMMANDS = readme_commands()
+
+
+def inputs(args: list[str]) -> list[str]:
+    """The recordings (or folders) a command reads, as written."""
+    namespace = build_parser().parse_args(args or ["view"])
+    found = []
+    for name in INPUTS:
+        value = getattr(namespace, name, None)
+        for item in value if isinstance(value, list) else [value]:
+            if item is None:
+                continue
+            path = item[0] if isinstance(item, tuple) else item  # morph's FILE@TIME
+            found.append(Path(path).as_posix())
+    return found
+
+
+def is_placeholder(path: str) -> bool:
+    """``RECORDING.mat``-like names: capitals that cannot be mistaken for a real file."""
+    return re.fullmatch(r"[A-Z][A-Z_]*(\.\w+)?", Path(path).name) is not None
+
+
+def test_readme_shows_the_commands():
+    assert len(COMMANDS) >= 10
+    assert {args[0] for args in COMMANDS if args} >= {"view", "info", "syllables", "convert", "validate"}
+
+
+@pytest.mark.parametrize("args", COMMANDS, ids=lambda args: " ".join(args) or "(no arguments)")
+def test_readme_command_reads_files_a_user_has(args):
+    try:
+        files = inputs(args)
+    except SystemExit:
+        pytest.fail(f"`tonguevis {' '.join(args)}` does not parse")
+    assert not any(".." in Path(word).parts for word in args), "points outside the clone"
+    for path in files:
+        assert is_placeholder(path) or (Path(path).parts[0] == "data" and (REPO_DIR / path).exists()), (
+            f"`tonguevis {' '.join(args)}` reads {path}: neither a demo file in data/ nor a placeholder")
+
+
+def test_readme_code_names_only_demo_files_that_exist():
+    text = README.read_text(encoding="utf-8")
+    named = set(re.findall(r"(?<![\w/.])data/[\w.-]+", text))
+    assert named
+    for path in named:
+        assert (REPO_DIR / path).exists(), path
+
+
+@pytest.mark.parametrize("args", [a for a in COMMANDS if a and a[0] in CHEAP], ids=" ".join)
+def test_readme_command_runs_as_written(args, tmp_path, monkeypatch, capsys):
+    if not DATA_DIR.exists():
+        pytest.skip("no demo corpus")
+    (tmp_path / "data").symlink_to(DATA_DIR, target_is_directory=True)  # a clone's root; outputs stay here
+    monkeypatch.chdir(tmp_path)
+    code = main(args)
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "error" not in err
