@@ -1,4 +1,4 @@
-"""Scores, rest-interval fallback and the ``tonguevis validate`` command."""
+"""Scores and the ``tonguevis validate`` command (the rest fallback: tests/preprocess/test_rest.py)."""
 
 from __future__ import annotations
 
@@ -8,13 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from tonguevis.analysis.validation_scores import (
-    resolve_rest_interval,
-    return_to_rest_frame,
-    stillest_window,
-    trajectory_scores,
-)
-from tonguevis.io.recording import Recording
+from tonguevis.analysis.validation_scores import return_to_rest_frame, trajectory_scores
 
 
 def _pearson(a, b):
@@ -66,23 +60,6 @@ def test_proportional_trajectories_correlate_within_plus_minus_one():
             assert np.all((-1.0 <= r) & (r <= 1.0)), (c, r.tolist())
             np.testing.assert_allclose(r, np.sign(c), rtol=0, atol=1e-14)
             assert -1.0 <= s["corr"] <= 1.0
-
-
-def _moving_recording(still_from: float, still_to: float, duration: float = 2.0) -> Recording:
-    rate = 100.0
-    t = np.arange(int(duration * rate)) / rate
-    frozen = np.clip(t, None, still_from) + np.clip(t - still_to, 0, None)  # clock that stops while still
-    tip = np.stack([0.005 * np.sin(9 * frozen), 0 * t, 0.004 * np.cos(7 * frozen)], axis=1)
-    return Recording(rate=rate, times=t, sensors={"TT": tip, "TD": 0.5 * tip + 0.01}, metadata={"file": "x"})
-
-
-def test_rest_falls_back_to_the_stillest_window():
-    rec = _moving_recording(1.2, 1.5)
-    interval, how = resolve_rest_interval(rec, ["TT", "TD"])
-    assert how == "stillest window"
-    assert 1.2 - 1e-9 <= interval[0] and interval[1] <= 1.5 + 0.011
-    assert stillest_window(rec, ["TT"]) == interval
-    assert resolve_rest_interval(rec, ["TT"], (0.1, 0.3)) == ((0.1, 0.3), "given")
 
 
 def test_return_to_rest_is_the_last_still_frame_after_moving():

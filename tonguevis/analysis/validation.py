@@ -3,7 +3,7 @@
 For each tongue sensor h of a recording in turn:
 
 1. The recording is prepared once with *all* tongue sensors
-   (:func:`tonguevis.sim.prepare_targets`): head and jaw correction, rest
+   (:func:`tonguevis.preprocess.prepare_targets`): head and jaw correction, rest
    pose, the similarity fit onto the model, and each sensor's node (the
    placement-rule node, or with ``landmarks="speaker"`` the dorsal-surface
    node nearest its aligned rest position).  Using every sensor's *rest*
@@ -37,11 +37,7 @@ import numpy as np
 
 from tonguevis._progress import ProgressCallback, report
 from tonguevis.analysis.kinematic import interpolation_weights
-from tonguevis.analysis.validation_scores import (
-    recording_summary,
-    resolve_rest_interval,
-    trajectory_scores,
-)
+from tonguevis.analysis.validation_scores import recording_summary, trajectory_scores
 from tonguevis.errors import SimulationError
 from tonguevis.io.recording import Recording
 
@@ -97,7 +93,7 @@ def validate(
     model=None,
     modes: int = 100,
     landmarks: str = "speaker",
-    rest_interval: tuple[float, float] | None = None,
+    rest_interval=None,
     quasi_static: bool = True,
     tolerance: float = 1e-8,
     progress: ProgressCallback | None = None,
@@ -105,11 +101,12 @@ def validate(
     """Leave-one-sensor-out validation of ``model`` (default: the shipped tongue) on ``recording``.
 
     Needs >= 3 tongue sensors with landmarks on the model (each run is driven
-    by >= 2).  ``rest_interval`` (start_s, end_s) defaults to the detected
-    rest, else the stillest 0.2 s window (logged; the JSON says which).
+    by >= 2).  ``rest_interval`` (start_s, end_s) or a :class:`~tonguevis.preprocess.RestChoice`
+    defaults to the detected rest, else the stillest 0.2 s window (logged; the JSON says which).
     """
     from tonguevis.sim import TongueModel
-    from tonguevis.sim.simulate import TONGUE_SENSORS, prepare_targets, simulate
+    from tonguevis.preprocess.targets import TONGUE_SENSORS, prepare_targets
+    from tonguevis.sim.simulate import simulate
 
     model = model or TongueModel.default()
     file = recording.metadata.get("file")
@@ -119,14 +116,13 @@ def validate(
             f"leave-one-sensor-out needs at least 3 tongue sensors with model landmarks, found "
             f"{candidates or 'none'} (recording sensors: {', '.join(recording.sensor_names)}); "
             "map the channels with a sensor map", file)
-    interval, rest_how = resolve_rest_interval(recording, candidates, rest_interval)
-    prep = prepare_targets(recording, model, landmarks, interval)
+    prep = prepare_targets(recording, model, landmarks, rest_interval)
     names, nodes = prep.names, np.asarray(prep.nodes)
     basis = model.basis(modes)
     w_full = model.rotation_matrix(basis)
     report(progress, 0, 4, "simulating with every sensor")
     motion = simulate(recording, model, modes=modes, warping=True, landmarks=landmarks,
-                      rest_interval=interval, tolerance=tolerance)
+                      rest_interval=prep.rest, tolerance=tolerance)
     centres = prep.aligned_rest
     s = len(names)
     dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
@@ -166,7 +162,7 @@ def validate(
         scores[name]["outside_drivers"] = bool(np.any(weights < -1e-9))
         scores[name]["kinematic_weights"] = weights.tolist()
     report(progress, 4, 4, "validated")
-    summary = recording_summary(recording, motion, prep, interval, rest_how)
+    summary = recording_summary(recording, motion, prep, prep.rest.interval, prep.rest.how)
     settings = _settings(model, basis, modes, landmarks, quasi_static, tolerance)
     return ValidationResult(scores, settings, summary, held_out)
 

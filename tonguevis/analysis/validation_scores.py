@@ -1,4 +1,4 @@
-"""Scores for the validation: trajectory errors, rest interval, per-recording summary.
+"""Scores for the validation: trajectory errors, return to rest, per-recording summary.
 
 Definitions (docs/validation.md repeats them):
 
@@ -20,13 +20,11 @@ from typing import Any
 
 import numpy as np
 
-from tonguevis.errors import RecordingError
 from tonguevis.io.recording import Recording
 
 logger = logging.getLogger("tonguevis")
 
 MIN_AXIS_STD_MM = 1.0
-STILLEST_WINDOW_S = 0.2  # fallback rest window when no 1 s still interval exists
 REST_TOLERANCE_MM = 0.5  # sensors this close to rest count as "returned to rest"
 MOVED_MM = 2.0  # ... after having moved at least this far
 
@@ -63,39 +61,6 @@ def trajectory_scores(measured: np.ndarray, predicted: np.ndarray) -> dict[str, 
     chosen = r[moving] if moving.any() else r[np.isfinite(r)]
     corr = float(np.mean(chosen)) if len(chosen) else np.nan
     return {"rmse_mm": float(rmse), "rmse_axes_mm": rmse_axes.tolist(), "corr": corr, "corr_axes": r.tolist()}
-
-
-def stillest_window(recording: Recording, sensors, duration: float = STILLEST_WINDOW_S) -> tuple[float, float]:
-    """(start_s, end_s) of the window of ``duration`` where the sensors move least.
-
-    Motion = the largest frame-to-frame step over the sensors; the window with
-    the smallest mean motion wins (invalid samples count as moving).
-    """
-    stacked = np.stack([recording.sensors[n] for n in sensors], axis=1)  # (N, S, 3)
-    step = np.linalg.norm(np.diff(stacked, axis=0), axis=2).max(axis=1)
-    step = np.where(np.isfinite(step), step, np.inf)
-    width = max(1, int(round(duration * recording.rate)))
-    if len(step) < width:
-        raise RecordingError(f"recording too short ({recording.n_samples} samples) for a rest window",
-                             recording.metadata.get("file"))
-    csum = np.concatenate([[0.0], np.cumsum(np.where(np.isfinite(step), step, 1e9))])
-    means = (csum[width:] - csum[:-width]) / width
-    start = int(np.argmin(means))
-    return float(recording.times[start]), float(recording.times[start + width])
-
-
-def resolve_rest_interval(recording: Recording, sensors, given=None) -> tuple[tuple[float, float], str]:
-    """The rest interval to use and how it was found: "given", "detected" or "stillest window"."""
-    from tonguevis.preprocess import find_rest_interval
-
-    if given is not None:
-        return (float(given[0]), float(given[1])), "given"
-    try:
-        return find_rest_interval(recording, sensors=sensors), "detected"
-    except RecordingError as exc:
-        interval = stillest_window(recording, sensors)
-        logger.warning("%s; using the stillest %.1f s window %.2f-%.2f s as rest", exc, STILLEST_WINDOW_S, *interval)
-        return interval, "stillest window"
 
 
 def return_to_rest_frame(target_displacement: np.ndarray) -> int | None:

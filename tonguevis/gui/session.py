@@ -66,10 +66,10 @@ def production_intervals(productions: Any) -> list[tuple[float, float]]:
 
 def find_production_table(recording: Recording):
     """The recording's CV productions (a ProductionTable), or None when none can be found (logged)."""
-    from tonguevis.preprocess import find_productions
+    from tonguevis.workflows import find_recording_productions
 
     try:
-        return find_productions(recording)
+        return find_recording_productions(recording)
     except TonguevisError as exc:
         log.warning("no productions found: %s", exc)
         return None
@@ -85,7 +85,9 @@ class Session:
     production_table : the ProductionTable they come from (None if none found).
     motion : the simulated Motion, or None until the simulation ran.
     frames : per-frame drawing data (:class:`tonguevis.gui.frames.MotionFrames`).
-    notes : what the user should know about how it was simulated (e.g. no rest found).
+    given_rest : (start_s, end_s) the user gave for the rest, or None to find it.
+    rest : the :class:`~tonguevis.preprocess.RestChoice` the simulation used (None before).
+    notes : what the user should know about how it was simulated (the rest line).
     """
 
     recording: Recording
@@ -94,6 +96,8 @@ class Session:
     production_table: Any = None
     motion: Any = None
     frames: Any = None
+    given_rest: tuple[float, float] | None = None
+    rest: Any = None
     notes: list[str] = field(default_factory=list)
     _signals: dict = field(default_factory=dict, repr=False)
 
@@ -133,13 +137,23 @@ class Session:
         values = derivative(rec, order=order, window=window if window > order + 1 else None, sensors=names)
         return {n: values[n] * scale for n in names}
 
+    def set_motion(self, motion, frames) -> None:
+        """The simulation's results: ``motion``, its drawing ``frames``, the rest it used and its note."""
+        from tonguevis.workflows import rest_of
+
+        self.motion, self.frames, self.rest = motion, frames, rest_of(motion)
+        self.notes = [self.rest.describe()] if self.rest is not None else []
+        self._signals.pop("displacement", None)  # displacements are from this rest now
+
     def _rest(self, names: list[str]) -> dict[str, np.ndarray]:
-        from tonguevis.preprocess.rest import rest_pose
+        from tonguevis.preprocess.rest import choose_rest_interval, rest_pose
 
         try:
-            return rest_pose(self.recording, sensors=names)
+            # The simulation's rest once there is one; before, the same choice it will make.
+            rest = self.rest or choose_rest_interval(self.recording, given=self.given_rest)
+            return rest_pose(self.recording, rest.interval, sensors=names)
         except TonguevisError as exc:
-            # No still interval: the first valid sample is the best "rest" there is.
+            # Too short for any rest window: the first valid sample is the best "rest" there is.
             log.info("no rest interval (%s); displacements from the first valid sample", exc)
             out = {}
             for n in names:
@@ -151,10 +165,10 @@ class Session:
 
 def load_session(path: str | os.PathLike, sensor_map: dict | str | None = None) -> Session:
     """Read a recording (any supported format) and find its productions."""
-    from tonguevis.io.registry import read_recording
+    from tonguevis.workflows import open_recording
 
     path = Path(path)
-    recording = read_recording(path, sensor_map=sensor_map)
+    recording = open_recording(path, sensor_map)
     if recording.n_samples < 2:
         raise RecordingError(f"the recording has {recording.n_samples} sample(s); at least 2 needed", path)
     return make_session(recording, path)
@@ -172,7 +186,9 @@ def remap_session(session: Session, mapping: dict[str, str]) -> Session:
 
     recording = apply_sensor_map(session.recording, mapping, str, session.path)
     recording.metadata["sensor_map"] = dict(mapping)
-    return make_session(recording, session.path)
+    remapped = make_session(recording, session.path)
+    remapped.given_rest = session.given_rest
+    return remapped
 
 
 def demo_recording_path() -> Path | None:

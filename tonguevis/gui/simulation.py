@@ -39,19 +39,6 @@ def staged(progress: ProgressCallback | None, stage: int, stages: int, name: str
     return callback
 
 
-def rest_interval(recording) -> tuple[tuple[float, float], str]:
-    """The rest interval of ``recording`` and how it was found ("detected" or "stillest window").
-
-    Recordings without a still stretch (a read sentence, e.g. Haskins files) use the
-    window where the tongue sensors move least, so they can still be replayed.
-    """
-    from tonguevis.analysis.validation_scores import resolve_rest_interval
-    from tonguevis.gui.session import TONGUE_NAMES
-
-    sensors = [n for n in TONGUE_NAMES if n in recording.sensors]
-    return resolve_rest_interval(recording, sensors)
-
-
 def simulate_session(
     session: Session,
     model=None,
@@ -61,23 +48,21 @@ def simulate_session(
     landmarks: str = "speaker",
     progress: ProgressCallback | None = None,
 ) -> Session:
-    """Simulate ``session.recording`` and return the session with ``motion`` and ``frames``.
+    """Simulate ``session.recording`` and return the session with ``motion``, ``frames`` and ``rest``.
 
-    ``landmarks``: sensor nodes snapped to the speaker's layout ('speaker') or the
+    The rest is ``session.given_rest`` when the user gave one, else found as every
+    front end finds it (:func:`tonguevis.workflows.simulate_recording`); ``session.notes``
+    says which.  ``landmarks``: sensor nodes snapped to the speaker's layout ('speaker') or the
     paper's placement rule ('rule').  ``progress(done, total, message)`` may raise :class:`tonguevis.errors.Cancelled`.
     """
-    from tonguevis import simulate
+    from tonguevis.workflows import simulate_recording
 
     if progress is not None:
         progress(0, 1000, "building the tongue model")
     if model is None:
         model = build_model(mesh_path)
-    rest, how = rest_interval(session.recording)
-    session.notes = [] if how == "detected" else [
-        f"no rest interval found: the stillest {rest[1] - rest[0]:.1f} s ({rest[0]:.2f}-{rest[1]:.2f} s) "
-        "is used as the rest pose"]
-    motion = simulate(session.recording, model=model, modes=modes, warping=warping, landmarks=landmarks,
-                      rest_interval=rest, progress=staged(progress, 0, 2, "simulating"))
+    motion = simulate_recording(session.recording, model, modes=modes, warping=warping, landmarks=landmarks,
+                                rest=session.given_rest, progress=staged(progress, 0, 2, "simulating"))
     frames = MotionFrames(motion, progress=staged(progress, 1, 2, "reconstructing frames"))
-    session.motion, session.frames = motion, frames
+    session.set_motion(motion, frames)
     return session

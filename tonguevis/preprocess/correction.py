@@ -135,3 +135,22 @@ def _rotate_quaternions(rotation: np.ndarray, q: np.ndarray) -> np.ndarray:
         xyzw = r.as_quat()
         out[ok] = xyzw[:, [3, 0, 1, 2]]
     return out
+
+
+def head_corrected(rec: Recording, rest_interval=None) -> Recording:
+    """``rec`` without head motion when it has >= 3 head references (REF*), else ``rec`` itself.
+
+    The one rule every step uses (the simulation's targets, the productions):
+    :func:`correct_head` on every REF* sensor, its head frame the references'
+    pose over ``rest_interval`` (detected when None, else their median pose).
+    """
+    references = head_references(rec)
+    if not references:
+        return rec
+    return correct_head(rec, references, rest_interval=rest_interval)
+
+
+def head_references(rec: Recording) -> list[str]:
+    """The head references :func:`head_corrected` uses: every REF* sensor when there are >= 3, else none."""
+    references = reference_names(rec.sensor_names)
+    return references if len(references) >= 3 else []

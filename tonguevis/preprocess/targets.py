@@ -1,0 +1,122 @@
+"""From a recording to the sensor targets that drive a tongue model (§3.1).
+
+:func:`prepare_targets` chooses the rest interval (:func:`choose_rest_interval`),
+removes head and jaw motion, takes the rest pose, fits the sensors' rest
+positions onto the model by a similarity transform and picks each sensor's
+node.  The simulation, the validation and every front end go through it.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from tonguevis.errors import SimulationError
+from tonguevis.io.recording import Recording
+from tonguevis.preprocess._names import TONGUE
+from tonguevis.preprocess.rest import RestChoice, choose_rest_interval
+
+if TYPE_CHECKING:
+    from tonguevis.sim.model import TongueModel
+
+logger = logging.getLogger("tonguevis")
+
+TONGUE_SENSORS = TONGUE
+LATERAL_SENSORS = ("TL", "TR")
+
+
+@dataclass
+class PreparedTargets:
+    """Aligned sensor motion ready to drive a model.
+
+    names : S driving sensors; nodes : (S,) their mesh nodes;
+    displacement : (F, S, 3) sensor displacement from rest in the model frame (m), NaN = missing;
+    transform : the similarity fit recording -> model; ignored : sensors without a node;
+    rest : the :class:`RestChoice` (interval and how it was found);
+    midsagittal : whether the fit kept the midsagittal plane;
+    alignment_rms : RMS distance (m) between aligned rest sensors and their nodes before snapping.
+    aligned_rest : (S, 3) rest positions of the sensors in the model frame (m).
+    """
+
+    names: list[str]
+    nodes: np.ndarray
+    displacement: np.ndarray
+    transform: Any
+    ignored: list[str]
+    rest: RestChoice
+    midsagittal: bool
+    alignment_rms: float
+    aligned_rest: np.ndarray
+
+    @property
+    def rest_interval(self) -> tuple[float, float]:
+        """(start_s, end_s) of the rest (``rest.interval``)."""
+        return self.rest.interval
+
+
+def prepare_targets(
+    recording: Recording,
+    model: "TongueModel",
+    landmarks: str = "speaker",
+    rest: RestChoice | tuple[float, float] | None = None,
+    smooth_window: int | None = None,
+) -> PreparedTargets:
+    """Rest interval, head and jaw correction, rest pose, similarity fit, sensor-node choice (§3.1).
+
+    rest : a :class:`RestChoice` (used as is), a (start_s, end_s) the user gave
+        (checked), or None: :func:`choose_rest_interval` finds it (the longest
+        still interval, else the stillest window) over the driving sensors.
+    landmarks : "rule" keeps the model's placement-rule nodes (comparable
+        across speakers, as the paper); "speaker" snaps each sensor to the
+        dorsal-surface node nearest its own aligned rest position.
+    """
+    from tonguevis import preprocess as pp
+
+    file = recording.metadata.get("file")
+    if landmarks not in ("rule", "speaker"):
+        raise SimulationError(f"landmarks must be 'rule' or 'speaker', got {landmarks!r}", file)
+    present = [n for n in TONGUE_SENSORS if n in recording.sensors]
+    names = [n for n in present if n in model.landmarks.sensors]
+    ignored = [n for n in present if n not in model.landmarks.sensors]
+    if ignored:
+        logger.warning("sensors %s have no landmark on the model and are ignored", ", ".join(ignored))
+    if len(names) < 2:
+        raise SimulationError(
+            f"too few tongue sensors to drive the model: found {names or 'none'} of "
+            f"{', '.join(TONGUE_SENSORS)} (recording sensors: {', '.join(recording.sensor_names)}); "
+            "map the channels with a sensor map", file)
+    if not isinstance(rest, RestChoice):
+        rest = choose_rest_interval(recording, sensors=names, given=rest)
+    rest_interval = rest.interval
+    rec = pp.head_corrected(recording, rest_interval=rest_interval)
+    if "JAW" in rec.sensors:
+        rec = pp.correct_jaw(rec, rest_interval=rest_interval)
+    if smooth_window:
+        rec = pp.smooth(rec, window=smooth_window, sensors=names)
+    rest_positions = pp.rest_pose(rec, rest_interval, sensors=names)
+    source = np.array([rest_positions[n] for n in names])
+    rule_nodes = np.array([int(model.landmarks.sensors[n]) for n in names])
+    target = model.mesh.points[rule_nodes]
+    midsagittal = not any(n in LATERAL_SENSORS for n in names)
+    if not midsagittal and len(names) < 3:
+        raise SimulationError(f"a 3-D alignment needs at least 3 tongue sensors, got {names}", file)
+    transform = pp.fit_similarity(source, target, midsagittal=midsagittal)
+    aligned_rest = transform.apply(source)
+    alignment_rms = float(np.sqrt(np.mean(np.sum((aligned_rest - target) ** 2, axis=1))))
+    if landmarks == "speaker":
+        candidates = model.dorsal_nodes
+        dist = np.linalg.norm(model.mesh.points[candidates][None] - aligned_rest[:, None], axis=2)
+        nodes = candidates[np.argmin(dist, axis=1)]
+        if len(np.unique(nodes)) < len(nodes):
+            raise SimulationError(f"two sensors snapped to the same node ({dict(zip(names, nodes.tolist()))})", file)
+    else:
+        nodes = rule_nodes
+    positions = np.stack([rec.sensors[n] for n in names], axis=1)  # (F, S, 3)
+    # Displacement from rest, rotated and scaled into the model frame.
+    displacement = transform.scale * (positions - source[None]) @ transform.rotation.T
+    return PreparedTargets(
+        names, nodes, displacement, transform, ignored, rest, midsagittal, alignment_rms, aligned_rest
+    )
