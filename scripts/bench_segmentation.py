@@ -46,17 +46,12 @@ def load_model(ours: bool = False):
 
 
 def simulate_file(model, name: str):
-    from tonguevis.io import read_recording
-    from tonguevis.preprocess import correct_head, find_productions
-    from tonguevis.preprocess._names import reference_names
-    from tonguevis.sim import simulate
+    from tonguevis.workflows import find_recording_productions, open_recording, simulate_recording
 
     path = REPO / "data" / f"{name}.tsv"
-    rec = read_recording(path, sensor_map=REPO / "data" / "sensor_map.json")
-    motion = simulate(rec, model, modes=100)
-    references = reference_names(rec.sensor_names)
-    timing = correct_head(rec, references) if len(references) >= 3 else rec
-    return motion, find_productions(timing)
+    rec = open_recording(path, REPO / "data" / "sensor_map.json")
+    motion = simulate_recording(rec, model, modes=100)
+    return motion, find_recording_productions(rec)
 
 
 def fig17_seeds(model) -> list[int]:

@@ -51,11 +51,12 @@ def main(argv=None) -> int:
     os.environ["TONGUEVIS_CACHE"] = tempfile.mkdtemp(prefix="tonguevis-bench-")
     from tonguevis.io import read_recording
     from tonguevis.mesh import ARTISYNTH_AXES, read_mesh
-    from tonguevis.sim import TongueModel, prepare_targets
+    from tonguevis.preprocess import prepare_targets
+    from tonguevis.sim import TongueModel
     from tonguevis.sim.newmark import NewmarkSettings, integrate
     from tonguevis.sim.newmark_warp import integrate_warp
     from tonguevis.sim.rotation import rotate_accumulated
-    from tonguevis.sim.warp_kernels import rotate_accumulated_warp
+    from tonguevis.sim.kernels import rotate_accumulated_compiled
 
     if args.mesh is not None:
         mesh_path, axes = args.mesh, args.axes
@@ -100,7 +101,7 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(0)
     w = rng.normal(size=(frames, mesh.n_nodes, 3)) * 0.2
     d = rng.normal(size=(frames, mesh.n_nodes, 3)) * 1e-3
-    t_wk, fast = best_of(lambda: rotate_accumulated_warp(w, d))
+    t_wk, fast = best_of(lambda: rotate_accumulated_compiled(w, d))
     t_np, slow = best_of(lambda: rotate_accumulated(w, d), repeat=1)
 
     figures = {

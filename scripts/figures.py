@@ -56,16 +56,15 @@ def simulate_corpus(data: Path, model, modes: int):
 
 def vowel_curves(result, data: Path):
     """The same productions on vowel-to-vowel windows (consonant mid-curve), from the simulated motions."""
-    from tonguevis.analysis.corpus import _head_corrected, labels_from_name
+    from tonguevis.analysis.corpus import labels_from_name
     from tonguevis.analysis.energy import production_curves, vowel_windows
-    from tonguevis.io import read_recording
-    from tonguevis.preprocess import find_productions
+    from tonguevis.workflows import find_recording_productions, open_recording
 
     curves = []
     for name, motion in result.motions.items():
         entry = labels_from_name(data / f"{name}.tsv")
-        rec = read_recording(entry.path)
-        windows = [w for w in vowel_windows(find_productions(_head_corrected(rec), keep=None)) if 2 <= w.index <= 4]
+        rec = open_recording(entry.path)
+        windows = [w for w in vowel_windows(find_recording_productions(rec, keep=None)) if 2 <= w.index <= 4]
         curves += production_curves(motion, windows, recording=name, speaker=entry.speaker, syllable=entry.syllable)
     return curves
 

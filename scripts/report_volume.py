@@ -24,12 +24,10 @@ REPO = Path(__file__).resolve().parents[1]
 
 def production_frames(rec, motion) -> np.ndarray:
     """Boolean mask of the frames inside the kept productions."""
-    from tonguevis.preprocess import correct_head, find_productions
+    from tonguevis.workflows import find_recording_productions
 
-    refs = [n for n in rec.sensors if n.startswith("REF")]
-    clean = correct_head(rec) if len(refs) >= 3 else rec
     mask = np.zeros(motion.n_frames, dtype=bool)
-    for p in find_productions(clean):
+    for p in find_recording_productions(rec):
         mask |= (motion.times >= p.start) & (motion.times <= p.end)
     return mask
 
@@ -43,16 +41,16 @@ def main(argv=None) -> int:
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
 
-    from tonguevis.io import read_recording
-    from tonguevis.sim import TongueModel, simulate
+    from tonguevis.sim import TongueModel
+    from tonguevis.workflows import open_recording, simulate_recording
 
     model = TongueModel.from_mesh(args.mesh, axes=args.axes) if args.mesh else TongueModel.default()
     rows = defaultdict(lambda: defaultdict(list))
     for path in sorted(args.data.glob("spk*_*.tsv")):
         speaker, cv = re.match(r"(spk\d+)_(\w+)", path.stem).groups()
-        rec = read_recording(path, sensor_map=args.data / "sensor_map.json")
+        rec = open_recording(path, args.data / "sensor_map.json")
         for warping in (True, False):
-            motion = simulate(rec, model, modes=args.modes, warping=warping)
+            motion = simulate_recording(rec, model, modes=args.modes, warping=warping)
             mask = production_frames(rec, motion)
             dv = 100 * np.abs(motion.volume_change[mask])
             rows[(cv, "warped" if warping else "linear")][speaker].append((dv.mean(), dv.max()))

@@ -197,12 +197,13 @@ def load_corpus(paths: Iterable[str | os.PathLike], table: str | os.PathLike | N
 
 @dataclass
 class CorpusResult:
-    """What :func:`corpus_energy_curves` made: curves, and the motion and productions per recording name."""
+    """What :func:`corpus_energy_curves` made: curves, and the motion, productions and rest per recording name."""
 
     curves: list
     motions: dict
     productions: dict
     skipped: list = field(default_factory=list)  # (path, reason) of walked files that were not recordings
+    rests: dict = field(default_factory=dict)  # recording name -> the RestChoice its simulation used
 
 
 def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int = 100,
@@ -216,26 +217,27 @@ def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int
     window : "release" (release to next release, §3.2) or "vowel" (previous
         vowel to own vowel: the consonant mid-curve, see :func:`vowel_windows`).
     progress(done, total, message) is called once per recording.
+    simulate_options : passed to :func:`tonguevis.workflows.simulate_recording`
+        (``rest=(start_s, end_s)`` for every recording, ``landmarks``, ``warping``...).
     """
     from tonguevis._progress import report
     from tonguevis.analysis.energy import EnergyError, production_curves, vowel_windows
-    from tonguevis.io import read_recording
-    from tonguevis.preprocess import find_productions
-    from tonguevis.sim import TongueModel, simulate
+    from tonguevis.sim import TongueModel
+    from tonguevis.workflows import find_recording_productions, open_recording, rest_of, simulate_recording
 
     if window not in ("release", "vowel"):
         raise EnergyError(f"window must be 'release' or 'vowel', got {window!r}")
     from tonguevis.errors import RecordingError
 
     model = model or TongueModel.default()
-    curves, motions, tables, skipped = [], {}, {}, []
+    curves, motions, tables, skipped, rests = [], {}, {}, [], {}
     for k, entry in enumerate(corpus.entries):
         report(progress, k, len(corpus), f"simulating {entry.path.name}")
         mapping = sensor_map
         if mapping is None and (entry.path.parent / "sensor_map.json").is_file():
             mapping = entry.path.parent / "sensor_map.json"
         try:
-            rec = read_recording(entry.path, sensor_map=mapping)
+            rec = open_recording(entry.path, mapping)
         except RecordingError as exc:
             if not entry.walked:
                 raise
@@ -243,12 +245,13 @@ def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int
             skipped.append((entry.path, str(exc)))
             continue
         entry = entry.apply_metadata(rec.metadata) if entry.source != "table" else entry
-        motion = simulate(rec, model=model, modes=modes, **simulate_options)
+        motion = simulate_recording(rec, model, modes=modes, **simulate_options)
+        rests[entry.name] = rest_of(motion)
         if window == "release":
-            table = find_productions(_head_corrected(rec), keep=keep)
+            table = find_recording_productions(rec, keep=keep)
             spans = list(table)
         else:
-            table = find_productions(_head_corrected(rec), keep=None)
+            table = find_recording_productions(rec, keep=None)
             spans = [w for w in vowel_windows(table) if keep is None or w.index in keep]
         curves.extend(production_curves(motion, spans, recording=entry.name, speaker=entry.speaker,
                                         syllable=entry.syllable, trial=entry.trial))
@@ -256,13 +259,4 @@ def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int
             motions[entry.name] = motion
         tables[entry.name] = table
     report(progress, len(corpus), len(corpus), "done")
-    return CorpusResult(curves, motions, tables, skipped)
-
-
-def _head_corrected(rec):
-    """The recording without head motion when it has three or more references (as ``tonguevis syllables``)."""
-    from tonguevis.preprocess import correct_head
-    from tonguevis.preprocess._names import reference_names
-
-    references = reference_names(rec.sensor_names)
-    return correct_head(rec, references) if len(references) >= 3 else rec
+    return CorpusResult(curves, motions, tables, skipped, rests)
