@@ -1,15 +1,19 @@
-"""WAV audio in and out (stdlib ``wave`` + NumPy; IEEE-float WAV by a small RIFF parser).
+"""WAV audio in and out, through :mod:`scipy.io.wavfile`.
 
-Reading gives mono float64 samples nominally in [-1, 1]: integer PCM is
-divided by its full scale (8-bit unsigned, 16/24/32-bit signed); several
-channels are averaged.  Writing is mono int16 PCM.
+Reading gives mono float64 samples nominally in [-1, 1]: integer PCM of any
+width (8-bit unsigned, 16 to 64-bit signed, WAVE_FORMAT_EXTENSIBLE too) is
+divided by its container's full scale, IEEE float is taken as is; several
+channels are averaged.  A file cut short keeps the samples present, with a
+warning; one that cannot be read raises :class:`RecordingError` naming it.
+Writing is mono int16 PCM.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import struct
-import wave
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -18,86 +22,84 @@ from tonguevis.errors import RecordingError
 from tonguevis._files import atomic_write
 from tonguevis.io.recording import Audio
 
+log = logging.getLogger("tonguevis")
 
-def _pcm_to_float(raw: bytes, width: int, channels: int, path) -> np.ndarray:
-    frame_bytes = width * channels
-    usable = len(raw) - len(raw) % frame_bytes
-    raw = raw[:usable]
-    if width == 1:
-        data = (np.frombuffer(raw, dtype=np.uint8).astype(np.float64) - 128.0) / 128.0
-    elif width == 2:
-        data = np.frombuffer(raw, dtype="<i2").astype(np.float64) / 32768.0
-    elif width == 3:
-        b = np.frombuffer(raw, dtype=np.uint8).reshape(-1, 3).astype(np.int32)
-        ints = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16)
-        ints = np.where(ints >= 1 << 23, ints - (1 << 24), ints)
-        data = ints.astype(np.float64) / float(1 << 23)
-    elif width == 4:
-        data = np.frombuffer(raw, dtype="<i4").astype(np.float64) / float(1 << 31)
-    else:
-        raise RecordingError(f"unsupported WAV sample width of {width} bytes", path)
-    return data.reshape(-1, channels).mean(axis=1)
+#: What scipy raises on a file it cannot parse (a cut header, zero channels, a frame cut in half).
+_PARSE_ERRORS = (ValueError, struct.error, EOFError, ZeroDivisionError, OverflowError, IndexError)
 
 
-def _read_float_wav(data: bytes, path) -> Audio:
-    """IEEE-float (format 3, or extensible with a float subformat) WAV, which ``wave`` refuses."""
-    if len(data) < 12 or data[:4] != b"RIFF" or data[8:12] != b"WAVE":
-        raise RecordingError("not a WAV file (no RIFF/WAVE header)", path)
-    pos, fmt, payload = 12, None, None
-    while pos + 8 <= len(data):
-        cid, size = struct.unpack_from("<4sI", data, pos)
-        body = data[pos + 8 : pos + 8 + size]
-        if cid == b"fmt " and len(body) >= 16:
-            fmt = struct.unpack_from("<HHIIHH", body, 0)
-            if fmt[0] == 0xFFFE and len(body) >= 26:
-                fmt = (struct.unpack_from("<H", body, 24)[0],) + fmt[1:]
-        elif cid == b"data":
-            payload = body
-        pos += 8 + size + (size & 1)
-    if fmt is None or payload is None:
-        raise RecordingError("WAV file has no fmt or data chunk", path)
-    tag, channels, rate, _, _, bits = fmt
-    if tag != 3 or bits not in (32, 64) or channels < 1 or rate <= 0:
-        raise RecordingError(f"unsupported WAV encoding (format tag {tag}, {bits} bits)", path)
-    dtype = "<f4" if bits == 32 else "<f8"
-    frame = channels * bits // 8
-    payload = payload[: len(payload) - len(payload) % frame]
-    samples = np.frombuffer(payload, dtype=dtype).astype(np.float64).reshape(-1, channels).mean(axis=1)
-    return Audio(samples=samples, rate=float(rate))
+def _announced_size(path: Path) -> int | None:
+    """Bytes the RIFF header says the file has (None when there is no RIFF header)."""
+    with open(path, "rb") as f:
+        head = f.read(8)
+    if len(head) < 8 or head[:4] not in (b"RIFF", b"RIFX"):
+        return None
+    return struct.unpack("<I" if head[:4] == b"RIFF" else ">I", head[4:])[0] + 8
+
+
+def _truncation(path: Path) -> str | None:
+    """'N of the M bytes its header announces' when the file is shorter than its header says."""
+    announced, size = _announced_size(path), path.stat().st_size
+    if announced is None or size >= announced:
+        return None
+    return f"{size} of the {announced} bytes its header announces"
+
+
+def _to_unit_float(data: np.ndarray, path) -> np.ndarray:
+    """Samples as float64 in [-1, 1] (integer PCM divided by its container's full scale)."""
+    kind = data.dtype.kind
+    if kind == "u":  # 8-bit PCM is unsigned around 128
+        half = float(1 << (8 * data.dtype.itemsize - 1))
+        return (data.astype(np.float64) - half) / half
+    if kind == "i":  # scipy left-justifies 24/40/48/56-bit samples in int32/int64
+        return data.astype(np.float64) / float(1 << (8 * data.dtype.itemsize - 1))
+    if kind == "f":
+        return data.astype(np.float64)
+    raise RecordingError(f"unsupported WAV sample type {data.dtype}", path)
 
 
 def read_wav(path: str | os.PathLike) -> Audio:
-    """Mono float64 audio from a WAV file (PCM 8/16/24/32-bit or IEEE float)."""
+    """Mono float64 audio from a WAV file (integer PCM of any width or IEEE float)."""
+    from scipy.io import wavfile
+
     path = Path(path)
-    try:
-        with wave.open(str(path), "rb") as w:
-            channels, width, rate = w.getnchannels(), w.getsampwidth(), w.getframerate()
-            raw = w.readframes(w.getnframes())
-    except wave.Error as exc:
-        if "unknown format: 3" in str(exc) or "unknown format: 65534" in str(exc):
-            return _read_float_wav(path.read_bytes(), path)
-        raise RecordingError(f"not a readable WAV file: {exc}", path) from None
-    except (EOFError, struct.error) as exc:
-        raise RecordingError(f"truncated or malformed WAV file: {exc}", path) from None
-    if channels < 1 or rate <= 0:
-        raise RecordingError(f"impossible WAV header ({channels} channels, {rate} Hz)", path)
-    return Audio(samples=_pcm_to_float(raw, width, channels, path), rate=float(rate))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", wavfile.WavFileWarning)
+        try:
+            rate, data = wavfile.read(path, mmap=False)
+        except _PARSE_ERRORS as exc:
+            cut = _truncation(path)
+            if cut is not None:
+                raise RecordingError(f"truncated WAV file ({cut}): {exc}", path) from None
+            raise RecordingError(f"not a readable WAV file: {exc}", path) from None
+    cut = _truncation(path)  # decided from the sizes, not from the wording of scipy's warning
+    for warning in caught:
+        if not issubclass(warning.category, wavfile.WavFileWarning):
+            warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
+        elif cut is None:  # said once below when the file is cut short
+            # A chunk scipy skips (bext, iXML, ...) loses nothing; anything else odd is worth a warning.
+            level = logging.INFO if "not understood" in str(warning.message) else logging.WARNING
+            log.log(level, "%s: %s", path, warning.message)
+    if rate <= 0:
+        raise RecordingError(f"impossible WAV header ({rate} Hz)", path)
+    samples = _to_unit_float(data, path)
+    if samples.ndim == 2:
+        samples = samples.mean(axis=1)
+    if cut is not None:
+        if len(samples) == 0:
+            raise RecordingError(f"truncated WAV file ({cut}): no complete sample", path)
+        log.warning("%s: truncated WAV file (%s); using the %d samples present", path, cut, len(samples))
+    return Audio(samples=samples, rate=float(rate))
 
 
 def write_wav(audio: Audio, path: str | os.PathLike) -> None:
     """Write mono int16 PCM (samples clipped to [-1, 1]) through a temporary file."""
+    from scipy.io import wavfile
+
     rate = int(round(audio.rate))
     if rate <= 0:
         raise RecordingError(f"cannot write audio at {audio.rate} Hz", path)
     samples = np.nan_to_num(np.asarray(audio.samples, dtype=np.float64).ravel())
     # Same full scale as the reader (32768) so a write-read round trip is exact to half a step.
     ints = np.clip(np.round(samples * 32768.0), -32768, 32767).astype("<i2")
-
-    def write(tmp: Path) -> None:
-        with wave.open(str(tmp), "wb") as w:
-            w.setnchannels(1)
-            w.setsampwidth(2)
-            w.setframerate(rate)
-            w.writeframes(ints.tobytes())
-
-    atomic_write(path, write)
+    atomic_write(path, lambda tmp: wavfile.write(tmp, rate, ints))
