@@ -6,7 +6,8 @@ drifted apart).  No Qt here.
 
 * :func:`open_recording`: read any supported file with its sensor map.
 * :func:`head_corrected`: head motion removed when there are >= 3 head references.
-* :func:`find_recording_productions`: head-correct, then find the CV productions.
+* :func:`find_recording_productions`: head-correct, then find the CV productions (or take
+  them from a label tier).
 * :func:`simulate_recording`: choose the rest (given, detected, or the stillest
   window), prepare the targets and simulate; ``motion.metadata["rest"]`` says
   which rest was used and :func:`rest_of` gives it back as a :class:`RestChoice`.
@@ -44,16 +45,23 @@ def open_recording(path: str | os.PathLike, sensors: dict | str | os.PathLike | 
 
 
 def find_recording_productions(recording: Recording, tip: str = "TT", keep=(2, 3, 4), trains=None,
-                               head_correction: bool = True):
+                               head_correction: bool = True, tier: str | None = None):
     """The CV productions (a :class:`~tonguevis.preprocess.ProductionTable`) of ``recording``.
 
     Head motion is removed first (:func:`head_corrected`; ``head_correction=False``
     keeps the positions as recorded), then :func:`tonguevis.preprocess.find_productions`
     with ``tip``, ``keep`` (1-based positions per train; None: all) and ``trains``.
+    tier : take the productions from this label tier instead (every non-empty
+        interval, ``keep`` and ``trains`` unused; see
+        :func:`tonguevis.preprocess.labelled.productions_from_tier`); a missing tier
+        raises RecordingError listing the tiers.
     """
+    from tonguevis.preprocess.labelled import productions_from_tier
     from tonguevis.preprocess.productions import find_productions
 
     rec = head_corrected(recording) if head_correction else recording
+    if tier is not None:
+        return productions_from_tier(rec, tier, tip=tip)
     return find_productions(rec, tip=tip, keep=keep, trains=trains)
 
 

@@ -67,3 +67,13 @@ def test_production_labels_interval_and_point_tiers():
     # read back as a tier, they give the same spans
     back = productions_from_tier(recording(labels), "productions")
     assert [(p.start, p.end) for p in back] == [(0.5, 0.9), (0.9, 1.3)]
+
+
+def test_workflow_takes_productions_from_a_tier_instead_of_finding_them():
+    from tonguevis.workflows import find_recording_productions
+
+    rec = recording(SYLLABLES)
+    table = find_recording_productions(rec, tier="syll")
+    assert [(p.start, p.end) for p in table] == [(0.2, 0.9), (0.9, 1.8), (2.1, 2.9)]
+    with pytest.raises(RecordingError, match="tiers: syll, words, events"):
+        find_recording_productions(rec, tier="phones")
