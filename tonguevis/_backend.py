@@ -1,4 +1,6 @@
-"""Importing warp-lang quietly: the library never prints.
+"""The compute backends: ``"warp"`` (warp-lang kernels, the default) or ``"numpy"`` (the references).
+
+Importing warp-lang quietly: the library never prints.
 
 warp announces itself on stdout when it initialises and, on machines without
 an NVIDIA driver, its native code writes a CUDA warning to stderr.  Both are
@@ -17,6 +19,17 @@ import threading
 logger = logging.getLogger("tonguevis")
 _lock = threading.Lock()
 _warp = None
+
+#: Backend names every ``backend=`` argument accepts.  "warp" here means the
+#: warp-lang compiler; modal warping is always called ``warping``.
+BACKENDS = ("warp", "numpy")
+
+
+def check_backend(backend: str) -> str:
+    """``backend`` if it is one of :data:`BACKENDS`, else ValueError naming the choices."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {', '.join(map(repr, BACKENDS))}, got {backend!r}")
+    return backend
 
 
 def load_warp():

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from tests.sim._models import bar_model, sensor_rows
+from tonguevis.sim.constrained import point_stiffness
 from tonguevis.sim.newmark import NewmarkSettings, integrate
 
 
@@ -82,11 +83,38 @@ def test_frames_that_do_not_converge_are_flagged(bar):
     res = integrate(lam, phi_s, w_s, targets, settings)
     assert not res.converged.all()
     assert res.converged[0]  # the rest frame needs no iteration
+    assert not res.recovered.any()  # unconverged but sane: the last iterate is kept, flagged
+
+
+def test_a_runaway_frame_keeps_the_previous_shape_and_stops(bar, monkeypatch):
+    import tonguevis.sim.newmark as newmark
+
+    model, lam, phi_s, w_s = bar
+    _, targets = _raise_and_rest(0.03)
+    settings = _settings(model, True)
+    free = integrate(lam, phi_s, w_s, targets, settings)
+    w = np.linalg.norm(free.q @ w_s[0].T, axis=1)
+    limit = 0.5 * w.max()  # frames rotating the sensor past half the peak count as runaways here
+    monkeypatch.setattr(newmark, "RUNAWAY_ROTATION", limit)
+    res = integrate(lam, phi_s, w_s, targets, settings)
+    bad = np.flatnonzero(res.recovered)
+    assert len(bad) > 0 and np.all(np.isfinite(res.q))
+    assert np.all(np.linalg.norm(res.q @ w_s[0].T, axis=1) <= limit + 1e-12)  # never past the limit
+    first = bad[0]
+    np.testing.assert_array_equal(res.q[first], res.q[first - 1])
+    assert np.all(res.qd[bad] == 0) and np.all(res.qdd[bad] == 0)
 
 
 @pytest.mark.parametrize("warping", [True, False])
-def test_compiled_integrator_equals_the_numpy_reference(warping):
-    from tonguevis.sim.newmark_warp import integrate_warp
+@pytest.mark.parametrize("compliance", ["hard", "compliant", "ramped", "runaway"])
+def test_compiled_integrator_equals_the_numpy_reference(warping, compliance, monkeypatch):
+    import tonguevis.sim.constrained as constrained
+    import tonguevis.sim.newmark as newmark
+    from tonguevis.sim.newmark_kernel import integrate_compiled
+
+    if compliance == "runaway":  # a low limit, so that recoveries happen and must match
+        monkeypatch.setattr(constrained, "RUNAWAY_ROTATION", 0.05)
+        monkeypatch.setattr(newmark, "RUNAWAY_ROTATION", 0.05)
 
     model = bar_model(sensors=("TT", "TD", "TL", "TR"))
     nodes = [model.landmarks.sensors[s] for s in ("TT", "TD", "TL", "TR")]
@@ -96,15 +124,26 @@ def test_compiled_integrator_equals_the_numpy_reference(warping):
     targets[:, 0] = tip[:, 0]
     targets[:, 2, 2] = 0.3 * tip[:, 0, 2]
     targets[60:70, 1] = np.nan  # a lost sensor for a while
+    unit = 1.0 / point_stiffness(lam, phi_s)  # m/N
+    comp = {"hard": 0.0, "runaway": 0.0, "compliant": unit / 20, "ramped": np.zeros((200, 4))}[compliance]
+    if compliance == "ramped":  # sensor 2 released over 10 frames, off for 20, back over 10
+        comp[100:110, 2] = np.linspace(0.0, 5.0, 10) * unit
+        comp[110:130, 2] = np.inf
+        comp[130:140, 2] = np.linspace(5.0, 0.0, 10) * unit
     settings = _settings(model, warping)
-    ref = integrate(lam, phi_s, w_s, targets, settings)
-    fast = integrate_warp(lam, phi_s, w_s, targets, settings)
+    ref = integrate(lam, phi_s, w_s, targets, settings, compliance=comp)
+    fast = integrate_compiled(lam, phi_s, w_s, targets, settings, compliance=comp)
     scale = np.abs(ref.q).max()
     assert np.abs(fast.q - ref.q).max() < 1e-10 * scale
     assert np.abs(fast.qd - ref.qd).max() < 1e-8 * np.abs(ref.qd).max()
     np.testing.assert_array_equal(fast.converged, ref.converged)
+    np.testing.assert_array_equal(fast.recovered, ref.recovered)
     np.testing.assert_array_equal(fast.iterations, ref.iterations)
     np.testing.assert_allclose(fast.residual, ref.residual, atol=1e-12, equal_nan=True)
+    if compliance == "compliant":  # a spring, not a rod: the sensors are followed, not held
+        assert np.nanmax(ref.residual) > 1e-5
+    if compliance == "runaway" and warping:
+        assert ref.recovered.any()
     # Several trials in one launch give the same as one at a time.
-    both = integrate_warp(lam, phi_s, w_s, np.stack([targets, 0.5 * targets]), settings)
+    both = integrate_compiled(lam, phi_s, w_s, np.stack([targets, 0.5 * targets]), settings, compliance=comp)
     np.testing.assert_allclose(both[0].q, fast.q, rtol=0, atol=1e-15 * scale)

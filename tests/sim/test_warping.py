@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 from tonguevis.mesh.structured import box_mesh
 from tests.sim._models import bar_model as _bar_model
 from tonguevis.sim.rotation import accumulated_rotation_matrix, rotate_accumulated, rotate_accumulated_jacobian
-from tonguevis.sim.warp_kernels import rotate_accumulated_warp
+from tonguevis.sim.kernels import rotate_accumulated_compiled
 
 
 def _path_integral(w, samples=4001):
@@ -47,8 +47,8 @@ def test_warp_kernel_equals_numpy_reference():
     rng = np.random.default_rng(11)
     w = rng.normal(size=(3, 500, 3)) * np.array([1e-6, 0.04, 1.5])[:, None, None]
     d = rng.normal(size=(3, 500, 3)) * 0.01
-    np.testing.assert_allclose(rotate_accumulated_warp(w, d), rotate_accumulated(w, d), rtol=0, atol=1e-10 * 0.01)
-    assert np.abs(rotate_accumulated_warp(w, d) - rotate_accumulated(w, d)).max() < 1e-10
+    np.testing.assert_allclose(rotate_accumulated_compiled(w, d), rotate_accumulated(w, d), rtol=0, atol=1e-10 * 0.01)
+    assert np.abs(rotate_accumulated_compiled(w, d) - rotate_accumulated(w, d)).max() < 1e-10
 
 
 def test_warping_turns_an_infinitesimal_rotation_into_an_exact_rotation():
@@ -89,8 +89,8 @@ def test_volume_change_from_the_surface_equals_the_tet_sum():
 def test_warp_and_numpy_reconstruction_agree_on_a_model():
     model = _bar_model(nx=6)
     q = np.random.default_rng(4).normal(size=(5, 8)) * 1e-3
-    fast = model.displacements(q, warping=True, use_warp=True)
-    ref = model.displacements(q, warping=True, use_warp=False)
+    fast = model.displacements(q, warping=True, backend="warp")
+    ref = model.displacements(q, warping=True, backend="numpy")
     assert np.abs(fast - ref).max() < 1e-10
 
 
@@ -106,4 +106,4 @@ def test_float32_rendering_path_is_close_to_float64():
 def test_volume_kernel_equals_numpy():
     model = _bar_model(nx=5)
     disp = np.random.default_rng(9).normal(size=(300, model.mesh.n_nodes, 3)) * 2e-3
-    np.testing.assert_allclose(model.volume_change(disp), model.volume_change(disp, use_warp=False), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(model.volume_change(disp), model.volume_change(disp, backend="numpy"), rtol=0, atol=1e-13)

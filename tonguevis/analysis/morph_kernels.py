@@ -26,7 +26,7 @@ def _build():
     with _lock:
         if _kernels:
             return
-        from tonguevis._warp import load_warp
+        from tonguevis._backend import load_warp
 
         wp = load_warp()
 

@@ -163,6 +163,7 @@ def validate(
         scores[name]["kinematic_weights"] = weights.tolist()
     report(progress, 4, 4, "validated")
     summary = recording_summary(recording, motion, prep, prep.rest.interval, prep.rest.how)
+    summary["rest_interval_reason"] = prep.rest.reason
     settings = _settings(model, basis, modes, landmarks, quasi_static, tolerance)
     return ValidationResult(scores, settings, summary, held_out)
 
@@ -192,15 +193,12 @@ def _drive_trials(basis, phi_s, w_s, trials, warping, dt, material, tolerance) -
     The compiled integrator runs all trials in one launch when available; the
     NumPy reference otherwise (same result to rounding).
     """
-    from tonguevis.sim.newmark import NewmarkSettings, integrate
+    from tonguevis.sim.newmark import NewmarkSettings
 
     settings = NewmarkSettings(dt=dt, alpha=material.alpha, beta=material.beta, tolerance=tolerance, warping=warping)
-    try:
-        from tonguevis.sim.newmark_warp import integrate_warp
-    except ImportError:  # pragma: no cover - the compiled path ships with tonguevis
-        results = [integrate(basis.eigenvalues, phi_s, w_s, t, settings) for t in trials]
-    else:
-        results = integrate_warp(basis.eigenvalues, phi_s, w_s, trials, settings)
+    from tonguevis.sim.newmark_kernel import integrate_compiled
+
+    results = integrate_compiled(basis.eigenvalues, phi_s, w_s, trials, settings)
     return [(r.q, r.converged) for r in results]
 
 

@@ -24,7 +24,7 @@ def _build():
     with _lock:
         if _kernel is not None:
             return
-        from tonguevis._warp import load_warp
+        from tonguevis._backend import load_warp
 
         wp = load_warp()
 
@@ -82,7 +82,7 @@ def warp_device() -> str:
     return str(_wp.get_preferred_device())
 
 
-def rotate_accumulated_warp(w: np.ndarray, d: np.ndarray, device: str | None = None) -> np.ndarray:
+def rotate_accumulated_compiled(w: np.ndarray, d: np.ndarray, device: str | None = None) -> np.ndarray:
     """R̃(w) d for (..., 3) arrays, computed by the warp kernel.
 
     float32 inputs (both) stay float32 (for rendering); anything else is float64.
@@ -114,7 +114,7 @@ def enclosed_volumes(points: np.ndarray, faces: np.ndarray, device: str | None =
     """(F,) volumes in m³ enclosed by the closed, outward surface ``faces`` (f, 3)
     for node positions ``points`` (F, n, 3): the warp-lang form of
     ⅙ Σ p0 · (p1 × p2) (NumPy reference: :meth:`TongueModel.volume_change` with
-    ``use_warp=False``)."""
+    ``backend="numpy"``)."""
     _build()
     wp = _wp
     pts = np.ascontiguousarray(points, dtype=np.float64)

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from tonguevis._backend import check_backend
 from tonguevis._blas import single_threaded_blas
 from tonguevis._progress import ProgressCallback
 from tonguevis.errors import ModelError
@@ -153,12 +154,12 @@ class TongueModel:
 
     # ------------------------------------------------------------------ reconstruction
     def displacements(
-        self, q: np.ndarray, warping: bool = True, use_warp: bool = True, dtype=np.float64
+        self, q: np.ndarray, warping: bool = True, backend: str = "warp", dtype=np.float64
     ) -> np.ndarray:
         """(F, n, 3) node displacements in m for modal displacements ``q`` (F, m).
 
         Linear: Φq.  Warped: ũ_i = R̃((Wq)_i) (Φq)_i, the rotation in warp-lang
-        (``use_warp``) or NumPy.  Frames are processed in chunks to bound memory.
+        (``backend="warp"``) or NumPy (``"numpy"``).  Frames are processed in chunks to bound memory.
         ``dtype=np.float32`` halves the work for rendering (about 1e-7 relative).
         """
         dtype = np.dtype(dtype)
@@ -175,10 +176,10 @@ class TongueModel:
                 lin = (chunk @ phi_t).reshape(len(chunk), n, 3)
                 w = (chunk @ w_t).reshape(len(chunk), n, 3) if warping else None
             if warping:
-                if use_warp:
-                    from tonguevis.sim.warp_kernels import rotate_accumulated_warp
+                if check_backend(backend) == "warp":
+                    from tonguevis.sim.kernels import rotate_accumulated_compiled
 
-                    lin = rotate_accumulated_warp(w, lin)
+                    lin = rotate_accumulated_compiled(w, lin)
                 else:
                     lin = rotate_accumulated(w, lin)
             out[start : start + len(chunk)] = lin
@@ -198,21 +199,21 @@ class TongueModel:
         """(n, 3) displacement in m for one modal vector ``q`` (m,)."""
         return self.displacements(np.asarray(q)[None, :], warping=warping)[0]
 
-    def volume_change(self, displacements: np.ndarray, use_warp: bool = True) -> np.ndarray:
+    def volume_change(self, displacements: np.ndarray, backend: str = "warp") -> np.ndarray:
         """(F,) relative volume change (V - V_rest)/V_rest for (F, n, 3) displacements.
 
         The volume of a closed tet mesh is the flux of x/3 through its
         boundary, V = ⅙ Σ_faces p0 · (p1 × p2), which touches only the surface
         (about a fifth of the work of summing every tet); a test checks it
-        against the tet sum.  ``use_warp`` runs it as a warp-lang kernel, else NumPy.
+        against the tet sum.  ``backend="warp"`` runs it as a warp-lang kernel, ``"numpy"`` in NumPy.
         """
         d = np.asarray(displacements)
         faces = self.surface_faces
         out = np.empty(len(d))
         for start in range(0, len(d), CHUNK_FRAMES):
             pts = self.mesh.points[None] + d[start : start + CHUNK_FRAMES]
-            if use_warp:
-                from tonguevis.sim.warp_kernels import enclosed_volumes
+            if check_backend(backend) == "warp":
+                from tonguevis.sim.kernels import enclosed_volumes
 
                 out[start : start + len(pts)] = enclosed_volumes(pts, faces)
             else:

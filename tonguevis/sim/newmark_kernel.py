@@ -1,10 +1,11 @@
-"""The constrained Newmark integrator compiled with warp-lang (the fast path).
+"""The constrained Newmark integrator compiled with warp-lang (``backend="warp"``, the fast path).
 
-The same algorithm as :mod:`tonguevis.sim.newmark` (which stays the readable
-reference; a test proves both equal): per frame, Newton on
-A q̈ = b + Φ_sᵀR̃_sᵀμ, R̃(W_s q)Φ_s q = c, started at the previous frame's q,
-with the Woodbury form of the Newton matrix, the capped sensor-rotation step
-and the backtracking line search.  One warp thread integrates one whole trial
+The same algorithm as :mod:`tonguevis.sim.newmark` and :mod:`tonguevis.sim.constrained`
+(the readable reference; a test proves both equal): per frame, Newton on
+A q̈ = b + Φ_sᵀR̃_sᵀμ, R̃(W_s q)Φ_s q + Cμ = c, started at the previous frame's q,
+with the Woodbury form of the Newton matrix, the capped sensor-rotation step,
+the backtracking line search and the recovery of a frame that runs away
+(previous shape kept, velocity reset).  One warp thread integrates one whole trial
 (frames are sequential); several trials run as one launch.  The Python
 reference spends its time in NumPy call overhead on 12 × 100 arrays; compiled,
 a frame costs tens of microseconds.
@@ -26,8 +27,8 @@ _wp = None
 _V_Q, _V_QD, _V_QDD, _V_QP, _V_QDP, _V_B, _V_TRIAL, _V_RSTAT, _V_TMP, _V_DQDD, _V_AUX = range(11)
 N_VECTORS = 11
 # Scratch vectors of length 3S per trial.
-_W_C, _W_MULT, _W_DMULT, _W_RCON, _W_RCON2, _W_MULT2, _W_RHOW, _W_RHOP, _W_Y, _W_T1, _W_T2 = range(11)
-N_SMALLVEC = 11
+_W_C, _W_MULT, _W_DMULT, _W_RCON, _W_RCON2, _W_MULT2, _W_RHOW, _W_RHOP, _W_Y, _W_T1, _W_T2, _W_COMP = range(12)
+N_SMALLVEC = 12
 # Scratch 3S × (3S + 1) matrices per trial.
 _S_H, _S_E, _S_SOL, _S_M = range(4)
 N_SMALL = 4
@@ -38,7 +39,7 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
     with _lock:
         if _kernel is not None:
             return
-        from tonguevis._warp import load_warp
+        from tonguevis._backend import load_warp
 
         wp = load_warp()
         f64 = wp.float64
@@ -167,7 +168,7 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                     vecs[t, _V_RSTAT, j] = vecs[t, _V_RSTAT, j] - (
                         phi[3 * s, j] * rt_mu[0] + phi[3 * s + 1, j] * rt_mu[1] + phi[3 * s + 2, j] * rt_mu[2])
                 for r in range(3):
-                    rc = svec[t, _W_C, 3 * a + r] - g[r]
+                    rc = svec[t, _W_C, 3 * a + r] - g[r] - svec[t, _W_COMP, 3 * a + r] * mu[r]
                     svec[t, rcon_i, 3 * a + r] = rc
                     con = con + rc * rc
             stat = f64(0.0)
@@ -193,13 +194,67 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                         for r in range(3):
                             small[t, _S_H, 3 * a + r, 3 * b2 + c] = hv[r]
 
+        @wp.func
+        def linear_start(t: int, n_act: int, warping: int, bn: f64, act: wp.array2d(dtype=int),
+                         phi: wp.array2d(dtype=f64), ws: wp.array2d(dtype=f64), qm: wp.array2d(dtype=f64),
+                         pm: wp.array2d(dtype=f64), a_inv: wp.array(dtype=f64), vecs: wp.array3d(dtype=f64),
+                         svec: wp.array3d(dtype=f64), small: wp.array4d(dtype=f64),
+                         rotb: wp.array3d(dtype=wp.mat33d), dgb: wp.array3d(dtype=wp.mat33d),
+                         wb: wp.array3d(dtype=wp.vec3d)):
+            """_V_TRIAL = q̈ of the problem linearised at the previous frame's q, _W_MULT its forces;
+            with ``warping`` 0 the exact solution of the linear (unwarped) constraint."""
+            m = phi.shape[1]
+            n_c = 3 * n_act
+            # Start at the previous frame's q with the forces of the linearised problem there.
+            for j in range(m):
+                vecs[t, _V_TRIAL, j] = (vecs[t, _V_Q, j] - vecs[t, _V_QP, j]) / bn
+                vecs[t, _V_TMP, j] = vecs[t, _V_TRIAL, j] - a_inv[j] * vecs[t, _V_B, j]
+            for k in range(n_c):
+                svec[t, _W_MULT, k] = f64(0.0)
+            evaluate(t, _V_TRIAL, _W_MULT, _W_RCON, 0, n_act, warping, bn, act, phi, ws, a_inv, vecs, svec,
+                     rotb, dgb, wb)
+            fill_h(t, n_act, act, qm, pm, rotb, dgb, small)
+            for a in range(n_act):
+                rot = rotb[t, 0, a]
+                dg = dgb[t, 0, a]
+                jv = rot * sensor_rows(t, a, act, phi, vecs, _V_TMP, a_inv, 0) + dg * sensor_rows(
+                    t, a, act, ws, vecs, _V_TMP, a_inv, 0)
+                for r in range(3):
+                    small[t, _S_SOL, 3 * a + r, 0] = svec[t, _W_RCON, 3 * a + r] + bn * jv[r]
+            # M = β H R̃ᵀ + C
+            for k in range(n_c):
+                for a in range(n_act):
+                    rot = rotb[t, 0, a]
+                    for c in range(3):
+                        acc = f64(0.0)
+                        for r in range(3):
+                            acc = acc + small[t, _S_H, k, 3 * a + r] * rot[c, r]
+                        small[t, _S_M, k, 3 * a + c] = bn * acc
+                small[t, _S_M, k, k] = small[t, _S_M, k, k] + svec[t, _W_COMP, k]
+            solve_small(t, small, _S_M, n_c, _S_SOL, 1)
+            for k in range(n_c):
+                svec[t, _W_MULT, k] = small[t, _S_SOL, k, 0]
+            for j in range(m):
+                vecs[t, _V_TRIAL, j] = vecs[t, _V_B, j]
+            for a in range(n_act):
+                mu = wp.vec3d(svec[t, _W_MULT, 3 * a], svec[t, _W_MULT, 3 * a + 1], svec[t, _W_MULT, 3 * a + 2])
+                rt_mu = wp.transpose(rotb[t, 0, a]) * mu
+                s = act[t, a]
+                for j in range(m):
+                    vecs[t, _V_TRIAL, j] = vecs[t, _V_TRIAL, j] + (
+                        phi[3 * s, j] * rt_mu[0] + phi[3 * s + 1, j] * rt_mu[1] + phi[3 * s + 2, j] * rt_mu[2])
+            for j in range(m):
+                vecs[t, _V_TRIAL, j] = a_inv[j] * vecs[t, _V_TRIAL, j]
+
         @wp.kernel
         def newmark(lam: wp.array(dtype=f64), a_inv: wp.array(dtype=f64), damp: wp.array(dtype=f64),
                     phi: wp.array2d(dtype=f64), ws: wp.array2d(dtype=f64), qm: wp.array2d(dtype=f64),
-                    pm: wp.array2d(dtype=f64), targets: wp.array3d(dtype=f64),
-                    h: f64, bn: f64, tol: f64, stat_rtol: f64, max_iter: int, max_rot: f64, warping: int,
+                    pm: wp.array2d(dtype=f64), targets: wp.array3d(dtype=f64), comp: wp.array3d(dtype=f64),
+                    h: f64, bn: f64, tol: f64, stat_rtol: f64, max_iter: int, max_rot: f64, runaway: f64,
+                    warping: int,
                     out_q: wp.array3d(dtype=f64), out_qd: wp.array3d(dtype=f64), out_qdd: wp.array3d(dtype=f64),
                     out_res: wp.array3d(dtype=f64), out_conv: wp.array2d(dtype=int), out_iter: wp.array2d(dtype=int),
+                    out_rec: wp.array2d(dtype=int),
                     vecs: wp.array3d(dtype=f64), svec: wp.array3d(dtype=f64), small: wp.array4d(dtype=f64),
                     rotb: wp.array3d(dtype=wp.mat33d), dgb: wp.array3d(dtype=wp.mat33d),
                     wb: wp.array3d(dtype=wp.vec3d), act: wp.array2d(dtype=int)):
@@ -224,10 +279,13 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                     for r in range(3):
                         if wp.isnan(targets[t, i, 3 * s + r]):
                             ok = int(0)
+                    if not wp.isfinite(comp[t, i, s]):
+                        ok = int(0)
                     if ok == 1:
                         act[t, n_act] = s
                         for r in range(3):
                             svec[t, _W_C, 3 * n_act + r] = targets[t, i, 3 * s + r]
+                            svec[t, _W_COMP, 3 * n_act + r] = comp[t, i, s]
                         n_act = n_act + 1
                 n_c = 3 * n_act
                 conv = int(1)
@@ -236,45 +294,8 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                     for j in range(m):
                         vecs[t, _V_TRIAL, j] = a_inv[j] * vecs[t, _V_B, j]
                 else:
-                    # Start at the previous frame's q with the forces of the linearised problem there.
-                    for j in range(m):
-                        vecs[t, _V_TRIAL, j] = (vecs[t, _V_Q, j] - vecs[t, _V_QP, j]) / bn
-                        vecs[t, _V_TMP, j] = vecs[t, _V_TRIAL, j] - a_inv[j] * vecs[t, _V_B, j]
-                    for k in range(n_c):
-                        svec[t, _W_MULT, k] = f64(0.0)
-                    evaluate(t, _V_TRIAL, _W_MULT, _W_RCON, 0, n_act, warping, bn, act, phi, ws, a_inv, vecs, svec,
-                             rotb, dgb, wb)
-                    fill_h(t, n_act, act, qm, pm, rotb, dgb, small)
-                    for a in range(n_act):
-                        rot = rotb[t, 0, a]
-                        dg = dgb[t, 0, a]
-                        jv = rot * sensor_rows(t, a, act, phi, vecs, _V_TMP, a_inv, 0) + dg * sensor_rows(
-                            t, a, act, ws, vecs, _V_TMP, a_inv, 0)
-                        for r in range(3):
-                            small[t, _S_SOL, 3 * a + r, 0] = svec[t, _W_RCON, 3 * a + r] + bn * jv[r]
-                    # M = β H R̃ᵀ
-                    for k in range(n_c):
-                        for a in range(n_act):
-                            rot = rotb[t, 0, a]
-                            for c in range(3):
-                                acc = f64(0.0)
-                                for r in range(3):
-                                    acc = acc + small[t, _S_H, k, 3 * a + r] * rot[c, r]
-                                small[t, _S_M, k, 3 * a + c] = bn * acc
-                    solve_small(t, small, _S_M, n_c, _S_SOL, 1)
-                    for k in range(n_c):
-                        svec[t, _W_MULT, k] = small[t, _S_SOL, k, 0]
-                    for j in range(m):
-                        vecs[t, _V_TRIAL, j] = vecs[t, _V_B, j]
-                    for a in range(n_act):
-                        mu = wp.vec3d(svec[t, _W_MULT, 3 * a], svec[t, _W_MULT, 3 * a + 1], svec[t, _W_MULT, 3 * a + 2])
-                        rt_mu = wp.transpose(rotb[t, 0, a]) * mu
-                        s = act[t, a]
-                        for j in range(m):
-                            vecs[t, _V_TRIAL, j] = vecs[t, _V_TRIAL, j] + (
-                                phi[3 * s, j] * rt_mu[0] + phi[3 * s + 1, j] * rt_mu[1] + phi[3 * s + 2, j] * rt_mu[2])
-                    for j in range(m):
-                        vecs[t, _V_TRIAL, j] = a_inv[j] * vecs[t, _V_TRIAL, j]
+                    linear_start(t, n_act, warping, bn, act, phi, ws, qm, pm, a_inv, vecs, svec, small, rotb, dgb,
+                                 wb)
                     iters = int(1)
                     if warping != 0:
                         merit = evaluate(t, _V_TRIAL, _W_MULT, _W_RCON, 0, n_act, warping, bn, act, phi, ws, a_inv,
@@ -357,6 +378,7 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                                         for p in range(n_c):
                                             sacc = sacc + small[t, _S_H, k, p] * small[t, _S_SOL, p, l]
                                         small[t, _S_M, k, l] = bn * sacc
+                                    small[t, _S_M, k, k] = small[t, _S_M, k, k] + svec[t, _W_COMP, k]
                                 for k in range(n_c):
                                     svec[t, _W_T2, k] = small[t, _S_E, k, n_c]
                                 for k in range(n_c):
@@ -408,8 +430,8 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                                         searching = int(0)
                                     else:
                                         step = step * f64(0.5)
-                                if trial_merit >= merit:
-                                    done = int(1)  # no descent: keep the last iterate, flagged
+                                if not (trial_merit < merit):
+                                    done = int(1)  # no descent (or NaN): keep the last iterate, flagged
                                 else:
                                     merit = trial_merit
                                     for j in range(m):
@@ -423,6 +445,25 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                                         wb[t, 0, a] = wb[t, 1, a]
                                     it = it + 1
                         iters = wp.min(it, max_iter)
+                    # A non-finite or runaway frame keeps the previous frame's shape; velocity reset.
+                    recover = int(0)
+                    for j in range(m):
+                        qn = vecs[t, _V_QP, j] + bn * vecs[t, _V_TRIAL, j]
+                        vecs[t, _V_AUX, j] = qn
+                        if not wp.isfinite(qn):
+                            recover = int(1)
+                    if warping != 0 and recover == 0:
+                        for s in range(n_sensors):
+                            wv = wp.vec3d()
+                            for j in range(m):
+                                x = vecs[t, _V_AUX, j]
+                                wv = wv + wp.vec3d(ws[3 * s, j], ws[3 * s + 1, j], ws[3 * s + 2, j]) * x
+                            if wp.length(wv) > runaway:
+                                recover = int(1)
+                    if recover != 0:
+                        for j in range(m):
+                            vecs[t, _V_TRIAL, j] = (vecs[t, _V_Q, j] - vecs[t, _V_QP, j]) / bn
+                    out_rec[t, i] = recover
                 # Commit the frame.
                 for j in range(m):
                     qdd = vecs[t, _V_TRIAL, j]
@@ -430,9 +471,12 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                     vecs[t, _V_Q, j] = q
                     vecs[t, _V_QD, j] = vecs[t, _V_QDP, j] + f64(0.5) * h * qdd
                     vecs[t, _V_QDD, j] = qdd
+                    if out_rec[t, i] != 0:
+                        vecs[t, _V_QD, j] = f64(0.0)
+                        vecs[t, _V_QDD, j] = f64(0.0)
                     out_q[t, i, j] = q
                     out_qd[t, i, j] = vecs[t, _V_QD, j]
-                    out_qdd[t, i, j] = qdd
+                    out_qdd[t, i, j] = vecs[t, _V_QDD, j]
                 out_conv[t, i] = conv
                 out_iter[t, i] = iters
                 for s in range(n_sensors):
@@ -449,26 +493,29 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
         _kernel = newmark
 
 
-def integrate_warp(
+def integrate_compiled(
     eigenvalues: np.ndarray,
     phi_s: np.ndarray,
     w_s: np.ndarray,
     targets: np.ndarray,
     settings: NewmarkSettings,
+    compliance: np.ndarray | float = 0.0,
     device: str = "cpu",
 ) -> IntegrationResult | list[IntegrationResult]:
     """Compiled :func:`tonguevis.sim.newmark.integrate`.
 
     targets : (F, S, 3) for one trial, or (T, F, S, 3) for T trials integrated
     in one launch (then a list of results is returned).
+    compliance : m/N, broadcast to (F, S) or (T, F, S); 0 = hard, inf = not acting.
     """
-    from tonguevis.sim.newmark import MAX_ROTATION_STEP, STATIONARITY_RTOL
+    from tonguevis.sim.constrained import MAX_ROTATION_STEP, RUNAWAY_ROTATION, STATIONARITY_RTOL
 
     _build()
     wp = _wp
     batch = targets.ndim == 4
     tg = targets if batch else targets[None]
     n_trials, n_frames, n_sensors, _ = tg.shape
+    comp = np.broadcast_to(np.asarray(compliance, dtype=np.float64), tg.shape[:3])
     lam = np.ascontiguousarray(eigenvalues, dtype=np.float64)
     m = len(lam)
     n_c = 3 * n_sensors
@@ -486,6 +533,7 @@ def integrate_warp(
     out_res = wp.zeros((n_trials, n_frames, n_sensors), dtype=wp.float64, device=device)
     out_conv = wp.zeros((n_trials, n_frames), dtype=wp.int32, device=device)
     out_iter = wp.zeros((n_trials, n_frames), dtype=wp.int32, device=device)
+    out_rec = wp.zeros((n_trials, n_frames), dtype=wp.int32, device=device)
     vecs = wp.zeros((n_trials, N_VECTORS, m), dtype=wp.float64, device=device)
     svec = wp.zeros((n_trials, N_SMALLVEC, n_c), dtype=wp.float64, device=device)
     small = wp.zeros((n_trials, N_SMALL, n_c, n_c + 1), dtype=wp.float64, device=device)
@@ -498,11 +546,11 @@ def integrate_warp(
         dim=n_trials,
         inputs=[
             arr(lam), arr(a_inv), arr(damp), arr(phi2), arr(w_s.reshape(n_c, m)), arr(q_full), arr(p_full),
-            arr(tg.reshape(n_trials, n_frames, n_c)),
+            arr(tg.reshape(n_trials, n_frames, n_c)), arr(comp),
             h, bn, float(settings.tolerance), float(STATIONARITY_RTOL), int(settings.max_iterations),
-            float(MAX_ROTATION_STEP),
+            float(MAX_ROTATION_STEP), float(RUNAWAY_ROTATION),
             int(bool(settings.warping)),
-            out_q, out_qd, out_qdd, out_res, out_conv, out_iter, vecs, svec, small, rotb, dgb, wb, act,
+            out_q, out_qd, out_qdd, out_res, out_conv, out_iter, out_rec, vecs, svec, small, rotb, dgb, wb, act,
         ],
         device=device,
     )
@@ -510,9 +558,10 @@ def integrate_warp(
     invalid = np.any(np.isnan(tg), axis=3)
     res[invalid] = np.nan
     results = [
-        IntegrationResult(q, qd, qdd, r, c.astype(bool), it.astype(np.int64))
-        for q, qd, qdd, r, c, it in zip(
-            out_q.numpy(), out_qd.numpy(), out_qdd.numpy(), res, out_conv.numpy(), out_iter.numpy()
+        IntegrationResult(q, qd, qdd, r, c.astype(bool), it.astype(np.int64), rec.astype(bool))
+        for q, qd, qdd, r, c, it, rec in zip(
+            out_q.numpy(), out_qd.numpy(), out_qdd.numpy(), res, out_conv.numpy(), out_iter.numpy(),
+            out_rec.numpy()
         )
     ]
     return results if batch else results[0]

@@ -6,7 +6,7 @@ a = (1 - cos θ)/θ²,  b = (θ - sin θ)/θ³,
 which is ∫₀¹ R(s w) ds: the rotation R(s w) integrated along the straight path
 from 0 to w in modal space (Choi & Ko 2005).  It depends on the current
 rotation vector only (no history).  ``R̃ d = d + a (w × d) + b w × (w × d)``
-never needs a 3×3 matrix.  The warp-lang kernels in :mod:`warp_kernels` compute
+never needs a 3×3 matrix.  The warp-lang kernels in :mod:`tonguevis.sim.kernels` compute
 the same thing and are tested equal to this module.
 """
 
