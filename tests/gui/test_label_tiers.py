@@ -91,7 +91,9 @@ def test_cursor_runs_across_the_tiers_and_a_click_there_seeks(qtbot, plot):
 
 def test_without_labels_there_is_no_tier_row(qtbot, plot):
     shown(qtbot, plot, LABELS)
+    with_tiers = plot.minimumHeight()
     shown(qtbot, plot, [])
+    assert plot.minimumHeight() < with_tiers  # the rows asked for room of their own
     assert plot.tiers_ax is None and plot.n_tiers == 0
     assert len(plot.figure.axes) == 2
     assert len(plot.overlay.columns) == 2

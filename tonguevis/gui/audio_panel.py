@@ -14,6 +14,9 @@ ENVELOPE_BINS = 3000
 SPECTROGRAM_MAX_HZ = 8000.0
 #: Height of one label tier's row relative to the waveform's axes.
 TIER_ROW_RATIO = 0.3
+#: Minimum heights (px) of the plot without tiers and with them (base + per tier), so the
+#: waveform and spectrogram keep their room when rows are added.
+MIN_HEIGHT, MIN_HEIGHT_WITH_TIERS, MIN_HEIGHT_PER_TIER = 110, 200, 26
 
 
 def envelope(samples: np.ndarray, rate: float, offset: float, bins: int = ENVELOPE_BINS):
@@ -47,6 +50,7 @@ class AudioPlot(TimePlot):
             self.wave_ax, self.spec_ax = self.figure.subplots(2, 1, sharex=True, height_ratios=[1, 1.3])
             self.tiers_ax = None
         self.n_tiers = n_tiers
+        self.setMinimumHeight(MIN_HEIGHT_WITH_TIERS + MIN_HEIGHT_PER_TIER * n_tiers if n_tiers else MIN_HEIGHT)
         self.set_time_axes(self.time_axes)
 
     @property
