@@ -28,7 +28,9 @@ def test_haskins_midsagittal_recording_plays(qtbot, window):
     motion = session.motion
     assert set(motion.sensor_names) <= {"TT", "TB", "TBK"} and "TT" in motion.sensor_names
     plotted = set(window.sensor_panel.plot.lines)
-    assert {"TT", "TB", "TBK", "JAW"} <= plotted and not {"TL", "TR"} & plotted
+    assert {"TT", "TB", "TBK"} <= plotted and not {"TL", "TR", "JAW"} & plotted  # the jaw on request:
+    window.sensor_panel.set_show_others(True)
+    assert "JAW" in window.sensor_panel.plot.lines
     before = np.array(window.view3d.scene.surface.points)
     window.state.set_time(window.state.start + 1.3)
     assert np.abs(np.array(window.view3d.scene.surface.points) - before).max() > 0

@@ -1,17 +1,23 @@
-"""Sensor panel: x, y and z of every sensor over time (§6.1).
+"""Sensor panel: x, y and z of the tongue sensors over time (§6.1).
 
 Switchable between raw position, displacement from rest, velocity and
 acceleration; the productions of the syllable segmentation are shaded and
-the selected sensor is drawn bold.  Click or drag to seek.
+the selected sensor is drawn bold.  Head references, the jaw and channels
+the sensor map leaves unnamed are hidden unless asked for: a reference
+120 mm away would flatten the tongue's traces, since each axis scales to
+what it shows.  Click or drag to seek.
 """
 
 from __future__ import annotations
 
+from itertools import cycle
+
 import numpy as np
-from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from tonguevis.appstate import AppState
-from tonguevis.gui.session import SIGNAL_KINDS, Session
+from tonguevis.gui.session import SIGNAL_KINDS, Session, tongue_sensors
 from tonguevis.gui.timeplot import TimePlot
 
 SENSOR_COLOURS = ["#b8860b", "#ff69b4", "#6b8e23", "#4682b4", "#a0522d", "#2c3e50", "#7f8c8d", "#9370db"]
@@ -19,6 +25,13 @@ SENSOR_COLOURS = ["#b8860b", "#ff69b4", "#6b8e23", "#4682b4", "#a0522d", "#2c3e5
 NAMED_COLOURS = {"TT": "#c0392b", "TB": "#e67e22", "TD": "#2980b9", "TBK": "#1abc9c", "TL": "#27ae60",
                  "TR": "#8e44ad", "JAW": "#555555"}
 AXIS_NAMES = ("x (anterior)", "y (left)", "z (up)")
+OTHERS_LABEL = "show reference and other channels"
+
+
+def sensor_colours(names) -> dict[str, str]:
+    """{name: colour}: the canonical sensors' own, the palette in turn for the other channels."""
+    others = cycle(SENSOR_COLOURS)
+    return {name: NAMED_COLOURS.get(name) or next(others) for name in names}
 
 
 class SensorPlot(TimePlot):
@@ -30,8 +43,10 @@ class SensorPlot(TimePlot):
         state.subscribe("selection", lambda e: self._highlight())
 
     def show_signals(self, times: np.ndarray, signals: dict[str, np.ndarray], label: str, unit: str,
-                     productions: list[tuple[float, float]]) -> None:
+                     productions: list[tuple[float, float]], colours: dict[str, str] | None = None) -> None:
+        """Plot ``signals`` ({name: (N, 3)}); each axis's y range fits them (autoscaled)."""
         self.lines = {}
+        colours = colours or sensor_colours(list(signals))
         for k, ax in enumerate(self.axes):
             ax.clear()
             ax.set_facecolor("white")
@@ -41,9 +56,8 @@ class SensorPlot(TimePlot):
             for j, (start, end) in enumerate(productions):
                 ax.axvspan(start, end, color="#3498db" if j % 2 else "#95a5a6", alpha=0.12, lw=0)
                 ax.axvline(start, color="#7f8c8d", lw=0.6, ls="--")
-            for i, (name, xyz) in enumerate(signals.items()):
-                colour = NAMED_COLOURS.get(name, SENSOR_COLOURS[i % len(SENSOR_COLOURS)])
-                (line,) = ax.plot(times, xyz[:, k], lw=0.9, color=colour, label=name)
+            for name, xyz in signals.items():
+                (line,) = ax.plot(times, xyz[:, k], lw=0.9, color=colours[name], label=name)
                 self.lines.setdefault(name, []).append(line)
         if len(times):
             self.axes[0].set_xlim(times[0], times[-1])
@@ -77,6 +91,9 @@ class SensorPanel(QWidget):
             self.kind.addItem(f"{label} ({unit})", kind)
         self.sensor = QComboBox()
         self.sensor.addItem("all sensors", None)
+        self.others = QCheckBox(OTHERS_LABEL)
+        self.others.setToolTip("Head references, the jaw, lips and channels the sensor map leaves unnamed;\n"
+                               "hidden by default so that the axes fit the tongue's motion")
         self.plot = SensorPlot(state, self)
         controls = QHBoxLayout()
         controls.addWidget(QLabel("Show"))
@@ -87,8 +104,10 @@ class SensorPanel(QWidget):
         layout = QVBoxLayout(self)
         layout.setContentsMargins(2, 2, 2, 2)
         layout.addLayout(controls)
+        layout.addWidget(self.others, 0, Qt.AlignmentFlag.AlignLeft)  # own row: beside the combos it widens the tab
         layout.addWidget(self.plot, 1)
         self.kind.currentIndexChanged.connect(lambda _i: self.refresh())
+        self.others.toggled.connect(lambda _on: self.refresh())
         self.sensor.currentIndexChanged.connect(lambda _i: state.select(self.sensor.currentData(), source=self))
         state.subscribe("selection", self._on_selection)
 
@@ -104,19 +123,33 @@ class SensorPanel(QWidget):
         self.sensor.blockSignals(True)
         self.sensor.clear()
         self.sensor.addItem("all sensors", None)
+        hidden = 0
         if session is not None:
-            for name in session.signals("position"):
+            names = list(session.signals("position"))
+            for name in names:
                 self.sensor.addItem(name, name)
+            hidden = len(names) - len(self.shown(names))
         self.sensor.blockSignals(False)
+        self.others.setText(f"{OTHERS_LABEL} ({hidden})" if hidden else OTHERS_LABEL)
         self.refresh()
+
+    def shown(self, names) -> list[str]:
+        """The channels plotted: the tongue sensors, all of them when asked or when there is none."""
+        tongue = tongue_sensors(names)
+        return list(names) if self.others.isChecked() or not tongue else tongue
+
+    def set_show_others(self, on: bool) -> None:
+        self.others.setChecked(on)
 
     def refresh(self) -> None:
         if self.session is None:
             return
         kind = self.kind.currentData()
         label, unit, _ = SIGNAL_KINDS[kind]
-        self.plot.show_signals(self.session.recording.times, self.session.signals(kind), label, unit,
-                               self.session.productions)
+        signals = self.session.signals(kind)
+        colours = sensor_colours(list(signals))  # of every channel: the same whether the others show or not
+        shown = {name: signals[name] for name in self.shown(signals)}
+        self.plot.show_signals(self.session.recording.times, shown, label, unit, self.session.productions, colours)
 
     def _on_selection(self, event) -> None:
         index = self.sensor.findData(event.value)

@@ -44,12 +44,20 @@ def needs_sensor_map(recording: Recording) -> bool:
 
 
 def plotted_sensors(recording: Recording) -> list[str]:
-    """Sensors the panel plots: tongue sensors first (canonical order), then the others
-    except head references."""
+    """Every channel the sensor panel can plot: tongue sensors first (canonical order), then
+    the others in the file's order, head references last.  The panel shows only the tongue
+    sensors (:func:`tongue_sensors`) unless asked for the others."""
+    from tonguevis.preprocess._names import is_reference
+
     names = recording.sensor_names
-    tongue = [n for n in TONGUE_NAMES if n in names]
-    rest = [n for n in names if n not in tongue and not n.upper().startswith("REF")]
-    return tongue + rest
+    tongue = tongue_sensors(names)
+    others = [n for n in names if n not in tongue]
+    return tongue + sorted(others, key=is_reference)
+
+
+def tongue_sensors(names) -> list[str]:
+    """The tongue sensors among ``names``, in canonical order (TT, TB, TD, TBK, TL, TR)."""
+    return [n for n in TONGUE_NAMES if n in names]
 
 
 def production_intervals(productions: Any) -> list[tuple[float, float]]:
@@ -151,16 +159,22 @@ class Session:
         try:
             # The simulation's rest once there is one; before, the same choice it will make.
             rest = self.rest or choose_rest_interval(self.recording, given=self.given_rest)
-            return rest_pose(self.recording, rest.interval, sensors=names)
         except TonguevisError as exc:
             # Too short for any rest window: the first valid sample is the best "rest" there is.
             log.info("no rest interval (%s); displacements from the first valid sample", exc)
-            out = {}
-            for n in names:
-                valid = self.recording.valid(n)
-                xyz = self.recording.sensors[n]
-                out[n] = xyz[np.argmax(valid)] if valid.any() else np.zeros(3)
-            return out
+            rest = None
+        out = {}
+        for n in names:  # one by one: a channel lost at rest (a placeholder, a reference) spoils no other
+            if rest is not None:
+                try:
+                    out.update(rest_pose(self.recording, rest.interval, sensors=[n]))
+                    continue
+                except TonguevisError:
+                    pass
+            valid = self.recording.valid(n)
+            xyz = self.recording.sensors[n]
+            out[n] = xyz[np.argmax(valid)] if valid.any() else np.zeros(3)
+        return out
 
 
 def load_session(path: str | os.PathLike, sensor_map: dict | str | None = None) -> Session:

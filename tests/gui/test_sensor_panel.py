@@ -1,0 +1,107 @@
+"""The sensor panel fits its axes to the tongue: references and other channels only on request."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("PySide6")
+
+from tonguevis.io.recording import Recording  # noqa: E402
+
+pytestmark = pytest.mark.gui
+
+TONGUE = ("TT", "TD")
+OTHERS = ("JAW", "S0", "S7", "S2", "REF1")
+
+
+def export_like_recording() -> Recording:
+    """What a real NDI Wave export looks like once mapped: two tongue sensors moving a few mm
+    after a still second, the jaw, an unmapped reference 120 mm away (S0), a constant
+    placeholder (S7), a port with no valid sample (S2) and a mapped head reference."""
+    rate = 100.0
+    times = np.arange(300) / rate
+    moving = np.where(times > 1.2, np.sin(2 * np.pi * 1.5 * (times - 1.2)), 0.0)[:, None]
+    settle = np.where(times < 0.05, 1.0, 0.0)[:, None]  # the first samples before the tongue came to rest
+    tongue_tip = np.array([-0.019, 0.0, -0.010])
+    sensors = {
+        "TT": tongue_tip + moving * [0.004, 0.001, 0.006] + settle * 0.002,
+        "TD": np.array([-0.039, 0.0, -0.005]) + moving * [0.002, 0.0005, 0.003],
+        "JAW": np.array([-0.003, 0.0, -0.024]) + moving * [0.0, 0.0, 0.002],
+        "S0": np.tile(tongue_tip + [0.120, 0.080, 0.060], (len(times), 1)),
+        "S7": np.tile([-0.200, -0.150, 0.100], (len(times), 1)),
+        "S2": np.full((len(times), 3), np.nan),
+        "REF1": np.tile([-0.085, 0.062, -0.018], (len(times), 1)),
+    }
+    return Recording(rate, times, sensors, metadata={"format": "test", "file": "export.tsv"})
+
+
+@pytest.fixture
+def panel(qtbot):
+    from tonguevis.appstate import AppState
+    from tonguevis.gui.sensor_panel import SensorPanel
+    from tonguevis.gui.session import Session
+
+    widget = SensorPanel(AppState())
+    qtbot.addWidget(widget)
+    widget.resize(700, 600)
+    widget.show()
+    qtbot.waitExposed(widget)
+    widget.set_session(Session(export_like_recording()))
+    yield widget
+    widget.plot.close_plot()
+
+
+def _range(names, k):
+    rec = export_like_recording()
+    values = np.concatenate([rec.sensors[n][:, k] for n in names]) * 1e3
+    values = values[np.isfinite(values)]
+    return values.min(), values.max()
+
+
+def test_position_axes_fit_the_tongue_by_default(panel):
+    assert not panel.others.isChecked()
+    assert set(panel.plot.lines) == set(TONGUE)
+    assert "(5)" in panel.others.text()  # says how many channels it hides
+    for k, ax in enumerate(panel.plot.axes):
+        low, high = ax.get_ylim()
+        t_low, t_high = _range(TONGUE, k)
+        assert low <= t_low and t_high <= high
+        assert high - low < 1.5 * (t_high - t_low)  # the tongue's traces fill the axis
+        for name in ("S0", "S7", "REF1"):  # the far reference and the placeholders are off the axis
+            value = export_like_recording().sensors[name][0, k] * 1e3
+            assert not low <= value <= high, (name, k, value, (low, high))
+
+
+def test_the_toggle_shows_every_channel_and_hides_them_again(panel, qtbot):
+    from PySide6.QtCore import Qt
+
+    qtbot.mouseClick(panel.others, Qt.MouseButton.LeftButton)
+    assert panel.others.isChecked()
+    assert set(panel.plot.lines) == set(TONGUE + OTHERS)
+    colour = panel.plot.lines["S0"][0].get_color()
+    for k, ax in enumerate(panel.plot.axes):
+        low, high = ax.get_ylim()
+        everything = _range(TONGUE + OTHERS, k)
+        assert low <= everything[0] and everything[1] <= high
+    panel.set_kind("velocity")  # the choice holds for every kind
+    assert set(panel.plot.lines) == set(TONGUE + OTHERS)
+    panel.set_kind("position")
+    panel.set_show_others(False)
+    assert set(panel.plot.lines) == set(TONGUE)
+    low, high = panel.plot.axes[0].get_ylim()
+    assert high - low < 1.5 * np.subtract(*_range(TONGUE, 0)[::-1])
+    panel.set_show_others(True)
+    assert panel.plot.lines["S0"][0].get_color() == colour  # a channel keeps its colour
+
+
+def test_displacements_from_rest_despite_a_channel_without_samples():
+    """A dead port (S2, all NaN) must not push every sensor's rest to its first sample."""
+    from tonguevis.gui.session import Session
+
+    rec = export_like_recording()
+    displacement = Session(rec).signals("displacement")
+    still = (rec.times > 0.2) & (rec.times < 1.1)
+    assert np.abs(displacement["TT"][still]).max() < 1e-6  # rest = the still second, not the first sample
+    assert np.all(np.isnan(displacement["S2"]))
+    assert list(displacement)[-1] == "REF1"  # references last
