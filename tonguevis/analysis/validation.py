@@ -164,6 +164,7 @@ def validate(
     report(progress, 4, 4, "validated")
     summary = recording_summary(recording, motion, prep, prep.rest.interval, prep.rest.how)
     summary["rest_interval_reason"] = prep.rest.reason
+    summary["rest_interval_reason"] = prep.rest.reason
     settings = _settings(model, basis, modes, landmarks, quasi_static, tolerance)
     return ValidationResult(scores, settings, summary, held_out)
 

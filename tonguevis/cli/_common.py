@@ -1,4 +1,8 @@
-"""Arguments and steps that several commands share: reading a recording, the model, simulating."""
+"""Arguments and steps that several commands share: reading a recording, the model, the rest, simulating.
+
+The steps themselves live in :mod:`tonguevis.workflows`; this module only maps
+command-line arguments onto them.
+"""
 
 from __future__ import annotations
 
@@ -25,10 +29,46 @@ def add_model_arguments(parser: argparse.ArgumentParser, modes: int = 100) -> No
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def read_recording_args(args):
-    from tonguevis.io import read_recording
+def add_rest_argument(parser: argparse.ArgumentParser, every: bool = False) -> None:
+    """``--rest START END``: the rest interval in seconds, for every command that simulates."""
+    which = " (for every recording)" if every else ""
+    parser.add_argument("--rest", type=float, nargs=2, metavar=("START", "END"),
+                        help=f"rest interval in seconds{which}; default: the longest still interval of >= 1 s, "
+                             "else the stillest 0.2 s window (the summary says which)")
 
-    return read_recording(args.file, sensor_map=args.sensors)
+
+def rest_arg(args) -> tuple[float, float] | None:
+    """The ``--rest`` interval as (start_s, end_s), or None.
+
+    Its order is checked here, before anything is read; whether it fits a
+    recording is checked when that recording is simulated.
+    """
+    import math
+
+    from tonguevis.errors import TonguevisError
+
+    rest = getattr(args, "rest", None)
+    if rest is None:
+        return None
+    start, end = float(rest[0]), float(rest[1])
+    if not (math.isfinite(start) and math.isfinite(end) and start < end):
+        raise TonguevisError(f"--rest {start:g} {end:g}: the end must come after the start (seconds)",
+                             getattr(args, "file", None))
+    return start, end
+
+
+def rest_line(motion) -> str:
+    """The summary line saying which rest a motion used (e.g. ``rest: 2.31-2.51 s (stillest window: ...)``)."""
+    from tonguevis.workflows import rest_of
+
+    rest = rest_of(motion)
+    return rest.describe() if rest is not None else "rest: not recorded in this motion file"
+
+
+def read_recording_args(args):
+    from tonguevis.workflows import open_recording
+
+    return open_recording(args.file, args.sensors)
 
 
 def load_model_args(args):
@@ -41,11 +81,15 @@ def load_model_args(args):
     return TongueModel.from_mesh(args.mesh, **options)
 
 
-def simulate_args(args, recording, model):
-    """Simulate with a tqdm bar (unless --quiet)."""
+def simulate_args(args, recording, model, modes: int | None = None, progress=None):
+    """Simulate with the command's --modes, --linear, --landmarks and --rest, with a tqdm bar (unless --quiet
+    or a ``progress`` callback is given)."""
     from tonguevis._progress import tqdm_progress
-    from tonguevis.sim import simulate
+    from tonguevis.workflows import simulate_recording
 
-    with tqdm_progress("simulating", disable=getattr(args, "quiet", False)) as progress:
-        return simulate(recording, model, modes=args.modes, warping=not getattr(args, "linear", False),
-                        landmarks=getattr(args, "landmarks", "speaker"), progress=progress)
+    options = dict(modes=args.modes if modes is None else modes, warping=not getattr(args, "linear", False),
+                   landmarks=getattr(args, "landmarks", "speaker"), rest=rest_arg(args))
+    if progress is not None:
+        return simulate_recording(recording, model, progress=progress, **options)
+    with tqdm_progress("simulating", disable=getattr(args, "quiet", False)) as bar:
+        return simulate_recording(recording, model, progress=bar, **options)

@@ -21,7 +21,7 @@ log = logging.getLogger("tonguevis")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import add_model_arguments
+    from tonguevis.cli._common import add_model_arguments, add_rest_argument
 
     parser.add_argument("paths", nargs="+", type=Path, metavar="PATH", help="recordings or folders of recordings")
     parser.add_argument("--sensors", metavar="MAP",
@@ -41,6 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="curve span: release to next release (default), or previous vowel to own vowel "
                              "(the consonant mid-curve)")
     add_model_arguments(parser)
+    add_rest_argument(parser, every=True)
 
 
 def load_model(args):
@@ -54,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
     from tonguevis.analysis.corpus import CorpusError, corpus_energy_curves, load_corpus
     from tonguevis.analysis.energy import GROUP_KEYS, summarize, write_curves_csv, write_summary_csv
+    from tonguevis.cli._common import rest_arg
 
     by = tuple(k.strip() for k in args.group_by.split(",") if k.strip())
     bad = [k for k in by if k not in GROUP_KEYS]
@@ -66,10 +68,12 @@ def run(args: argparse.Namespace) -> int:
     with tqdm_progress("energy curves", disable=args.quiet) as progress:
         result = corpus_energy_curves(corpus, model=model, sensor_map=args.sensors, modes=args.modes,
                                       keep=None if args.all else (2, 3, 4), keep_motions=False, window=args.window,
-                                      landmarks=args.landmarks, warping=not args.linear,
+                                      landmarks=args.landmarks, warping=not args.linear, rest=rest_arg(args),
                                       progress=progress)
     for path, reason in result.skipped:
         print(f"skipped {path}: {reason}")
+    for name, rest in result.rests.items():
+        print(f"{name}: {rest.describe()}")
     write_curves_csv(result.curves, args.csv)
     print(f"{len(corpus)} recording(s), {len(result.curves)} production curves -> {args.csv}")
     summaries = summarize(result.curves, by) if result.curves else []

@@ -6,6 +6,8 @@ from pathlib import Path
 
 
 def add_arguments(parser) -> None:
+    from tonguevis.cli._common import add_rest_argument
+
     parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the demo /ta/ train, spk1_ta)")
     parser.add_argument("--out", type=Path, required=True, metavar="MP4", help="the video to write")
     parser.add_argument("--start", type=float, metavar="S", help="first second (default: the start)")
@@ -18,10 +20,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--color", choices=("displacement", "energy", "plain"), default="displacement",
                         help="surface colouring (default: displacement magnitude)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_rest_argument(parser)
 
 
 def run(args) -> int:
     from tonguevis._progress import tqdm_progress
+    from tonguevis.cli._common import rest_arg
     from tonguevis.errors import RecordingError
     from tonguevis.gui.session import demo_recording_path, load_session
     from tonguevis.gui.simulation import simulate_session
@@ -34,11 +38,11 @@ def run(args) -> int:
         width, height = (int(v) for v in args.size.lower().split("x"))
     except ValueError:
         raise RecordingError(f"--size must look like 1280x720, got {args.size!r}") from None
-    session = load_session(path, sensor_map=args.sensors)
+    session = load_session(path, sensor_map=args.sensors, rest=rest_arg(args))
     with tqdm_progress("simulating", disable=args.quiet) as progress:
         simulate_session(session, mesh_path=args.mesh, modes=args.modes, progress=progress)
     with tqdm_progress("rendering", disable=args.quiet) as progress:
         out = export_video(session, args.out, args.start, args.end, fps=args.fps, size=(width, height),
                            mode=args.color, progress=progress)
-    print(out)
+    print(f"{session.rest.describe()}\n{out}")
     return 0

@@ -105,9 +105,9 @@ def describe(rec) -> list[str]:
 
 
 def read_from_args(args, path):
-    from tonguevis.io import read_recording
+    from tonguevis.workflows import open_recording
 
-    return read_recording(path, sensor_map=args.sensors, format=args.format, **parse_options(args.option))
+    return open_recording(path, args.sensors, format=args.format, **parse_options(args.option))
 
 
 def run(args) -> int:

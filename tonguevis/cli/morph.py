@@ -30,7 +30,7 @@ def _frame_spec(text: str) -> tuple[Path, float]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import add_model_arguments
+    from tonguevis.cli._common import add_model_arguments, add_rest_argument
 
     parser.add_argument("source", type=_frame_spec, metavar="SOURCE@TIME", help="source shape (t = 0)")
     parser.add_argument("target", type=_frame_spec, metavar="TARGET@TIME", help="target shape (t = 1)")
@@ -43,6 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--one-way", action="store_true", help="MP4 plays source → target only (default: and back)")
     parser.add_argument("--sensors", metavar="MAP", help="sensor map for recordings (default: sensor_map.json beside)")
     add_model_arguments(parser)
+    add_rest_argument(parser, every=True)
 
 
 def load_model(args):
@@ -53,17 +54,14 @@ def load_model(args):
 
 
 def _motion(path: Path, model, args, progress):
-    from tonguevis.io import read_recording
-    from tonguevis.sim import Motion, simulate
+    from tonguevis.cli._common import simulate_args
+    from tonguevis.sim import Motion
+    from tonguevis.workflows import open_recording
 
     if path.suffix.lower() == ".npz":
         return Motion.load(path)
-    sensor_map = args.sensors
-    if sensor_map is None and (path.parent / "sensor_map.json").is_file():
-        sensor_map = path.parent / "sensor_map.json"
-    rec = read_recording(path, sensor_map=sensor_map)
-    return simulate(rec, model=model, modes=args.modes, landmarks=args.landmarks, warping=not args.linear,
-                    progress=progress)
+    rec = open_recording(path, args.sensors)  # a sensor_map.json beside the file is used by default
+    return simulate_args(args, rec, model, progress=progress)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -72,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
     from tonguevis.analysis.morph import MorphError, morph_between
     from tonguevis.analysis.morph_render import render_mp4, render_png
+    from tonguevis.cli._common import rest_line
 
     suffix = args.out.suffix.lower()
     if suffix not in (".mp4", ".png"):
@@ -79,6 +78,9 @@ def run(args: argparse.Namespace) -> int:
     if args.frames < 2:
         raise MorphError(f"--frames must be at least 2, got {args.frames}")
     (src_path, src_time), (tgt_path, tgt_time) = args.source, args.target
+    if args.rest is not None and all(p.suffix.lower() == ".npz" for p in (src_path, tgt_path)):
+        raise MorphError("--rest needs a recording to simulate; saved motions keep the rest they were simulated "
+                         "with", src_path)
     motions = {}
     model = None
     # A saved motion brings its own model; recordings are simulated on it (or on the default).
@@ -96,6 +98,8 @@ def run(args: argparse.Namespace) -> int:
     morph.labels = (f"{src_path.stem} @ {src.times[morph.source_frame]:.2f} s",
                     f"{tgt_path.stem} @ {tgt.times[morph.target_frame]:.2f} s")
     diff = morph.element_difference
+    for path in dict.fromkeys((src_path, tgt_path)):
+        print(f"{path.name}: {rest_line(motions[path])}")
     print(f"source (t = 0): {morph.labels[0]}, energy {1e3 * src.energy[morph.source_frame]:.3f} mJ")
     print(f"target (t = 1): {morph.labels[1]}, energy {1e3 * tgt.energy[morph.target_frame]:.3f} mJ")
     gap = 1e3 * np.linalg.norm(morph.source_displacement - morph.target_displacement, axis=1)

@@ -18,6 +18,8 @@ log = logging.getLogger("tonguevis")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from tonguevis.cli._common import add_rest_argument
+
     parser.add_argument("file", type=Path,
                         help="the recording (NDI Wave TSV, Carstens .pos, EST .ema, ...) or a saved motion (.npz)")
     parser.add_argument("--sensors", metavar="MAP",
@@ -52,6 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
                         help="sensor nodes: the speaker's own layout (default) or the paper's placement rule")
     parser.add_argument("--linear", action="store_true", help="linear modal model (no modal warping)")
+    add_rest_argument(parser)
     parser.add_argument("--out", type=Path, required=True, metavar="OUT.vtu", help="VTU file to write")
     parser.add_argument("--png", type=Path, metavar="OUT.png", help="also render a picture (off screen)")
     parser.add_argument("--save", type=Path, metavar="OUT.npz", help="also save the whole result")
@@ -88,16 +91,13 @@ def _target(args, rec, motion):
         return frame_target(motion, time=args.time)
     if args.production is None:
         return peak_energy_target(motion)
-    from tonguevis.preprocess import correct_head, find_productions
-    from tonguevis.preprocess._names import reference_names
+    from tonguevis.workflows import find_recording_productions
 
     if rec is None:
         raise SegmentationError("--production needs the recording to find the productions: give the "
                                 "recording itself, or keep it where the saved motion says it was", args.file)
 
-    references = reference_names(rec.sensor_names)
-    timing = correct_head(rec, references) if len(references) >= 3 else rec
-    table = find_productions(timing)
+    table = find_recording_productions(rec)
     if not 1 <= args.production <= len(table):
         raise SegmentationError(f"production {args.production} asked, the recording has {len(table)} "
                                 "(see 'tonguevis syllables')", args.file)
@@ -115,19 +115,24 @@ def load_model(mesh: Path | None, axes: str | None):
 
 
 def _recording(path: Path, sensors):
-    from tonguevis.io import read_recording
+    from tonguevis.workflows import open_recording
 
-    return read_recording(path, sensor_map=sensors)  # a sensor_map.json beside the file is used by default
+    return open_recording(path, sensors)  # a sensor_map.json beside the file is used by default
 
 
 def _motion(args):
     """(recording or None, motion): a saved motion is loaded, a recording simulated."""
-    from tonguevis._progress import tqdm_progress
-    from tonguevis.sim import simulate
+    from tonguevis.cli._common import simulate_args
     from tonguevis.sim.motion import Motion
 
     if args.file.suffix.lower() == ".npz":
         motion = Motion.load(args.file)
+        if args.rest is not None:
+            from tonguevis.analysis.segmentation import SegmentationError
+            from tonguevis.cli._common import rest_line
+
+            raise SegmentationError(f"--rest needs a recording to simulate; this saved motion keeps its own "
+                                    f"({rest_line(motion)})", args.file)
         source = motion.metadata.get("recording", {})
         source = source.get("file") if isinstance(source, dict) else source
         rec = None
@@ -136,15 +141,13 @@ def _motion(args):
         return rec, motion
     rec = _recording(args.file, args.sensors)
     model = load_model(args.mesh, args.axes)
-    with tqdm_progress("simulating", disable=args.quiet) as progress:
-        motion = simulate(rec, model, modes=args.modal_modes, warping=not args.linear, landmarks=args.landmarks,
-                          progress=progress)
-    return rec, motion
+    return rec, simulate_args(args, rec, model, modes=args.modal_modes)
 
 
 def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
     from tonguevis.analysis.segmentation import segment
+    from tonguevis.cli._common import rest_line
 
     seeding = _seeding(args)
     rec, motion = _motion(args)
@@ -155,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
                          adjust=args.adjust, progress=progress, **seeding)
     result.metadata["recording"] = str(args.file)
     result.to_vtu(args.out)
-    lines = [f"target: {target.description}",
+    lines = [rest_line(motion), f"target: {target.description}",
              f"{result.n_partitions} partitions with {args.modes} modes in {result.metadata['seconds']:.2f} s; "
              f"relative global error {100 * result.relative_error:.2f} % (|u~ - u|^2 / |u|^2)",
              "partition  tets  volume_cm3  rms_error_mm  seed_tet"]

@@ -8,13 +8,15 @@ from pathlib import Path
 import numpy as np
 
 from tonguevis.cli._common import (
-    add_model_arguments, add_recording_arguments, load_model_args, read_recording_args, simulate_args,
+    add_model_arguments, add_recording_arguments, add_rest_argument, load_model_args, read_recording_args, rest_line,
+    simulate_args,
 )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_recording_arguments(parser)
     add_model_arguments(parser)
+    add_rest_argument(parser)
     parser.add_argument("--out", type=Path, metavar="DIR",
                         help="write motion.npz and a VTK series (motion.pvd + .vtu frames) for ParaView here")
 
@@ -29,6 +31,7 @@ def summary(motion) -> list[str]:
     lines = [
         f"model: {motion.model.mesh.n_nodes} nodes, {motion.model.mesh.n_tets} tets, {motion.q.shape[1]} modes, "
         f"{'modal warping' if motion.warping else 'linear'}; sensor nodes: {meta['landmarks']}",
+        rest_line(motion),
         "driving sensors: " + ", ".join(f"{n}->node {int(k)}" for n, k in zip(motion.sensor_names, motion.sensor_nodes)),
         f"alignment: scale {meta['alignment_scale']:.3f}, rest fit RMS {1e3 * meta['alignment_rms_m']:.2f} mm"
         + (" (midsagittal)" if meta.get("midsagittal_alignment") else ""),

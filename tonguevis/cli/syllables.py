@@ -31,11 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from tonguevis.errors import RecordingError
-    from tonguevis.io import read_recording
-    from tonguevis.preprocess import correct_head, find_productions, find_trains
-    from tonguevis.preprocess._names import reference_names
+    from tonguevis.workflows import find_recording_productions, head_references, open_recording
 
-    rec = read_recording(args.file, sensor_map=args.sensors)
+    rec = open_recording(args.file, args.sensors)
     sensor_map = rec.metadata.get("sensor_map")
     if args.tip not in rec.sensors:
         raise RecordingError(
@@ -44,13 +42,13 @@ def run(args: argparse.Namespace) -> int:
     lines = [f"file: {args.file}"]
     if sensor_map is not None:
         lines.append(f"sensor map: {sensor_map}")
-    references = reference_names(rec.sensor_names)
-    if len(references) >= 3 and not args.no_head_correction:
-        rec = correct_head(rec, references)
+    references = head_references(rec)
+    if references and not args.no_head_correction:
         lines.append(f"head motion removed with {', '.join(references)}")
     source = "audio envelope" if rec.audio is not None and len(rec.audio.samples) else "tongue-tip motion"
-    trains = find_trains(rec, tip=args.tip)
-    table = find_productions(rec, tip=args.tip, keep=None if args.all else (2, 3, 4), trains=trains)
+    table = find_recording_productions(rec, tip=args.tip, keep=None if args.all else (2, 3, 4),
+                                       head_correction=not args.no_head_correction)
+    trains = table.trains
     lines.append(f"trains: {len(trains)} (from the {source}); productions found per train: "
                  f"{', '.join(map(str, table.counts)) or 'none'}")
     lines.append(f"productions shown: {'all' if args.all else '2nd-4th of each train'} ({len(table)}); "

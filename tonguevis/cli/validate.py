@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tonguevis.cli._common import add_recording_arguments, load_model_args, read_recording_args
+from tonguevis.cli._common import add_recording_arguments, add_rest_argument, load_model_args, read_recording_args, rest_arg
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -25,8 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--modes", type=int, default=100, metavar="M", help="vibration modes (default 100)")
     parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
                         help="sensor nodes: snapped to the speaker's layout (default) or the paper's placement rule")
-    parser.add_argument("--rest", type=float, nargs=2, metavar=("START", "END"),
-                        help="rest interval in seconds (default: detected, else the stillest 0.2 s)")
+    add_rest_argument(parser)
     parser.add_argument("--no-static", action="store_true", help="skip the quasi-static baseline")
     parser.add_argument("--json", type=Path, required=True, metavar="OUT", help="write the results here (JSON)")
     parser.add_argument("--md", type=Path, metavar="OUT", help="also write a Markdown report")
@@ -39,22 +38,24 @@ def run(args: argparse.Namespace) -> int:
     from tonguevis._files import atomic_write_text
     from tonguevis.analysis.validation_report import axis_table, recording_markdown
     from tonguevis.errors import TonguevisError
+    from tonguevis.preprocess.rest import RestChoice
 
     if args.modes < 1:
         raise TonguevisError(f"--modes must be at least 1, got {args.modes}")
-    if args.rest is not None and not args.rest[0] < args.rest[1]:
-        raise TonguevisError(f"--rest START END needs START < END, got {args.rest[0]} {args.rest[1]}")
+    rest = rest_arg(args)
     recording = read_recording_args(args)
     model = load_model_args(args)
     with tqdm_progress("validating", disable=args.quiet) as progress:
         result = validate(recording, model, modes=args.modes, landmarks=args.landmarks,
-                          rest_interval=tuple(args.rest) if args.rest else None,
+                          rest_interval=rest,
                           quasi_static=not args.no_static, progress=progress)
     doc = result.as_dict()
     result.write_json(args.json)
     text = recording_markdown(doc, title=str(args.file))
     if args.md is not None:
         atomic_write_text(args.md, text + "\nPer axis (x anterior, y left, z up):\n\n" + axis_table(doc) + "\n")
+    r = doc["recording"]
+    print(RestChoice(r["rest_interval_s"], r["rest_interval_from"], r.get("rest_interval_reason", "")).describe())
     print(text)
     print(f"wrote {args.json}" + (f" and {args.md}" if args.md else ""))
     return 0

@@ -35,8 +35,9 @@ def install_error_hook(window) -> None:
     sys.excepthook = hook
 
 
-def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings=None, feature_tabs: bool = True):
-    """A shown MainWindow that opens ``file`` (default: the demo)."""
+def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings=None, feature_tabs: bool = True,
+                  rest=None):
+    """A shown MainWindow that opens ``file`` (default: the demo), with ``rest`` (start_s, end_s) if given."""
     from tonguevis.gui.window import MainWindow
 
     application()
@@ -46,10 +47,12 @@ def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings
 
         add_feature_tabs(window)
     window.show()
-    if file is None:
+    if file is None and rest is None:
         window.open_demo()
     else:
-        window.open_recording(file, sensor_map=sensors)
+        from tonguevis.gui.session import demo_recording_path
+
+        window.open_recording(file if file is not None else demo_recording_path(), sensor_map=sensors, rest=rest)
     return window
 
 
@@ -75,10 +78,12 @@ def opening_problem(window, file):
     return TonguevisError(" ".join(dialog.text().split()))
 
 
-def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None) -> int:
-    """``tonguevis view``: run the app; with ``screenshot``, save the window at ``frame`` and exit."""
+def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None,
+             rest=None) -> int:
+    """``tonguevis view``: run the app; with ``screenshot``, save the window at ``frame``, print the
+    rest line and exit.  ``rest``: (start_s, end_s) of the rest interval, None to find it."""
     app = application()
-    window = create_window(file, sensors, mesh, modes)
+    window = create_window(file, sensors, mesh, modes, rest=rest)
     if screenshot is None:
         install_error_hook(window)
         return app.exec()
@@ -98,6 +103,7 @@ def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=No
 
         def save() -> None:
             window.export_screenshot(os.fspath(screenshot))
+            print(f"{window.session.rest.describe()}\nwrote {screenshot}")
             status["code"] = 0
             window.close()
             app.exit(0)

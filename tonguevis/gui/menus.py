@@ -14,7 +14,7 @@ MAX_RECENT = 8
 
 class MenusMixin:
     """Needs ``self.state``, ``self.settings``, ``self.view3d``, ``self.transport`` and the
-    window's open/export methods."""
+    window's open/export/rest methods."""
 
     def _build_menus(self) -> None:
         bar = self.menuBar()
@@ -43,6 +43,8 @@ class MenusMixin:
             action.setCheckable(True)
             action.setChecked(mode == self.state.color)
             group.addAction(action)
+        simulation = bar.addMenu("&Simulation")
+        self.rest_action = self._action(simulation, "Set &rest interval…", self.ask_rest_interval)
         play = bar.addMenu("&Playback")
         self._action(play, "&Play / pause", lambda: self.state.toggle_playing(self), "Space")
         self._action(play, "Step &forward", lambda: self.state.step(1, self), "Right")

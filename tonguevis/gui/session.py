@@ -95,7 +95,7 @@ class Session:
     frames : per-frame drawing data (:class:`tonguevis.gui.frames.MotionFrames`).
     given_rest : (start_s, end_s) the user gave for the rest, or None to find it.
     rest : the :class:`~tonguevis.preprocess.RestChoice` the simulation used (None before).
-    notes : what the user should know about how it was simulated (the rest line).
+    notes : what else the user should know about how it was simulated.
     """
 
     recording: Recording
@@ -145,12 +145,18 @@ class Session:
         values = derivative(rec, order=order, window=window if window > order + 1 else None, sensors=names)
         return {n: values[n] * scale for n in names}
 
+    def rest_sensors(self) -> list[str]:
+        """The sensors a rest interval must hold valid samples of: those driving the model."""
+        if self.motion is not None:
+            return list(self.motion.sensor_names)
+        return [n for n in TONGUE_NAMES if n in self.recording.sensors]
+
     def set_motion(self, motion, frames) -> None:
         """The simulation's results: ``motion``, its drawing ``frames``, the rest it used and its note."""
         from tonguevis.workflows import rest_of
 
         self.motion, self.frames, self.rest = motion, frames, rest_of(motion)
-        self.notes = [self.rest.describe()] if self.rest is not None else []
+        self.notes = []
         self._signals.pop("displacement", None)  # displacements are from this rest now
 
     def _rest(self, names: list[str]) -> dict[str, np.ndarray]:
@@ -177,15 +183,21 @@ class Session:
         return out
 
 
-def load_session(path: str | os.PathLike, sensor_map: dict | str | None = None) -> Session:
-    """Read a recording (any supported format) and find its productions."""
-    from tonguevis.workflows import open_recording
+def load_session(path: str | os.PathLike, sensor_map: dict | str | None = None, rest=None) -> Session:
+    """Read a recording (any supported format) and find its productions.
+
+    rest : (start_s, end_s) to use as the rest interval (checked against the recording), or None to find it.
+    """
+    from tonguevis.workflows import check_rest_interval, open_recording
 
     path = Path(path)
     recording = open_recording(path, sensor_map)
     if recording.n_samples < 2:
         raise RecordingError(f"the recording has {recording.n_samples} sample(s); at least 2 needed", path)
-    return make_session(recording, path)
+    session = make_session(recording, path)
+    if rest is not None:
+        session.given_rest = check_rest_interval(recording, rest, session.rest_sensors())
+    return session
 
 
 def make_session(recording: Recording, path=None) -> Session:

@@ -51,7 +51,7 @@ def simulate_session(
     """Simulate ``session.recording`` and return the session with ``motion``, ``frames`` and ``rest``.
 
     The rest is ``session.given_rest`` when the user gave one, else found as every
-    front end finds it (:func:`tonguevis.workflows.simulate_recording`); ``session.notes``
+    front end finds it (:func:`tonguevis.workflows.simulate_recording`); ``session.rest``
     says which.  ``landmarks``: sensor nodes snapped to the speaker's layout ('speaker') or the
     paper's placement rule ('rule').  ``progress(done, total, message)`` may raise :class:`tonguevis.errors.Cancelled`.
     """

@@ -17,6 +17,7 @@ from tonguevis.gui.dialogs import SensorMapDialog, error_box
 from tonguevis.gui.menus import MenusMixin
 from tonguevis.gui.modal_tab import ModalTab
 from tonguevis.gui.playback import PlaybackController
+from tonguevis.gui.rest_dialog import RestMixin
 from tonguevis.gui.sensor_panel import SensorPanel
 from tonguevis.gui.session import Session, load_session, needs_sensor_map, remap_session
 from tonguevis.gui.transport import TransportBar
@@ -39,7 +40,7 @@ def register_tab_factory(title: str, factory) -> None:
     TAB_FACTORIES.append((title, factory))
 
 
-class MainWindow(MenusMixin, QMainWindow):
+class MainWindow(MenusMixin, RestMixin, QMainWindow):
     """The tonguevis window.  ``modes`` and ``mesh_path`` configure the simulation."""
 
     session_changed = Signal(object)
@@ -67,6 +68,7 @@ class MainWindow(MenusMixin, QMainWindow):
         self.playback = PlaybackController(self.state, self)
         self.playback.status.connect(lambda text: self.statusBar().showMessage(text))
         self.statusBar().showMessage("Open a recording (File ▸ Open, or drop a file here)")
+        self._build_rest_status()
         for title, factory in TAB_FACTORIES:
             self.register_tab(title, factory(self.state, self))
 
@@ -158,11 +160,14 @@ class MainWindow(MenusMixin, QMainWindow):
             return
         self.open_recording(path)
 
-    def open_recording(self, path, sensor_map=None) -> bool:
-        """Read ``path``; ask for a sensor map if needed; then simulate in the worker."""
+    def open_recording(self, path, sensor_map=None, rest=None) -> bool:
+        """Read ``path``; ask for a sensor map if needed; then simulate in the worker.
+
+        ``rest`` (start_s, end_s) is the rest interval to use (checked; None: found as usual).
+        """
         self.state.set_playing(False, self)
         try:
-            session = load_session(path, sensor_map=sensor_map)
+            session = load_session(path, sensor_map=sensor_map, rest=rest)
         except (TonguevisError, OSError) as exc:
             self.show_error("Cannot open recording", str(exc), path)
             return False
@@ -210,6 +215,7 @@ class MainWindow(MenusMixin, QMainWindow):
         self.transport.set_productions(session.productions)
         self.audio.show_audio(session.recording.audio, (start, end), session.productions,
                               session.recording.labels)
+        self.show_rest(session)
         self._publish()
         self._simulate(session)
 
@@ -258,6 +264,7 @@ class MainWindow(MenusMixin, QMainWindow):
             return  # a newer recording was opened meanwhile
         start, end, period = session.time_range
         self.state.set_range(start, end, period, self)
+        self.show_rest(session)
         self._publish()
         motion = session.motion
         self.statusBar().showMessage(
