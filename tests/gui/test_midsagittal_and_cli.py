@@ -49,16 +49,55 @@ def _run(*args, timeout=110):
                           timeout=timeout, cwd=REPO, env=env)
 
 
+def _screenshot_problems(rgb: np.ndarray) -> list[str]:
+    """What is wrong with a (H, W, 3) window screenshot (0..1) of the demo; [] if nothing."""
+    import matplotlib.colors as mcolors
+
+    from tonguevis.gui.scene import BACKGROUND, COLORMAP
+
+    problems = []
+    height, width = rgb.shape[:2]
+    if width <= 800 or height <= 500:
+        problems.append(f"only {width} x {height} pixels")
+    # not blank: a window of plots, text and a shaded mesh has thousands of colours
+    colours = len(np.unique(np.round(rgb * 255).astype(np.int64) @ [65536, 256, 1]))
+    if colours <= 2000:
+        problems.append(f"only {colours} distinct colours")
+    # the tongue: saturated colours of the plasma map (hues from violet through red to yellow; shading
+    # keeps the hue), filling most of the middle of the 3D view on the left (the colour bar alone is tiny)
+    assert COLORMAP == "plasma"
+    hsv = mcolors.rgb_to_hsv(rgb)
+    hue = 360 * hsv[..., 0]
+    tongue = (hsv[..., 1] > 0.35) & (hsv[..., 2] > 0.2) & ((hue >= 230) | (hue <= 65))
+    middle = tongue[int(0.1 * height):int(0.7 * height), int(0.05 * width):int(0.4 * width)]
+    if tongue.mean() <= 0.08 or middle.mean() <= 0.25:
+        problems.append(f"tongue colours cover {tongue.mean():.1%} of the window, {middle.mean():.1%} of the 3D view's middle")
+    # VTK's frame was painted in (a failed grab leaves it black): its background gradient shows around the tongue
+    bottom, top = (np.array(mcolors.to_rgb(c)) for c in BACKGROUND)
+    along = np.clip((rgb - bottom) @ (top - bottom) / np.sum((top - bottom) ** 2), 0, 1)
+    backdrop = np.linalg.norm(rgb - bottom - along[..., None] * (top - bottom), axis=-1) < 0.03
+    if backdrop[:, : width // 2].mean() <= 0.05:
+        problems.append(f"the 3D background covers {backdrop[:, : width // 2].mean():.1%} of the left half")
+    return problems
+
+
 def test_view_screenshot_command(tmp_path):
     if not (DEMO.exists() and _default_model_available()):
         pytest.skip("needs the demo corpus and the shipped mesh")
-    from PySide6.QtGui import QImage
+    import matplotlib.image as mimage
 
     out = tmp_path / "shot.png"
     result = _run("view", str(DEMO), "--screenshot", str(out), "--frame", "560", "--modes", "20")
     assert result.returncode == 0, result.stderr[-2000:]
-    image = QImage(str(out))
-    assert image.width() > 800 and image.height() > 500
+    rgb = mimage.imread(out)[..., :3].astype(np.float64)  # (H, W, 3) in 0..1
+    assert _screenshot_problems(rgb) == []
+    # the checks can fail: a blank image, a black 3D view, the same window in greys
+    assert len(_screenshot_problems(np.full_like(rgb, 0.5))) == 3
+    black_view = rgb.copy()
+    black_view[:, : int(0.6 * rgb.shape[1])] = 0.0
+    assert len(_screenshot_problems(black_view)) == 2
+    grey = np.repeat(rgb.mean(axis=2, keepdims=True), 3, axis=2)
+    assert any(p.startswith("tongue colours") for p in _screenshot_problems(grey))
 
 
 def test_view_command_reports_a_bad_file(tmp_path):
