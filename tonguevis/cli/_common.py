@@ -52,8 +52,11 @@ def rest_arg(args) -> tuple[float, float] | None:
         return None
     start, end = float(rest[0]), float(rest[1])
     if not (math.isfinite(start) and math.isfinite(end) and start < end):
-        raise TonguevisError(f"--rest {start:g} {end:g}: the end must come after the start (seconds)",
-                             getattr(args, "file", None))
+        files = [getattr(args, "file", None)] + [spec[0] for spec in (getattr(args, "source", None),
+                                                                     getattr(args, "target", None)) if spec]
+        files += list(getattr(args, "paths", None) or [])
+        where = ", ".join(dict.fromkeys(str(f) for f in files if f is not None)) or None
+        raise TonguevisError(f"--rest {start:g} {end:g}: the end must come after the start (seconds)", where)
     return start, end
 
 
