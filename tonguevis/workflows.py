@@ -4,7 +4,7 @@ The CLI commands, the app, the corpus loader and the scripts call these
 functions; none strings the stages together on its own (when each did, they
 drifted apart).  No Qt here.
 
-* :func:`open_recording`: read any supported file with its sensor map.
+* :func:`open_recording`: read any supported file with its sensor map, sound and labels.
 * :func:`head_corrected`: head motion removed when there are >= 3 head references.
 * :func:`find_recording_productions`: head-correct, then find the CV productions (or take
   them from a label tier).
@@ -29,19 +29,22 @@ __all__ = [
 ]
 
 
-def open_recording(path: str | os.PathLike, sensors: dict | str | os.PathLike | None = None,
-                   **options: Any) -> Recording:
-    """Read the recording at ``path`` (any supported format) with its sensor map.
+def open_recording(path: str | os.PathLike, sensors: dict | str | os.PathLike | None = None, *,
+                   audio: Any = None, labels: Any = None, **options: Any) -> Recording:
+    """Read the recording at ``path`` (any supported format) with its sensor map, sound and labels.
 
     sensors : a preset name (paper, haskins, mngu0), a JSON file or a dict of
         canonical name -> channel; None uses a ``sensor_map.json`` beside the
         file when there is one.
-    options : passed to :func:`tonguevis.io.read_recording` (``format=``, ``audio=``,
-        ``labels=``, reader options).
+    audio : None (the file's own sound, else a WAV with the same name beside it
+        or in the Carstens ``wav/`` folder), a WAV path, or False (none).
+    labels : None (a ``NAME.TextGrid`` beside it), a TextGrid path, or False (none).
+        See :mod:`tonguevis.io.companions`.
+    options : passed to :func:`tonguevis.io.read_recording` (``format=``, reader options).
     """
     from tonguevis.io.registry import read_recording
 
-    return read_recording(path, sensor_map=sensors, **options)
+    return read_recording(path, sensor_map=sensors, audio=audio, labels=labels, **options)
 
 
 def find_recording_productions(recording: Recording, tip: str = "TT", keep=(2, 3, 4), trains=None,

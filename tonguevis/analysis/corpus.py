@@ -208,6 +208,7 @@ class CorpusResult:
 
 def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int = 100,
                          keep=(2, 3, 4), keep_motions: bool = True, window: str = "release", progress=None,
+                         tier: str | None = None, open_options: dict | None = None,
                          **simulate_options) -> CorpusResult:
     """Simulate every recording of ``corpus`` and cut its energy into production curves.
 
@@ -217,6 +218,10 @@ def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int
     window : "release" (release to next release, §3.2) or "vowel" (previous
         vowel to own vowel: the consonant mid-curve, see :func:`vowel_windows`).
     progress(done, total, message) is called once per recording.
+    tier : take every recording's productions from this label tier instead of
+        finding them (every non-empty interval; ``keep`` then unused).
+    open_options : passed to :func:`tonguevis.workflows.open_recording` for every
+        recording (``audio=``, ``labels=``).
     simulate_options : passed to :func:`tonguevis.workflows.simulate_recording`
         (``rest=(start_s, end_s)`` for every recording, ``landmarks``, ``warping``...).
     """
@@ -237,7 +242,7 @@ def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int
         if mapping is None and (entry.path.parent / "sensor_map.json").is_file():
             mapping = entry.path.parent / "sensor_map.json"
         try:
-            rec = open_recording(entry.path, mapping)
+            rec = open_recording(entry.path, mapping, **(open_options or {}))
         except RecordingError as exc:
             if not entry.walked:
                 raise
@@ -248,11 +253,11 @@ def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int
         motion = simulate_recording(rec, model, modes=modes, **simulate_options)
         rests[entry.name] = rest_of(motion)
         if window == "release":
-            table = find_recording_productions(rec, keep=keep)
+            table = find_recording_productions(rec, keep=keep, tier=tier)
             spans = list(table)
         else:
-            table = find_recording_productions(rec, keep=None)
-            spans = [w for w in vowel_windows(table) if keep is None or w.index in keep]
+            table = find_recording_productions(rec, keep=None, tier=tier)
+            spans = [w for w in vowel_windows(table) if keep is None or tier is not None or w.index in keep]
         curves.extend(production_curves(motion, spans, recording=entry.name, speaker=entry.speaker,
                                         syllable=entry.syllable, trial=entry.trial))
         if keep_motions:

@@ -15,6 +15,38 @@ def add_recording_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sensors", metavar="MAP",
                         help="sensor map: a preset (paper, haskins, mngu0) or a JSON file of name -> channel "
                              "(default: sensor_map.json beside the file, if there is one)")
+    add_companion_arguments(parser)
+
+
+def add_companion_arguments(parser: argparse.ArgumentParser, labels: bool = True) -> None:
+    """``--audio FILE`` and (unless ``labels=False``) ``--labels FILE``: the recording's sound and TextGrid."""
+    parser.add_argument("--audio", type=Path, metavar="FILE",
+                        help="the recording's sound (WAV); default: the file's own (MVIEW), else a WAV with the "
+                             "same name beside it, or NAME.wav in a wav/ folder beside the pos/ folder (Carstens)")
+    if labels:
+        parser.add_argument("--labels", dest="label_file", type=Path, metavar="FILE",
+                            help="Praat TextGrid of the recording's labels (its tiers join MVIEW's words and "
+                                 "phones); default: NAME.TextGrid beside the recording")
+
+
+def companion_options(args) -> dict:
+    """``audio=`` and ``labels=`` for :func:`tonguevis.workflows.open_recording` from ``--audio``/``--labels``."""
+    options = {}
+    if getattr(args, "audio", None) is not None:
+        options["audio"] = args.audio
+    if getattr(args, "label_file", None) is not None:
+        options["labels"] = args.label_file
+    return options
+
+
+def add_productions_from_argument(parser: argparse.ArgumentParser) -> None:
+    """``--productions-from TIER``: productions from a label tier instead of the automatic segmentation."""
+    parser.add_argument("--productions-from", metavar="TIER",
+                        help="take the productions from this label tier (each non-empty interval is one; tiers "
+                             "of --labels FILE, of NAME.TextGrid beside the recording, or MVIEW's words and "
+                             "phones) instead of finding them from the tongue tip")
+
+
 
 
 def add_model_arguments(parser: argparse.ArgumentParser, modes: int = 100) -> None:
@@ -71,7 +103,7 @@ def rest_line(motion) -> str:
 def read_recording_args(args):
     from tonguevis.workflows import open_recording
 
-    return open_recording(args.file, args.sensors)
+    return open_recording(args.file, args.sensors, **companion_options(args))
 
 
 def load_model_args(args):

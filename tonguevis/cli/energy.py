@@ -9,6 +9,8 @@ written in long format: one row per frame with the columns
 seconds since the production's consonant release (``--window vowel``: since
 the previous vowel), ``time_norm`` the same divided by the span's duration.  Speaker, syllable and trial come from
 file names like ``spk1_ta.tsv`` or ``spk1/ta_2.tsv``, or from ``--labels TABLE``.
+``--productions-from TIER`` takes the productions from a label tier of each
+recording (its ``NAME.TextGrid``, or MVIEW's words/phones) instead.
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ log = logging.getLogger("tonguevis")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import add_model_arguments, add_rest_argument
+    from tonguevis.cli._common import (add_companion_arguments, add_model_arguments, add_productions_from_argument,
+                                       add_rest_argument)
 
     parser.add_argument("paths", nargs="+", type=Path, metavar="PATH", help="recordings or folders of recordings")
     parser.add_argument("--sensors", metavar="MAP",
@@ -40,6 +43,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--window", choices=("release", "vowel"), default="release",
                         help="curve span: release to next release (default), or previous vowel to own vowel "
                              "(the consonant mid-curve)")
+    add_productions_from_argument(parser)
+    # --labels is the name table above: each recording's TextGrid is the NAME.TextGrid beside it.
+    add_companion_arguments(parser, labels=False)
     add_model_arguments(parser)
     add_rest_argument(parser, every=True)
 
@@ -55,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
     from tonguevis.analysis.corpus import CorpusError, corpus_energy_curves, load_corpus
     from tonguevis.analysis.energy import GROUP_KEYS, summarize, write_curves_csv, write_summary_csv
-    from tonguevis.cli._common import rest_arg
+    from tonguevis.cli._common import companion_options, rest_arg
 
     by = tuple(k.strip() for k in args.group_by.split(",") if k.strip())
     bad = [k for k in by if k not in GROUP_KEYS]
@@ -64,11 +70,15 @@ def run(args: argparse.Namespace) -> int:
     corpus = load_corpus(args.paths, table=args.labels)
     if not len(corpus):
         raise CorpusError(f"no recordings found in {', '.join(map(str, args.paths))}")
+    if args.audio is not None and len(corpus) > 1:
+        raise CorpusError(f"--audio names the sound of one recording, but {len(corpus)} were found; leave it out "
+                          "and put each recording's WAV beside it under the same name (NAME.wav)")
     model = load_model(args)
     with tqdm_progress("energy curves", disable=args.quiet) as progress:
         result = corpus_energy_curves(corpus, model=model, sensor_map=args.sensors, modes=args.modes,
                                       keep=None if args.all else (2, 3, 4), keep_motions=False, window=args.window,
                                       landmarks=args.landmarks, warping=not args.linear, rest=rest_arg(args),
+                                      tier=args.productions_from, open_options=companion_options(args),
                                       progress=progress)
     for path, reason in result.skipped:
         print(f"skipped {path}: {reason}")

@@ -32,12 +32,15 @@ def parse_options(pairs: list[str] | None) -> dict:
 
 
 def add_reading_arguments(parser: argparse.ArgumentParser) -> None:
+    from tonguevis.cli._common import add_companion_arguments
+
     parser.add_argument("--sensors", metavar="MAP",
                         help="sensor map: a preset (paper, haskins, mngu0) or a JSON file of name -> channel")
     parser.add_argument("--format", metavar="NAME", help="read as this format instead of detecting it")
     parser.add_argument("-O", "--option", action="append", metavar="KEY=VALUE",
                         help="reader option, e.g. channels=12 (headerless AG500), axes=-y,x,z, unit=mm, "
-                             "audio=false; repeatable")
+                             "audio=false (no sound at all), labels=false; repeatable")
+    add_companion_arguments(parser)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -84,7 +87,7 @@ def describe(rec) -> list[str]:
     if rec.audio is None:
         lines.append("audio:          none")
     else:
-        source = meta.get("audio_file")
+        source = meta.get("audio_file") or ("in the file" if meta.get("audio_source") == "embedded" else None)
         lines.append(f"audio:          {rec.audio.rate:.0f} Hz, {rec.audio.duration:.3f} s"
                      + (f" ({source})" if source else ""))
     if rec.labels:
@@ -95,6 +98,8 @@ def describe(rec) -> list[str]:
         words = [lab.text for lab in rec.labels if lab.tier == rec.labels[0].tier]
         text = " ".join(words[:12]) + (" ..." if len(words) > 12 else "")
         lines.append(f"labels:         {counts}: {text}")
+        if meta.get("labels_file"):
+            lines.append(f"label file:     {meta['labels_file']}")
     else:
         lines.append("labels:         none")
     if meta.get("sentence"):
@@ -107,7 +112,10 @@ def describe(rec) -> list[str]:
 def read_from_args(args, path):
     from tonguevis.workflows import open_recording
 
-    return open_recording(path, args.sensors, format=args.format, **parse_options(args.option))
+    from tonguevis.cli._common import companion_options
+
+    options = {**parse_options(args.option), **companion_options(args)}
+    return open_recording(path, args.sensors, format=args.format, **options)
 
 
 def run(args) -> int:

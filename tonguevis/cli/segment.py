@@ -18,7 +18,7 @@ log = logging.getLogger("tonguevis")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import add_rest_argument
+    from tonguevis.cli._common import add_companion_arguments, add_productions_from_argument, add_rest_argument
 
     parser.add_argument("file", type=Path,
                         help="the recording (NDI Wave TSV, Carstens .pos, EST .ema, ...) or a saved motion (.npz)")
@@ -32,8 +32,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "for the ArtiSynth tongue")
     which = parser.add_mutually_exclusive_group()
     which.add_argument("--production", metavar="K", type=int,
-                       help="segment production K (1-based, as listed by 'tonguevis syllables')")
+                       help="segment production K (1-based, as listed by 'tonguevis syllables', with the same "
+                            "--productions-from)")
     which.add_argument("--time", metavar="T", type=float, help="segment the frame nearest T seconds")
+    add_productions_from_argument(parser)
+    add_companion_arguments(parser)
     parser.add_argument("--peak", action="store_true",
                         help="with --production: only its frame of peak energy (default: the whole "
                              "production, frames weighted by energy, eq. 5)")
@@ -97,10 +100,12 @@ def _target(args, rec, motion):
         raise SegmentationError("--production needs the recording to find the productions: give the "
                                 "recording itself, or keep it where the saved motion says it was", args.file)
 
-    table = find_recording_productions(rec)
+    tier = getattr(args, "productions_from", None)
+    table = find_recording_productions(rec, tier=tier)
     if not 1 <= args.production <= len(table):
+        see = f"tonguevis syllables --productions-from {tier}" if tier is not None else "tonguevis syllables"
         raise SegmentationError(f"production {args.production} asked, the recording has {len(table)} "
-                                "(see 'tonguevis syllables')", args.file)
+                                f"(see '{see}')", args.file)
     production = table[args.production - 1]
     return peak_energy_target(motion, production) if args.peak else production_target(motion, production)
 
@@ -114,15 +119,16 @@ def load_model(mesh: Path | None, axes: str | None):
     return load_model_args(SimpleNamespace(mesh=mesh, axes=axes))
 
 
-def _recording(path: Path, sensors):
+def _recording(path: Path, sensors, options=None):
     from tonguevis.workflows import open_recording
 
-    return open_recording(path, sensors)  # a sensor_map.json beside the file is used by default
+    # a sensor_map.json, NAME.wav and NAME.TextGrid beside the file are used by default
+    return open_recording(path, sensors, **(options or {}))
 
 
 def _motion(args):
     """(recording or None, motion): a saved motion is loaded, a recording simulated."""
-    from tonguevis.cli._common import simulate_args
+    from tonguevis.cli._common import companion_options, simulate_args
     from tonguevis.sim.motion import Motion
 
     if args.file.suffix.lower() == ".npz":
@@ -137,9 +143,9 @@ def _motion(args):
         source = source.get("file") if isinstance(source, dict) else source
         rec = None
         if args.production is not None and source and Path(source).exists():
-            rec = _recording(Path(source), args.sensors)
+            rec = _recording(Path(source), args.sensors, companion_options(args))
         return rec, motion
-    rec = _recording(args.file, args.sensors)
+    rec = _recording(args.file, args.sensors, companion_options(args))
     model = load_model(args.mesh, args.axes)
     return rec, simulate_args(args, rec, model, modes=args.modal_modes)
 
@@ -150,6 +156,11 @@ def run(args: argparse.Namespace) -> int:
     from tonguevis.cli._common import rest_line
 
     seeding = _seeding(args)
+    if args.productions_from is not None and args.production is None:
+        from tonguevis.analysis.segmentation import SegmentationError
+
+        raise SegmentationError(f"--productions-from {args.productions_from} says where --production K is "
+                                "counted; give --production K too", args.file)
     rec, motion = _motion(args)
     model = motion.model
     target = _target(args, rec, motion)

@@ -82,12 +82,15 @@ def read_textgrid(path: str | os.PathLike) -> list[Label]:
 
 
 def write_textgrid(labels: Iterable[Label], path: str | os.PathLike, start: float = 0.0,
-                   end: float | None = None, tiers: list[str] | None = None) -> None:
+                   end: float | None = None, tiers: list[str] | None = None,
+                   point_tiers: Iterable[str] = ()) -> None:
     """Write ``labels`` as a long-format Praat TextGrid, atomically.
 
     start, end : the TextGrid's time span in seconds (end defaults to the last
     label's end); labels outside it are an error.  tiers : which tiers and in
-    which order (default: every tier, in order of first appearance).
+    which order (default: every tier, in order of first appearance).  point_tiers :
+    tiers written as point tiers even when they have no label (others are decided
+    by their labels).
     Intervals of one tier must not overlap.
     """
     from praatio import textgrid as praat_textgrid
@@ -97,6 +100,7 @@ def write_textgrid(labels: Iterable[Label], path: str | os.PathLike, start: floa
     path = Path(path)
     labels = list(labels)
     names = tier_names(labels) if tiers is None else list(tiers)
+    points = set(point_tiers)
     last = max((lab.end for lab in labels), default=start)
     end = max(last, start) if end is None else float(end)
     if end <= start:
@@ -109,7 +113,7 @@ def write_textgrid(labels: Iterable[Label], path: str | os.PathLike, start: floa
     grid = praat_textgrid.Textgrid(start, end)
     for name in names:
         own = tier_labels(labels, name)
-        if is_point_tier(labels, name):
+        if name in points or is_point_tier(labels, name):
             tier = PointTier(name, [(lab.start, lab.text) for lab in own], start, end)
         else:
             for a, b in zip(own[:-1], own[1:]):

@@ -79,3 +79,27 @@ def production_labels(table: ProductionTable) -> list[Label]:
                 points.setdefault(round(float(time), 6), what)
     events = [Label(t, t, what, EVENTS_TIER) for t, what in sorted(points.items())]
     return intervals + events
+
+
+def write_productions_textgrid(path, table: ProductionTable, rec: Recording) -> list[str]:
+    """Write a Praat TextGrid of ``rec``'s label tiers plus the tiers of :func:`production_labels`
+    (replacing tiers of those names), spanning the kinematics and the sound; returns the tier names.
+
+    The TextGrid starts at 0 s, the time of the first audio sample, so it lines up with
+    the recording's WAV in Praat.
+    """
+    from tonguevis.io.textgrid import tier_names, write_textgrid
+
+    ours = production_labels(table)
+    labels = [lab for lab in rec.labels if lab.tier not in (PRODUCTIONS_TIER, EVENTS_TIER)] + ours
+    ends = [rec.times[-1] + 1.0 / rec.rate if rec.n_samples else 0.0] + [lab.end for lab in labels]
+    start = min(0.0, float(rec.times[0])) if rec.n_samples else 0.0
+    if rec.audio is not None:
+        start = min(start, rec.audio.offset)
+        ends.append(rec.audio.offset + rec.audio.duration)
+    names = tier_names(labels)
+    for name in (PRODUCTIONS_TIER, EVENTS_TIER):  # both tiers even when there is no production
+        if name not in names:
+            names.append(name)
+    write_textgrid(labels, path, start=start, end=max(ends), tiers=names, point_tiers=[EVENTS_TIER])
+    return names
