@@ -47,8 +47,6 @@ def add_productions_from_argument(parser: argparse.ArgumentParser) -> None:
                              "phones) instead of finding them from the tongue tip")
 
 
-
-
 def add_model_arguments(parser: argparse.ArgumentParser, modes: int = 100) -> None:
     parser.add_argument("--mesh", type=Path, metavar="PATH",
                         help="tetrahedral tongue mesh (TetGen .node/.ele, VTU, Gmsh); default: the shipped tongue")

@@ -6,7 +6,7 @@ from pathlib import Path
 
 
 def add_arguments(parser) -> None:
-    from tonguevis.cli._common import add_rest_argument
+    from tonguevis.cli._common import add_companion_arguments, add_rest_argument
 
     parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the demo /ta/ train, spk1_ta)")
     parser.add_argument("--out", type=Path, required=True, metavar="MP4", help="the video to write")
@@ -21,6 +21,7 @@ def add_arguments(parser) -> None:
                         help="surface colouring (default: displacement magnitude)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_rest_argument(parser)
+    add_companion_arguments(parser, labels=False)  # the video has the sound, not the labels
 
 
 def run(args) -> int:
@@ -38,7 +39,7 @@ def run(args) -> int:
         width, height = (int(v) for v in args.size.lower().split("x"))
     except ValueError:
         raise RecordingError(f"--size must look like 1280x720, got {args.size!r}") from None
-    session = load_session(path, sensor_map=args.sensors, rest=rest_arg(args))
+    session = load_session(path, sensor_map=args.sensors, rest=rest_arg(args), audio=args.audio)
     with tqdm_progress("simulating", disable=args.quiet) as progress:
         simulate_session(session, mesh_path=args.mesh, modes=args.modes, progress=progress)
     with tqdm_progress("rendering", disable=args.quiet) as progress:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 
 def add_arguments(parser) -> None:
-    from tonguevis.cli._common import add_rest_argument
+    from tonguevis.cli._common import add_companion_arguments, add_rest_argument
 
     parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the demo /ta/ train, spk1_ta)")
     parser.add_argument("--sensors", metavar="MAP",
@@ -17,6 +17,7 @@ def add_arguments(parser) -> None:
                         help="open the window, show --frame, save the whole window as PNG and exit")
     parser.add_argument("--frame", type=int, metavar="N", help="frame shown for --screenshot (default: the middle)")
     add_rest_argument(parser)
+    add_companion_arguments(parser)
 
 
 def run(args) -> int:
@@ -25,4 +26,5 @@ def run(args) -> int:
     rest = rest_arg(args)
     from tonguevis.gui.app import run_view  # Qt only loads here: `import tonguevis.cli.view` stays light
 
-    return run_view(args.file, args.sensors, args.mesh, args.modes, args.screenshot, args.frame, rest=rest)
+    return run_view(args.file, args.sensors, args.mesh, args.modes, args.screenshot, args.frame, rest=rest,
+                    audio=args.audio, labels=args.label_file)

@@ -36,8 +36,9 @@ def install_error_hook(window) -> None:
 
 
 def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings=None, feature_tabs: bool = True,
-                  rest=None):
-    """A shown MainWindow that opens ``file`` (default: the demo), with ``rest`` (start_s, end_s) if given."""
+                  rest=None, audio=None, labels=None):
+    """A shown MainWindow that opens ``file`` (default: the demo), with ``rest`` (start_s, end_s) if given,
+    and the sound ``audio`` and TextGrid ``labels`` if given (else those found beside the file)."""
     from tonguevis.gui.window import MainWindow
 
     application()
@@ -47,12 +48,13 @@ def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings
 
         add_feature_tabs(window)
     window.show()
-    if file is None and rest is None:
+    if file is None and rest is None and audio is None and labels is None:
         window.open_demo()
     else:
         from tonguevis.gui.session import demo_recording_path
 
-        window.open_recording(file if file is not None else demo_recording_path(), sensor_map=sensors, rest=rest)
+        window.open_recording(file if file is not None else demo_recording_path(), sensor_map=sensors, rest=rest,
+                              audio=audio, labels=labels)
     return window
 
 
@@ -79,11 +81,12 @@ def opening_problem(window, file):
 
 
 def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None,
-             rest=None) -> int:
+             rest=None, audio=None, labels=None) -> int:
     """``tonguevis view``: run the app; with ``screenshot``, save the window at ``frame``, print the
-    rest line and exit.  ``rest``: (start_s, end_s) of the rest interval, None to find it."""
+    rest line and exit.  ``rest``: (start_s, end_s) of the rest interval, None to find it; ``audio``,
+    ``labels``: a WAV and a TextGrid, None for those beside the file."""
     app = application()
-    window = create_window(file, sensors, mesh, modes, rest=rest)
+    window = create_window(file, sensors, mesh, modes, rest=rest, audio=audio, labels=labels)
     if screenshot is None:
         install_error_hook(window)
         return app.exec()

@@ -1,9 +1,12 @@
-"""Dialogs: errors that name the file and the problem, and the sensor-mapping dialog."""
+"""Dialogs: errors that name the file and the problem, opening a recording with its sound and
+labels, and the sensor-mapping dialog."""
 
 from __future__ import annotations
 
-from PySide6.QtWidgets import (QComboBox, QDialog, QDialogButtonBox, QFormLayout, QLabel, QMessageBox,
-                               QVBoxLayout)
+from pathlib import Path
+
+from PySide6.QtWidgets import (QComboBox, QDialog, QDialogButtonBox, QFileDialog, QFormLayout, QHBoxLayout,
+                               QLabel, QLineEdit, QMessageBox, QPushButton, QVBoxLayout, QWidget)
 
 from tonguevis.gui.session import ROLES, TONGUE_NAMES
 
@@ -84,3 +87,67 @@ class SensorMapDialog(QDialog):
         self.problem.setText(problem)
         if not problem:
             self.accept()
+
+
+class OpenRecordingDialog(QDialog):
+    """File ▸ Open with sound/labels: a recording and, optionally, its WAV and Praat TextGrid.
+
+    Left empty, the sound and labels are found as for every recording (a same-name
+    ``.wav`` / ``.TextGrid`` beside it, Carstens ``pos``/``wav`` folders).
+    """
+
+    FIELDS = {
+        "recording": ("Recording", "an EMA recording (required)", ""),
+        "audio": ("Sound (WAV)", "found automatically: same name .wav beside it, or ../wav/ for ../pos/",
+                  "WAV audio (*.wav *.WAV);;All files (*)"),
+        "labels": ("Labels (TextGrid)", "found automatically: same name .TextGrid beside it",
+                   "Praat TextGrid (*.TextGrid *.textgrid);;All files (*)"),
+    }
+
+    def __init__(self, folder: str | Path = "", parent=None):
+        super().__init__(parent)
+        self.setWindowTitle("Open a recording with its sound and labels")
+        self.folder = str(folder)
+        self.edits: dict[str, QLineEdit] = {}
+        layout = QVBoxLayout(self)
+        form = QFormLayout()
+        for key, (title, hint, filter_) in self.FIELDS.items():
+            edit = QLineEdit()
+            edit.setPlaceholderText(hint)
+            edit.setMinimumWidth(420)
+            browse = QPushButton("Browse…")
+            browse.clicked.connect(lambda _=False, k=key, f=filter_: self._browse(k, f))
+            row = QWidget()
+            box = QHBoxLayout(row)
+            box.setContentsMargins(0, 0, 0, 0)
+            box.addWidget(edit, 1)
+            box.addWidget(browse)
+            form.addRow(title, row)
+            self.edits[key] = edit
+        layout.addLayout(form)
+        self.buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Open | QDialogButtonBox.StandardButton.Cancel)
+        self.buttons.accepted.connect(self.accept)
+        self.buttons.rejected.connect(self.reject)
+        layout.addWidget(self.buttons)
+        self.edits["recording"].textChanged.connect(self._update)
+        self._update()
+
+    def _update(self) -> None:
+        ok = self.buttons.button(QDialogButtonBox.StandardButton.Open)
+        ok.setEnabled(bool(self.edits["recording"].text().strip()))
+
+    def _browse(self, key: str, filter_: str) -> None:
+        start = self.edits[key].text() or self.edits["recording"].text() or self.folder
+        path, _ = QFileDialog.getOpenFileName(self, self.FIELDS[key][0], str(Path(start).parent if
+                                              Path(start).is_file() else start), filter_)
+        if path:
+            self.edits[key].setText(path)
+
+    def set_paths(self, recording="", audio="", labels="") -> None:
+        for key, value in (("recording", recording), ("audio", audio), ("labels", labels)):
+            self.edits[key].setText(str(value or ""))
+
+    def paths(self) -> tuple[str, str | None, str | None]:
+        """(recording, sound file or None for automatic, TextGrid or None for automatic)."""
+        text = {key: edit.text().strip() for key, edit in self.edits.items()}
+        return text["recording"], text["audio"] or None, text["labels"] or None

@@ -20,6 +20,7 @@ class MenusMixin:
         bar = self.menuBar()
         file_menu = bar.addMenu("&File")
         self._action(file_menu, "&Open recording…", self.ask_open_recording, QKeySequence.StandardKey.Open)
+        self._action(file_menu, "Open recording with &sound/labels…", self.ask_open_with_companions)
         self._action(file_menu, "Open &mesh…", self.ask_open_mesh)
         self.recent_menu = file_menu.addMenu("Open &recent")
         self._fill_recent()

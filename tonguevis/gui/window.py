@@ -142,6 +142,16 @@ class MainWindow(MenusMixin, RestMixin, QMainWindow):
         if path:
             self.open_recording(path)
 
+    def ask_open_with_companions(self) -> None:
+        """File ▸ Open with sound/labels: the recording plus an optional WAV and TextGrid."""
+        from tonguevis.gui.dialogs import OpenRecordingDialog
+
+        dialog = OpenRecordingDialog(self._last_folder(), self)
+        dialog.accepted.connect(lambda: self.open_recording(dialog.paths()[0], audio=dialog.paths()[1],
+                                                            labels=dialog.paths()[2]))
+        self.last_dialog = dialog
+        dialog.open()
+
     def ask_open_mesh(self) -> None:
         path, _ = QFileDialog.getOpenFileName(self, "Open a tetrahedral tongue mesh", str(self._last_folder()))
         if path:
@@ -160,14 +170,15 @@ class MainWindow(MenusMixin, RestMixin, QMainWindow):
             return
         self.open_recording(path)
 
-    def open_recording(self, path, sensor_map=None, rest=None) -> bool:
+    def open_recording(self, path, sensor_map=None, rest=None, audio=None, labels=None) -> bool:
         """Read ``path``; ask for a sensor map if needed; then simulate in the worker.
 
-        ``rest`` (start_s, end_s) is the rest interval to use (checked; None: found as usual).
+        ``rest`` (start_s, end_s) is the rest interval to use (checked; None: found as usual);
+        ``audio`` and ``labels`` a WAV and a TextGrid (None: those beside the recording).
         """
         self.state.set_playing(False, self)
         try:
-            session = load_session(path, sensor_map=sensor_map, rest=rest)
+            session = load_session(path, sensor_map=sensor_map, rest=rest, audio=audio, labels=labels)
         except (TonguevisError, OSError) as exc:
             self.show_error("Cannot open recording", str(exc), path)
             return False
