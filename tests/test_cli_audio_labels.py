@@ -253,3 +253,44 @@ def test_segment_counts_productions_in_the_tier(tmp_path, capsys, monkeypatch):
     assert code == 2 and "the recording has 2" in err and "--productions-from syll" in err
     code, _, err = run(capsys, *common, "--productions-from", "syll")
     assert code == 2 and "give --production K too" in err
+
+
+def test_energy_reads_its_one_recording_with_the_given_sound(tmp_path, capsys, monkeypatch):
+    import tonguevis.workflows as workflows
+    from tonguevis.errors import RecordingError
+
+    if not DEMO.exists():
+        pytest.skip(f"demo corpus not built: {DEMO}")
+    seen = {}
+
+    def open_recording(path, sensors=None, **options):
+        seen.update(options)
+        raise RecordingError("stop here", path)
+
+    monkeypatch.setattr(workflows, "open_recording", open_recording)
+    wav = tmp_path / "other.wav"
+    code, _, err = run(capsys, "energy", DEMO, "--csv", tmp_path / "e.csv", "--audio", wav, "--quiet")
+    assert code == 2 and "stop here" in err
+    assert seen == {"audio": wav}
+
+
+def test_info_says_the_sound_is_the_files_own(tmp_path, capsys):
+    from tests.io.examples import make_mview_v5
+
+    example = make_mview_v5(tmp_path)
+    code, out, _ = run(capsys, "info", example.path)
+    assert code == 0 and "audio:          8000 Hz, 0.200 s (in the file)" in out
+
+
+def test_textgrid_without_productions_still_has_both_tiers(tmp_path):
+    from praatio import textgrid
+
+    from tonguevis.preprocess.labelled import write_productions_textgrid
+    from tonguevis.preprocess.productions import ProductionTable
+
+    out = tmp_path / "none.TextGrid"
+    assert write_productions_textgrid(out, ProductionTable(), _train_recording()) == ["productions", "events"]
+    grid = textgrid.openTextgrid(str(out), includeEmptyIntervals=False)
+    assert type(grid.getTier("events")).__name__ == "PointTier"
+    assert type(grid.getTier("productions")).__name__ == "IntervalTier"
+    assert grid.maxTimestamp == pytest.approx(4.0)
