@@ -64,9 +64,9 @@ def tag_of(label: str) -> str:
 
 def run_one(path: Path, sensor_map, model, modes: int, landmarks: str, json_dir: Path | None, tag: str):
     from tonguevis.analysis import validate
-    from tonguevis.io import read_recording
+    from tonguevis.workflows import open_recording
 
-    rec = read_recording(path, sensor_map=sensor_map)
+    rec = open_recording(path, sensor_map)
     t0 = time.perf_counter()
     result = validate(rec, model, modes=modes, landmarks=landmarks)
     doc = result.as_dict()
