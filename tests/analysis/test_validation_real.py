@@ -40,7 +40,10 @@ def test_haskins_sentence_without_rest(artisynth_model):
     assert r["rest_interval_from"] == "stillest window"
     assert r["rest_interval_s"][1] - r["rest_interval_s"][0] == pytest.approx(0.2, abs=0.011)
     assert r["midsagittal_alignment"] and r["tongue_sensors"] == ["TT", "TB", "TBK"]
-    assert r["unconverged_frames"] == 0 and r["sensor_residual_max_mm"] < 1e-3
+    # Default sensor springs: no frame flagged, a believable shape near the sensors.
+    assert r["unconverged_frames"] == 0 and r["sensor_residual_mean_mm"] < 3.0
+    p = r["plausibility"]
+    assert p["amplification"] < 2.0 and p["volume_change_max_percent"] < 2.0
     for name, s in result.sensors.items():
         assert s["frames"] == rec.n_samples
         assert s["measured_peak_mm"] > 5  # every tongue sensor moved in the sentence

@@ -104,7 +104,8 @@ def test_cli_writes_the_json_and_the_report(cli_setup, tmp_path, capsys):
     write_recording(rec, path)
     out, md = tmp_path / "v.json", tmp_path / "v.md"
     code = main(["validate", str(path), "--modes", "30", "--landmarks", "rule", "--rest", "0", "0.2",
-                 "--json", str(out), "--md", str(md), "--quiet", "--no-static"])
+                 "--json", str(out), "--md", str(md), "--quiet", "--no-static",
+                 "--sensor-stiffness", "hard"])
     assert code == 0
     doc = json.loads(out.read_text())
     assert set(doc["sensors"]) == {"TT", "TB", "TD", "TL", "TR"}

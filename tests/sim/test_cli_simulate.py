@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from tonguevis.cli import main
 from tonguevis.paths import DATA_DIR
@@ -10,10 +11,12 @@ from tonguevis.sim import Motion
 
 
 def test_simulate_prints_the_figures_and_writes_motion_and_vtk(tmp_path, capsys):
-    code = main(["simulate", str(DATA_DIR / "spk2_ka.tsv"), "--modes", "30", "--quiet", "--out", str(tmp_path)])
+    code = main(["simulate", str(DATA_DIR / "spk2_ka.tsv"), "--modes", "30", "--quiet", "--out", str(tmp_path),
+                 "--sensor-stiffness", "hard"])
     out = capsys.readouterr().out
     assert code == 0, out
-    for what in ("max sensor residual", "max volume change", "energy peak", "drift at the end", "TT->node"):
+    for what in ("max sensor residual", "max volume change", "energy peak", "drift at the end", "TT->node",
+                 "far-field amplification", "held exactly"):
         assert what in out
     residual_mm = float(out.split("max sensor residual: ")[1].split(" mm")[0])
     assert residual_mm < 0.01
@@ -30,3 +33,20 @@ def test_simulate_reports_bad_input_in_one_line(tmp_path, capsys):
     assert len(err) == 1 and "broken.tsv" in err[0]
     assert main(["simulate", str(DATA_DIR / "spk1_ta.tsv"), "--mesh", str(tmp_path / "none.vtu"), "--quiet"]) == 2
     assert "none.vtu" in capsys.readouterr().err
+
+
+def test_default_sensor_springs_follow_the_sensors_closely_and_say_so(capsys):
+    assert main(["simulate", str(DATA_DIR / "spk2_ka.tsv"), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "sensor springs 20x" in out
+    misfit_rms = float(out.split("sensor misfit ")[1].split(" mm RMS")[0])
+    amplification = float(out.split("far-field amplification ")[1].split(" ")[0])
+    assert 0.0 < misfit_rms < 1.0 and amplification < 2.0
+
+
+def test_bad_sensor_stiffness_is_a_one_line_error(capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["simulate", str(DATA_DIR / "spk2_ka.tsv"), "--quiet", "--sensor-stiffness", "soft"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "soft" in err[-1] and "hard" in err[-1]

@@ -126,7 +126,7 @@ def test_compiled_integrator_equals_the_numpy_reference(warping, compliance, mon
     targets[60:70, 1] = np.nan  # a lost sensor for a while
     unit = 1.0 / point_stiffness(lam, phi_s)  # m/N
     comp = {"hard": 0.0, "runaway": 0.0, "compliant": unit / 20, "ramped": np.zeros((200, 4))}[compliance]
-    if compliance == "ramped":  # sensor 2 released over 10 frames, off for 20, back over 10
+    if compliance == "ramped":  # sensor 2 softened over 10 frames, off for 20, back over 10
         comp[100:110, 2] = np.linspace(0.0, 5.0, 10) * unit
         comp[110:130, 2] = np.inf
         comp[130:140, 2] = np.linspace(5.0, 0.0, 10) * unit

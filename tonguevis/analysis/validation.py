@@ -96,6 +96,7 @@ def validate(
     rest_interval=None,
     quasi_static: bool = True,
     tolerance: float = 1e-8,
+    sensor_stiffness: float | None | str = "default",
     progress: ProgressCallback | None = None,
 ) -> ValidationResult:
     """Leave-one-sensor-out validation of ``model`` (default: the shipped tongue) on ``recording``.
@@ -103,10 +104,12 @@ def validate(
     Needs >= 3 tongue sensors with landmarks on the model (each run is driven
     by >= 2).  ``rest_interval`` (start_s, end_s) or a :class:`~tonguevis.preprocess.RestChoice`
     defaults to the detected rest, else the stillest 0.2 s window (logged; the JSON says which).
+    ``sensor_stiffness`` as :func:`tonguevis.sim.simulate` (every physical predictor uses it).
     """
     from tonguevis.sim import TongueModel
     from tonguevis.preprocess.targets import TONGUE_SENSORS, prepare_targets
-    from tonguevis.sim.simulate import simulate
+    from tonguevis.sim.constrained import point_stiffness
+    from tonguevis.sim.simulate import DEFAULT_SENSOR_STIFFNESS, drive_schedule, simulate
 
     model = model or TongueModel.default()
     file = recording.metadata.get("file")
@@ -121,27 +124,36 @@ def validate(
     basis = model.basis(modes)
     w_full = model.rotation_matrix(basis)
     report(progress, 0, 4, "simulating with every sensor")
+    if sensor_stiffness == "default":
+        sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
     motion = simulate(recording, model, modes=modes, warping=True, landmarks=landmarks,
-                      rest_interval=prep.rest, tolerance=tolerance)
+                      rest_interval=prep.rest, tolerance=tolerance, sensor_stiffness=sensor_stiffness)
     centres = prep.aligned_rest
     s = len(names)
     dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
     phi_s = basis.phi[dofs].reshape(s, 3, -1)
     w_s = w_full[dofs].reshape(s, 3, -1)
     # Trial h drives with every sensor but h: h's targets are marked missing,
-    # which the integrator treats as a sensor that is not there.
-    trials = np.repeat(prep.displacement[None], s, axis=0)  # (S, F, S, 3)
-    trials[np.arange(s), :, np.arange(s)] = np.nan
+    # which the integrator treats as a sensor that is not there; the other
+    # sensors' dropouts are handled as in the simulation.
+    schedules = []
+    for h in range(s):
+        held = prep.displacement.copy()
+        held[:, h] = np.nan
+        schedules.append(drive_schedule(held, recording.rate, basis.eigenvalues, phi_s, sensor_stiffness))
+    trials = np.stack([sch[0] for sch in schedules])  # (S, F, S, 3)
+    compliance = np.stack([sch[1] for sch in schedules])  # (S, F, S)
     q_runs: dict[str, list] = {}
     for k, (method, warping) in enumerate((("model", True), ("linear", False))):
         report(progress, 1 + k, 4, f"leave-one-out: {method}")
-        q_runs[method] = _drive_trials(basis, phi_s, w_s, trials, warping, 1.0 / recording.rate,
+        q_runs[method] = _drive_trials(basis, phi_s, w_s, trials, compliance, warping, 1.0 / recording.rate,
                                        model.material, tolerance)
     if quasi_static:
         from tonguevis.analysis.quasistatic import quasi_static as solve_static
 
         report(progress, 3, 4, "leave-one-out: quasi-static")
-        q_runs["static"] = [solve_static(basis.eigenvalues, phi_s, w_s, t, tolerance)[:2] for t in trials]
+        q_runs["static"] = [solve_static(basis.eigenvalues, phi_s, w_s, t, tolerance, compliance=c)[:2]
+                            for t, c in zip(trials, compliance)]
     held_out: dict[str, HeldOutSensor] = {}
     scores: dict[str, dict[str, Any]] = {}
     for h, name in enumerate(names):
@@ -164,8 +176,12 @@ def validate(
     report(progress, 4, 4, "validated")
     summary = recording_summary(recording, motion, prep, prep.rest.interval, prep.rest.how)
     summary["rest_interval_reason"] = prep.rest.reason
-    summary["rest_interval_reason"] = prep.rest.reason
+    summary["plausibility"] = dict(motion.metadata.get("plausibility", {}))
+    for key in ("recovered_frames", "implausible_frames"):
+        summary[key] = list(motion.metadata.get(key, []))
     settings = _settings(model, basis, modes, landmarks, quasi_static, tolerance)
+    settings["sensor_stiffness"] = sensor_stiffness
+    settings["sensor_stiffness_n_per_m"] = motion.metadata.get("sensor_stiffness_n_per_m")
     return ValidationResult(scores, settings, summary, held_out)
 
 
@@ -188,18 +204,15 @@ def _sensor_scores(item: HeldOutSensor) -> dict[str, Any]:
     return out
 
 
-def _drive_trials(basis, phi_s, w_s, trials, warping, dt, material, tolerance) -> list:
-    """[(q (F, m), converged (F,))] per trial of targets (T, F, S, 3) at the sensor rows phi_s, w_s (S, 3, m).
-
-    The compiled integrator runs all trials in one launch when available; the
-    NumPy reference otherwise (same result to rounding).
-    """
+def _drive_trials(basis, phi_s, w_s, trials, compliance, warping, dt, material, tolerance) -> list:
+    """[(q (F, m), converged (F,))] per trial of targets (T, F, S, 3), and compliances (T, F, S)
+    at the sensor rows phi_s, w_s (S, 3, m); the compiled integrator runs all trials in one launch."""
     from tonguevis.sim.newmark import NewmarkSettings
 
     settings = NewmarkSettings(dt=dt, alpha=material.alpha, beta=material.beta, tolerance=tolerance, warping=warping)
     from tonguevis.sim.newmark_kernel import integrate_compiled
 
-    results = integrate_compiled(basis.eigenvalues, phi_s, w_s, trials, settings)
+    results = integrate_compiled(basis.eigenvalues, phi_s, w_s, trials, settings, compliance=compliance)
     return [(r.q, r.converged) for r in results]
 
 

@@ -56,7 +56,30 @@ def add_model_arguments(parser: argparse.ArgumentParser, modes: int = 100) -> No
     parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
                         help="sensor nodes: snapped to the speaker's layout (default) or the paper's placement rule")
     parser.add_argument("--linear", action="store_true", help="linear modal model (no modal warping)")
+    add_sensor_stiffness_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def add_sensor_stiffness_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--sensor-stiffness", type=sensor_stiffness_arg, default="default", metavar="K|hard",
+                        help="how hard the sensor nodes are pulled onto the sensors, in units of the tongue's own "
+                             "stiffness there (default 20: the tongue's most natural shape that follows them, "
+                             "measured best on real recordings); 'hard' holds them exactly, as the paper")
+
+
+def sensor_stiffness_arg(text: str):
+    """``--sensor-stiffness`` value: a positive number, 'hard' (None) or 'default'."""
+    if text.strip().lower() == "hard":
+        return None
+    if text == "default":  # argparse passes string defaults through ``type`` too
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither a positive number nor 'hard'") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r} must be a positive number or 'hard'")
+    return value
 
 
 def add_rest_argument(parser: argparse.ArgumentParser, every: bool = False) -> None:
@@ -121,7 +144,8 @@ def simulate_args(args, recording, model, modes: int | None = None, progress=Non
     from tonguevis.workflows import simulate_recording
 
     options = dict(modes=args.modes if modes is None else modes, warping=not getattr(args, "linear", False),
-                   landmarks=getattr(args, "landmarks", "speaker"), rest=rest_arg(args))
+                   landmarks=getattr(args, "landmarks", "speaker"), rest=rest_arg(args),
+                   sensor_stiffness=getattr(args, "sensor_stiffness", "default"))
     if progress is not None:
         return simulate_recording(recording, model, progress=progress, **options)
     with tqdm_progress("simulating", disable=getattr(args, "quiet", False)) as bar:

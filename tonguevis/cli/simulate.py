@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from tonguevis.sim.plausibility import plausibility_line
+
 from tonguevis.cli._common import (
     add_model_arguments, add_recording_arguments, add_rest_argument, load_model_args, read_recording_args, rest_line,
     simulate_args,
@@ -19,6 +21,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_rest_argument(parser)
     parser.add_argument("--out", type=Path, metavar="DIR",
                         help="write motion.npz and a VTK series (motion.pvd + .vtu frames) for ParaView here")
+
+
+def _stiffness_text(meta: dict) -> str:
+    k = meta.get("sensor_stiffness")
+    if k is None:
+        return "sensors held exactly (--sensor-stiffness hard, the paper)"
+    return f"sensor springs {k:g}x the tongue's stiffness there: the tongue's most natural shape near the sensors"
 
 
 def summary(motion) -> list[str]:
@@ -37,7 +46,8 @@ def summary(motion) -> list[str]:
         + (" (midsagittal)" if meta.get("midsagittal_alignment") else ""),
         f"frames: {motion.n_frames} ({motion.times[-1] - motion.times[0]:.2f} s); "
         f"Newton iterations per frame: {meta['newton_iterations_mean']:.2f}; unconverged frames: {unconverged}",
-        f"max sensor residual: {1e3 * res:.2e} mm",
+        f"max sensor residual: {1e3 * res:.2e} mm ({_stiffness_text(meta)})",
+        plausibility_line(meta),
         f"max volume change: {100 * np.abs(motion.volume_change).max():.2f} % "
         f"(mean {100 * np.abs(motion.volume_change).mean():.2f} %)",
         f"energy peak: {1e3 * motion.energy[peak]:.3f} mJ at {motion.times[peak]:.2f} s",

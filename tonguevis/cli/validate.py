@@ -13,7 +13,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tonguevis.cli._common import add_recording_arguments, add_rest_argument, load_model_args, read_recording_args, rest_arg
+from tonguevis.cli._common import (
+    add_recording_arguments, add_rest_argument, add_sensor_stiffness_argument, load_model_args, read_recording_args,
+    rest_arg,
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -25,6 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--modes", type=int, default=100, metavar="M", help="vibration modes (default 100)")
     parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
                         help="sensor nodes: snapped to the speaker's layout (default) or the paper's placement rule")
+    add_sensor_stiffness_argument(parser)
     add_rest_argument(parser)
     parser.add_argument("--no-static", action="store_true", help="skip the quasi-static baseline")
     parser.add_argument("--json", type=Path, required=True, metavar="OUT", help="write the results here (JSON)")
@@ -39,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from tonguevis.analysis.validation_report import axis_table, recording_markdown
     from tonguevis.errors import TonguevisError
     from tonguevis.preprocess.rest import RestChoice
+    from tonguevis.sim.plausibility import plausibility_line
 
     if args.modes < 1:
         raise TonguevisError(f"--modes must be at least 1, got {args.modes}")
@@ -47,8 +52,9 @@ def run(args: argparse.Namespace) -> int:
     model = load_model_args(args)
     with tqdm_progress("validating", disable=args.quiet) as progress:
         result = validate(recording, model, modes=args.modes, landmarks=args.landmarks,
-                          rest_interval=rest,
+                          rest_interval=rest, sensor_stiffness=args.sensor_stiffness,
                           quasi_static=not args.no_static, progress=progress)
+    print(plausibility_line(result.recording))
     doc = result.as_dict()
     result.write_json(args.json)
     text = recording_markdown(doc, title=str(args.file))

@@ -87,6 +87,33 @@ def point_stiffness(eigenvalues: np.ndarray, phi_s: np.ndarray) -> float:
     return float(1.0 / np.mean(np.sum(phi2 * phi2 / lam, axis=1)))
 
 
+def compliant_targets(eigenvalues: np.ndarray, phi_s: np.ndarray, targets: np.ndarray,
+                      compliance: np.ndarray) -> np.ndarray:
+    """(F, S, 3) sensor-node displacements of the compliant static solution, frame by frame.
+
+    Per frame, q̃ minimises ½q̃ᵀΛq̃ + Σ_s |Φ_s q̃ - c_s|² / (2 C_s) over the acting
+    sensors (finite target and compliance), i.e. q̃ = Λ⁻¹Φᵀ(Φ Λ⁻¹ Φᵀ + C)⁻¹ c,
+    and the result is Φ_s q̃ for every sensor: the measured targets projected
+    onto the deformations the tongue makes most easily.  A hard constraint
+    (C = 0) keeps its target.  targets : (F, S, 3) m; compliance : (F, S) m/N.
+    All frames in one batched solve.
+    """
+    lam = np.asarray(eigenvalues, dtype=np.float64)
+    n_frames, n_s, _ = targets.shape
+    phi2 = phi_s.reshape(3 * n_s, len(lam))
+    gram = (phi2 / lam) @ phi2.T  # (3S, 3S)
+    comp = np.repeat(np.asarray(compliance, dtype=np.float64), 3, axis=1)  # (F, 3S)
+    c = targets.reshape(n_frames, 3 * n_s)
+    acting = np.isfinite(comp) & np.isfinite(c)
+    acting = np.repeat(np.all(acting.reshape(n_frames, n_s, 3), axis=2), 3, axis=1)
+    mats = np.where(acting[:, :, None] & acting[:, None, :], gram[None], 0.0)
+    idx = np.arange(3 * n_s)
+    mats[:, idx, idx] += np.where(acting, np.where(np.isfinite(comp), comp, 0.0), 1.0)
+    rhs = np.where(acting, c, 0.0)
+    mult = np.linalg.solve(mats, rhs[:, :, None])[:, :, 0]  # zero on the sensors not acting
+    return (mult @ gram).reshape(n_frames, n_s, 3)
+
+
 def _blocks(blocks: np.ndarray) -> np.ndarray:
     """(S, 3, 3) blocks -> (3S, 3S) block-diagonal matrix."""
     n = 3 * len(blocks)

@@ -1,22 +1,28 @@
-"""Sensors that drop out and come back: bridged when short, released and re-engaged smoothly when long.
+"""Sensors that drop out and come back: bridged when short, handed over to the model smoothly when long.
 
-A constraint that vanishes in one frame is an impulse: on a real /ka/ a 1 s
-dropout of one tongue sensor made the tongue change volume by 103 % when the
-sensor's multiplier simply disappeared.  So, per sensor:
+A constraint that vanishes in one frame is an impulse: on a real /ka/, one
+tongue sensor lost for 1 s made the tongue change volume by 103 % when its
+multiplier simply disappeared (the nodes it held snapped by several radians
+in one frame).  So, per sensor:
 
 * a gap of at most ``bridge_s`` (default 0.1 s, one ramp: shorter than it takes
-  to release and re-engage) is bridged by monotone cubic (PCHIP) interpolation
-  of the sensor's displacement through the valid samples around it;
-* a longer gap is a *release*: over the first ``ramp_s`` of the gap the sensor
-  stays at its last measured position while its spring weakens to nothing;
-  then it does not act; when it comes back its spring grows from nothing to
-  full strength over ``ramp_s``, pulling the node from wherever the model
-  carried it onto the measurement.  A sensor missing at the start engages the
-  same way.
+  to hand a sensor over and back) is bridged by monotone cubic (PCHIP)
+  interpolation of its displacement through the valid samples around it;
+* over a longer gap the model itself says where that sensor's node goes: the
+  position the other sensors give it (:func:`tonguevis.sim.constrained.compliant_targets`
+  leaves the missing sensor out and returns every node's displacement).  For
+  the first ``ramp_s`` of the gap the node's target moves from its last
+  measured position onto that prediction, then the constraint is released;
+  since the node is by then where the tongue takes it anyway, releasing it
+  takes almost no force away.  When the sensor comes back, its target moves
+  from the prediction onto the measurement over ``ramp_s``.  A sensor missing
+  at the start engages the same way.
 
-The strength is a weight w in [0, 1] per sensor and frame; the constraint's
-compliance is C(w) = C₀ + (1 - w) / (w k_ramp) (m/N): C₀ at w = 1 (C₀ = 0 for
-the paper's hard constraints), infinite (not acting) at w = 0.
+(Fading the sensor's last force, or weakening it into a spring, was tried
+first: with the paper's hard constraints the last force is large, and the
+Newton solve of the first released frame ran away onto several-radian
+rotations on that same /ka/; a spring, at the first released frame, still sits
+on its target and pulls with nothing, which is the impulse again.)
 """
 
 from __future__ import annotations
@@ -25,9 +31,6 @@ import numpy as np
 
 BRIDGE_S = 0.1
 RAMP_S = 0.1
-#: k_ramp in units of the tongue's point stiffness at the sensors: at mid-ramp
-#: (w = ½) a released hard sensor is a spring of this stiffness.
-RAMP_STIFFNESS = 20.0
 
 
 def bridge_short_gaps(displacement: np.ndarray, rate: float, bridge_s: float = BRIDGE_S) -> tuple[np.ndarray, int]:
@@ -56,36 +59,53 @@ def bridge_short_gaps(displacement: np.ndarray, rate: float, bridge_s: float = B
     return out, bridged
 
 
-def engagement(valid: np.ndarray, rate: float, ramp_s: float = RAMP_S) -> tuple[np.ndarray, np.ndarray]:
-    """Weights w (F, S) in [0, 1] and, per frame and sensor, the frame whose target to use (F, S) int.
+def handover(valid: np.ndarray, rate: float, ramp_s: float = RAMP_S) -> tuple[np.ndarray, np.ndarray]:
+    """How much each sensor's target trusts its measurement, and whether it acts.
 
-    valid : (F, S) bool, the sensor measured in that frame.  During a release
-    the target is the last measured frame's (held); elsewhere its own frame's.
+    valid : (F, S) bool, the sensor measured in that frame.  Returns
+    ``trust`` (F, S) in [0, 1] (1: the measurement; 0: the model's prediction;
+    in between: a blend, with the last measured frame standing in during a
+    release) and ``acting`` (F, S) bool (measured, or within ``ramp_s`` after
+    the last measurement).
     """
     valid = np.asarray(valid, dtype=bool)
     n_frames, n_sensors = valid.shape
     ramp = max(1, int(round(ramp_s * rate)))
     steps = np.arange(1, ramp + 1) / (ramp + 1)  # strictly inside (0, 1)
-    weight = valid.astype(np.float64)
-    source = np.broadcast_to(np.arange(n_frames)[:, None], (n_frames, n_sensors)).copy()
+    trust = valid.astype(np.float64)
+    acting = valid.copy()
     for s in range(n_sensors):
         for start, stop in _runs(~valid[:, s]):
-            if start > 0:  # release: hold the last measurement while the spring weakens
+            if start > 0:  # release: onto the prediction, then let go
                 k = min(ramp, stop - start)
-                weight[start:start + k, s] = 1.0 - steps[:k]
-                source[start:start + k, s] = start - 1
-            if stop < n_frames:  # re-engage over the first frames back
+                trust[start:start + k, s] = 1.0 - steps[:k]
+                acting[start:start + k, s] = True
+            if stop < n_frames:  # back: from the prediction onto the measurement
                 k = min(ramp, n_frames - stop)
-                weight[stop:stop + k, s] = np.minimum(weight[stop:stop + k, s], steps[:k])
-    return weight, source
+                trust[stop:stop + k, s] = np.minimum(trust[stop:stop + k, s], steps[:k])
+    return trust, acting
 
 
-def compliance_schedule(weight: np.ndarray, base: float, ramp_stiffness: float) -> np.ndarray:
-    """(F, S) compliance in m/N from weights: C₀ + (1 - w)/(w k_ramp); inf where w = 0."""
-    w = np.asarray(weight, dtype=np.float64)
-    with np.errstate(divide="ignore"):
-        comp = base + (1.0 - w) / (w * ramp_stiffness)
-    return np.where(w > 0, comp, np.inf)
+def blend_targets(measured: np.ndarray, predicted: np.ndarray, trust: np.ndarray, acting: np.ndarray) -> np.ndarray:
+    """(F, S, 3) targets: trust·measured + (1 - trust)·predicted where acting, NaN elsewhere.
+
+    During a release (no measurement) the last measured value stands in.
+    """
+    held = _hold_last(measured)
+    base = np.where(np.isfinite(measured), measured, held)
+    t = trust[:, :, None]
+    out = t * np.nan_to_num(base) + (1.0 - t) * predicted
+    out = np.where((t == 0) | np.isfinite(base), out, np.nan)
+    return np.where(acting[:, :, None], out, np.nan)
+
+
+def _hold_last(x: np.ndarray) -> np.ndarray:
+    """(F, S, 3) with every NaN sample replaced by the sensor's last finite one (NaN before the first)."""
+    finite = np.all(np.isfinite(x), axis=2)
+    idx = np.where(finite, np.arange(len(x))[:, None], -1)
+    idx = np.maximum.accumulate(idx, axis=0)
+    out = x[np.maximum(idx, 0), np.arange(x.shape[1])[None, :]]
+    return np.where((idx >= 0)[:, :, None], out, np.nan)
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:

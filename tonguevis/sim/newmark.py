@@ -144,3 +144,4 @@ def integrate(
 def _largest_rotation(ws2: np.ndarray, q: np.ndarray) -> float:
     """Largest |w| (rad) over the sensor nodes of rows W_s (3S, m) at q."""
     return float(np.linalg.norm((ws2 @ q).reshape(-1, 3), axis=1).max())
+

@@ -14,21 +14,16 @@ from tonguevis.sim.model import TongueModel
 from tonguevis.sim.motion import Motion
 from tonguevis.errors import SimulationError
 from tonguevis.sim.constrained import RUNAWAY_ROTATION
-from tonguevis.sim.dropouts import RAMP_STIFFNESS
 from tonguevis.sim.newmark import NewmarkSettings, integrate
+from tonguevis.sim.plausibility import ABSURD_AMPLIFICATION, ABSURD_VOLUME, plausibility_figures
 
 logger = logging.getLogger("tonguevis")
 
 VOLUME_WARNING = 0.05  # relative volume change past which the motion is flagged as implausible
-#: Per frame, beyond these a frame is absurd (no tongue does it): flagged, and a run with
-#: more than ABSURD_SHARE of such frames is refused rather than returned.
-ABSURD_VOLUME = 0.25
-ABSURD_AMPLIFICATION = 10.0
-ABSURD_SHARE = 0.05
-MOVED_M = 1e-3  # per-frame amplification only where some sensor moved this far from rest
+ABSURD_SHARE = 0.05  # a run with more absurd frames than this is refused rather than returned
 #: Default sensor spring, in units of the tongue's own point stiffness at the sensors
 #: (see :func:`tonguevis.sim.constrained.point_stiffness`); None holds the sensors exactly (the paper).
-DEFAULT_SENSOR_STIFFNESS = None
+DEFAULT_SENSOR_STIFFNESS = 20.0
 
 
 def simulate(
@@ -68,7 +63,6 @@ def simulate(
     """
     from tonguevis._backend import check_backend
     from tonguevis.sim.constrained import point_stiffness
-    from tonguevis.sim.dropouts import bridge_short_gaps, compliance_schedule, engagement
 
     check_backend(backend)
     if sensor_stiffness == "default":
@@ -89,11 +83,8 @@ def simulate(
         tolerance=tolerance, warping=warping,
     )
     k_ref = point_stiffness(basis.eigenvalues, phi_s)
-    base = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * k_ref)
-    displacement, bridged = bridge_short_gaps(prep.displacement, recording.rate)
-    weight, source = engagement(np.all(np.isfinite(displacement), axis=2), recording.rate)
-    targets = displacement[source, np.arange(s)[None, :]]
-    compliance = compliance_schedule(weight, base, RAMP_STIFFNESS * k_ref)
+    targets, compliance, schedule = drive_schedule(prep.displacement, recording.rate, basis.eigenvalues, phi_s,
+                                                   sensor_stiffness)
     report(progress, 1, 3, "integrating")
     if backend == "warp":
         from tonguevis.sim.newmark_kernel import integrate_compiled
@@ -106,7 +97,8 @@ def simulate(
     displacements = model.displacements(result.q, warping=warping, backend=backend)
     volume_change = model.volume_change(displacements, backend=backend)
     energy = model.energy(result.q)
-    plausibility, absurd = _plausibility(displacements, displacement, volume_change, result.residual)
+    misfit = _sensor_misfit(result.q, phi_s, w_s, prep.displacement, warping)
+    plausibility, absurd = plausibility_figures(displacements, prep.displacement, volume_change, misfit)
     times = recording.times
     file = recording.metadata.get("file")
     if not np.all(np.isfinite(result.q)) or len(absurd) > ABSURD_SHARE * len(times):
@@ -129,7 +121,7 @@ def simulate(
             "the tongue changes volume by up to %.1f %% to follow the sensors: too few modes (%d) or sensor "
             "nodes far from the speaker's layout make it bend unnaturally", 100 * worst_volume, modes)
     rest_nodes = model.mesh.points[prep.nodes]
-    released = ~np.all(np.isfinite(displacement), axis=2)
+    released = schedule["released"]
     metadata = {
         "recording": dict(recording.metadata),
         "landmarks": landmarks,
@@ -143,7 +135,7 @@ def simulate(
         "sensor_stiffness": sensor_stiffness,
         "sensor_stiffness_n_per_m": None if sensor_stiffness is None else float(sensor_stiffness * k_ref),
         "point_stiffness_n_per_m": k_ref,
-        "dropouts": {"bridged_gaps": int(bridged), "released_frames": int(released.sum()),
+        "dropouts": {"bridged_gaps": int(schedule["bridged"]), "released_frames": int(released.sum()),
                      "released_by_sensor": {n: int(released[:, k].sum()) for k, n in enumerate(prep.names)}},
         "unconverged_frames": bad.tolist(),
         "recovered_frames": recovered.tolist(),
@@ -159,8 +151,8 @@ def simulate(
         warping=warping,
         sensor_names=prep.names,
         sensor_nodes=prep.nodes,
-        targets=rest_nodes[None] + displacement,
-        sensor_residual=result.residual,
+        targets=rest_nodes[None] + prep.displacement,
+        sensor_residual=misfit,
         energy=energy,
         volume_change=volume_change,
         converged=result.converged & ~result.recovered,
@@ -168,33 +160,44 @@ def simulate(
     )
 
 
-def _plausibility(displacements, sensor_displacement, volume_change, residual):
-    """Summary figures of a motion and the frames no tongue could produce.
+def drive_schedule(displacement: np.ndarray, rate: float, eigenvalues: np.ndarray, phi_s: np.ndarray,
+                   sensor_stiffness: float | None):
+    """What the integrator is driven with: (targets (F, S, 3), compliance (F, S), info).
 
-    displacements : (F, n, 3) node displacements; sensor_displacement : (F, S, 3)
-    measured sensor displacements (NaN = missing); volume_change (F,);
-    residual (F, S) sensor misfit, metres.
+    The measured sensor displacements (F, S, 3; NaN = missing) are projected
+    frame by frame onto the tongue's own deformations
+    (:func:`tonguevis.sim.constrained.compliant_targets`: sensor springs of
+    ``sensor_stiffness`` times the point stiffness; None keeps the
+    measurements, the paper's hard constraints), which also predicts where a
+    missing sensor's node goes.  Dropouts are bridged or handed over to that
+    prediction (:mod:`tonguevis.sim.dropouts`).  The dynamic solve then holds
+    the acting sensor nodes to these targets with hard multipliers: a spring
+    in the dynamic solve itself would lag behind fast speech (the sensor
+    node, a mass on a spring with the modes' damping, trailed a real /ta/ by
+    up to 7 mm).  info: {"bridged": gaps interpolated, "released": (F, S)
+    frames a sensor was missing after bridging}.
     """
-    node = np.linalg.norm(displacements, axis=2).max(axis=1)
-    with np.errstate(invalid="ignore"):
-        sensor = np.nanmax(np.linalg.norm(sensor_displacement, axis=2), axis=1, initial=0.0)
-    sensor = np.where(np.isfinite(sensor), sensor, 0.0)
-    moved = sensor >= MOVED_M
-    per_frame = np.where(moved, node / np.where(moved, sensor, 1.0), np.nan)
-    overall = float(node.max() / sensor.max()) if len(node) and sensor.max() > 0 else float("nan")
-    absurd = np.flatnonzero((np.abs(volume_change) > ABSURD_VOLUME) | (per_frame > ABSURD_AMPLIFICATION)
-                            | ~np.isfinite(volume_change))
-    res = residual[np.isfinite(residual)]
-    figures = {
-        "amplification": overall,
-        "amplification_frame_max": float(np.nanmax(per_frame)) if moved.any() else float("nan"),
-        "largest_node_displacement_mm": float(1e3 * node.max()) if len(node) else 0.0,
-        "largest_sensor_displacement_mm": float(1e3 * sensor.max()) if len(sensor) else 0.0,
-        "volume_change_max_percent": float(100 * np.abs(volume_change).max()) if len(volume_change) else 0.0,
-        "sensor_misfit_max_mm": float(1e3 * res.max()) if len(res) else 0.0,
-        "sensor_misfit_rms_mm": float(1e3 * np.sqrt(np.mean(res ** 2))) if len(res) else 0.0,
-    }
-    return figures, absurd
+    from tonguevis.sim.constrained import compliant_targets, point_stiffness
+    from tonguevis.sim.dropouts import blend_targets, bridge_short_gaps, handover
+
+    filled, bridged = bridge_short_gaps(displacement, rate)
+    present = np.all(np.isfinite(filled), axis=2)
+    base = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * point_stiffness(eigenvalues, phi_s))
+    projected = compliant_targets(eigenvalues, phi_s, filled, np.where(present, base, np.inf))
+    trust, acting = handover(present, rate)
+    targets = blend_targets(np.where(present[:, :, None], projected, np.nan), projected, trust, acting)
+    compliance = np.where(np.all(np.isfinite(targets), axis=2), 0.0, np.inf)
+    return targets, compliance, {"bridged": bridged, "released": ~present}
+
+
+def _sensor_misfit(q, phi_s, w_s, measured, warping):
+    """(F, S) distance (m) of each sensor node from its measured displacement (NaN where not measured)."""
+    from tonguevis.sim.rotation import rotate_accumulated
+
+    d = np.einsum("scm,fm->fsc", phi_s, q)
+    if warping:
+        d = rotate_accumulated(np.einsum("scm,fm->fsc", w_s, q), d)
+    return np.linalg.norm(d - measured, axis=2)
 
 
 def _stage(progress: ProgressCallback | None, stage: int, stages: int) -> ProgressCallback | None:

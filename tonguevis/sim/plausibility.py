@@ -1,0 +1,59 @@
+"""How believable a motion is: far-field amplification, volume change, sensor misfit.
+
+A tongue driven by sensors that move a few millimetres should not move any of
+its nodes much further than the sensors did, nor change its volume (tongue
+tissue is nearly incompressible), and its sensor nodes should stay near the
+sensors.  Every simulation reports these figures (``motion.metadata["plausibility"]``),
+the CLI prints :func:`plausibility_line` and the app shows it in its status bar.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Per frame, beyond these a frame is absurd (no tongue does it).
+ABSURD_VOLUME = 0.25
+ABSURD_AMPLIFICATION = 10.0
+MOVED_M = 1e-3  # per-frame amplification only where some sensor moved this far from rest
+
+
+def plausibility_figures(displacements, sensor_displacement, volume_change, residual):
+    """Summary figures of a motion and the frames no tongue could produce.
+
+    displacements : (F, n, 3) node displacements; sensor_displacement : (F, S, 3)
+    measured sensor displacements (NaN = missing); volume_change (F,);
+    residual (F, S) sensor misfit, metres.
+    """
+    node = np.linalg.norm(displacements, axis=2).max(axis=1)
+    with np.errstate(invalid="ignore"):
+        sensor = np.nanmax(np.linalg.norm(sensor_displacement, axis=2), axis=1, initial=0.0)
+    sensor = np.where(np.isfinite(sensor), sensor, 0.0)
+    moved = sensor >= MOVED_M
+    per_frame = np.where(moved, node / np.where(moved, sensor, 1.0), np.nan)
+    overall = float(node.max() / sensor.max()) if len(node) and sensor.max() > 0 else float("nan")
+    absurd = np.flatnonzero((np.abs(volume_change) > ABSURD_VOLUME) | (per_frame > ABSURD_AMPLIFICATION)
+                            | ~np.isfinite(volume_change))
+    res = residual[np.isfinite(residual)]
+    figures = {
+        "amplification": overall,
+        "amplification_frame_max": float(np.nanmax(per_frame)) if moved.any() else float("nan"),
+        "largest_node_displacement_mm": float(1e3 * node.max()) if len(node) else 0.0,
+        "largest_sensor_displacement_mm": float(1e3 * sensor.max()) if len(sensor) else 0.0,
+        "volume_change_max_percent": float(100 * np.abs(volume_change).max()) if len(volume_change) else 0.0,
+        "sensor_misfit_max_mm": float(1e3 * res.max()) if len(res) else 0.0,
+        "sensor_misfit_rms_mm": float(1e3 * np.sqrt(np.mean(res ** 2))) if len(res) else 0.0,
+    }
+    return figures, absurd
+
+
+def plausibility_line(metadata: dict) -> str:
+    """One line for users: amplification, volume change, sensor misfit, flagged frames."""
+    p = metadata.get("plausibility")
+    if not p:
+        return "plausibility: not recorded in this motion"
+    flagged = len(metadata.get("recovered_frames", [])) + len(metadata.get("implausible_frames", []))
+    text = (f"far-field amplification {p['amplification']:.2f} (largest node {p['largest_node_displacement_mm']:.1f} mm"
+            f" / largest sensor {p['largest_sensor_displacement_mm']:.1f} mm), max volume change "
+            f"{p['volume_change_max_percent']:.2f} %, sensor misfit {p['sensor_misfit_rms_mm']:.2f} mm RMS "
+            f"(max {p['sensor_misfit_max_mm']:.2f} mm)")
+    return text + (f"; {flagged} frames flagged" if flagged else "")
