@@ -317,3 +317,12 @@ def test_drop_a_file_and_open_a_mesh(qtbot, window, tmp_path):
         pytest.skip("meshes/tongue.vtu not built")
     window.open_path(shipped)
     assert window.model is not model and window.model.mesh.n_nodes > 1000
+
+
+def test_the_status_bar_says_how_believable_the_motion_is(qtbot, window):
+    """Issue 11: amplification, volume change and sensor misfit of every run, in the status bar."""
+    show_and_simulate(qtbot, window, demo_session(3.5, 5.8))
+    message = window.statusBar().currentMessage()
+    p = window.session.motion.metadata["plausibility"]
+    assert "far-field amplification" in message and "sensor misfit" in message
+    assert f"{p['amplification']:.2f}" in message and f"{p['volume_change_max_percent']:.2f} %" in message

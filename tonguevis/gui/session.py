@@ -155,8 +155,10 @@ class Session:
         """The simulation's results: ``motion``, its drawing ``frames``, the rest it used and its note."""
         from tonguevis.workflows import rest_of
 
+        from tonguevis.sim.plausibility import plausibility_line
+
         self.motion, self.frames, self.rest = motion, frames, rest_of(motion)
-        self.notes = []
+        self.notes = [plausibility_line(motion.metadata)] if "plausibility" in motion.metadata else []
         self._signals.pop("displacement", None)  # displacements are from this rest now
 
     def _rest(self, names: list[str]) -> dict[str, np.ndarray]:
