@@ -54,7 +54,8 @@ def main(argv=None) -> int:
     from tonguevis.preprocess import prepare_targets
     from tonguevis.sim import TongueModel
     from tonguevis.sim.newmark import NewmarkSettings, integrate
-    from tonguevis.sim.newmark_warp import integrate_warp
+    from tonguevis.sim.newmark_kernel import integrate_compiled
+    from tonguevis.sim.simulate import drive_schedule, simulate
     from tonguevis.sim.rotation import rotate_accumulated
     from tonguevis.sim.kernels import rotate_accumulated_compiled
 
@@ -83,9 +84,16 @@ def main(argv=None) -> int:
     phi_s, w_s = basis.phi[dofs].reshape(s, 3, -1), w_full[dofs].reshape(s, 3, -1)
     settings = NewmarkSettings(dt=1 / rec.rate, alpha=model.material.alpha, beta=model.material.beta)
     frames = len(prep.displacement)
-    integrate_warp(basis.eigenvalues, phi_s, w_s, prep.displacement[:3], settings)  # compile / load kernel
-    t_int, result = best_of(lambda: integrate_warp(basis.eigenvalues, phi_s, w_s, prep.displacement, settings))
-    t_ref, ref = best_of(lambda: integrate(basis.eigenvalues, phi_s, w_s, prep.displacement, settings), repeat=1)
+    # The default drive: targets projected onto the tongue's deformations (sensor springs), then held.
+    t_proj, (targets, compliance, _) = best_of(
+        lambda: drive_schedule(prep.displacement, rec.rate, basis.eigenvalues, phi_s, 20.0))
+    integrate_compiled(basis.eigenvalues, phi_s, w_s, targets[:3], settings, compliance=compliance[:3])  # compile
+    t_int, result = best_of(lambda: integrate_compiled(basis.eigenvalues, phi_s, w_s, targets, settings,
+                                                       compliance=compliance))
+    t_ref, ref = best_of(lambda: integrate(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance),
+                         repeat=1)
+    t_int += t_proj
+    t_sim, _ = best_of(lambda: simulate(rec, model, modes=args.modes), repeat=2)
     model.displacements(result.q[:2])
     t_rec, _ = best_of(lambda: model.displacements(result.q))
     t_rec32, _ = best_of(lambda: model.displacements(result.q, dtype=np.float32))
@@ -115,6 +123,8 @@ def main(argv=None) -> int:
         "throughput_fps": throughput,
         "throughput_float32_render_fps": throughput32,
         "integration_fps": frames / t_int,
+        "projection_ms": 1e3 * t_proj,
+        "simulate_end_to_end_fps": frames / t_sim,
         "integration_numpy_fps": frames / t_ref,
         "integration_max_rel_diff": float(np.abs(result.q - ref.q).max() / np.abs(ref.q).max()),
         "newton_iterations_mean": float(result.iterations.mean()),
