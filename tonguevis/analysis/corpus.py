@@ -226,42 +226,72 @@ def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int
         (``rest=(start_s, end_s)`` for every recording, ``landmarks``, ``warping``...).
     """
     from tonguevis._progress import report
-    from tonguevis.analysis.energy import EnergyError, production_curves, vowel_windows
+    from tonguevis.analysis.energy import EnergyError
+    from tonguevis.errors import RecordingError
     from tonguevis.sim import TongueModel
-    from tonguevis.workflows import find_recording_productions, open_recording, rest_of, simulate_recording
+    from tonguevis.workflows import rest_of, simulate_recording
 
     if window not in ("release", "vowel"):
         raise EnergyError(f"window must be 'release' or 'vowel', got {window!r}")
-    from tonguevis.errors import RecordingError
 
     model = model or TongueModel.default()
     curves, motions, tables, skipped, rests = [], {}, {}, [], {}
     for k, entry in enumerate(corpus.entries):
         report(progress, k, len(corpus), f"simulating {entry.path.name}")
-        mapping = sensor_map
-        if mapping is None and (entry.path.parent / "sensor_map.json").is_file():
-            mapping = entry.path.parent / "sensor_map.json"
         try:
-            rec = open_recording(entry.path, mapping, **(open_options or {}))
+            entry, rec = open_entry(entry, sensor_map, open_options)
         except RecordingError as exc:
             if not entry.walked:
                 raise
             logger.warning("skipping %s: %s", entry.path, exc)
             skipped.append((entry.path, str(exc)))
             continue
-        entry = entry.apply_metadata(rec.metadata) if entry.source != "table" else entry
         motion = simulate_recording(rec, model, modes=modes, **simulate_options)
         rests[entry.name] = rest_of(motion)
-        if window == "release":
-            table = find_recording_productions(rec, keep=keep, tier=tier)
-            spans = list(table)
-        else:
-            table = find_recording_productions(rec, keep=None, tier=tier)
-            spans = [w for w in vowel_windows(table) if keep is None or tier is not None or w.index in keep]
-        curves.extend(production_curves(motion, spans, recording=entry.name, speaker=entry.speaker,
-                                        syllable=entry.syllable, trial=entry.trial))
+        found, table = entry_curves(entry, rec, motion, keep=keep, window=window, tier=tier)
+        curves.extend(found)
         if keep_motions:
             motions[entry.name] = motion
         tables[entry.name] = table
     report(progress, len(corpus), len(corpus), "done")
     return CorpusResult(curves, motions, tables, skipped, rests)
+
+
+def open_entry(entry: CorpusEntry, sensor_map=None, open_options: dict | None = None):
+    """(entry, recording): read one corpus entry as :func:`corpus_energy_curves` does.
+
+    sensor_map : for this file (dict, JSON path or preset); None uses a
+        ``sensor_map.json`` beside it when there is one.  The entry's labels are
+        then taken from the recording's metadata unless a label table gave them.
+    """
+    from tonguevis.workflows import open_recording
+
+    mapping = sensor_map
+    if mapping is None and (entry.path.parent / "sensor_map.json").is_file():
+        mapping = entry.path.parent / "sensor_map.json"
+    rec = open_recording(entry.path, mapping, **(open_options or {}))
+    return (entry.apply_metadata(rec.metadata) if entry.source != "table" else entry), rec
+
+
+def entry_curves(entry: CorpusEntry, rec, motion, keep=(2, 3, 4), window: str = "release",
+                 tier: str | None = None):
+    """(energy curves, production table) of one simulated entry, as :func:`corpus_energy_curves` cuts them.
+
+    window "release": the productions ``keep`` of
+    :func:`~tonguevis.workflows.find_recording_productions`; "vowel": their
+    vowel-to-vowel windows (the table then holds every production).
+    """
+    from tonguevis.analysis.energy import EnergyError, production_curves, vowel_windows
+    from tonguevis.workflows import find_recording_productions
+
+    if window == "release":
+        table = find_recording_productions(rec, keep=keep, tier=tier)
+        spans = list(table)
+    elif window == "vowel":
+        table = find_recording_productions(rec, keep=None, tier=tier)
+        spans = [w for w in vowel_windows(table) if keep is None or tier is not None or w.index in keep]
+    else:
+        raise EnergyError(f"window must be 'release' or 'vowel', got {window!r}")
+    curves = production_curves(motion, spans, recording=entry.name, speaker=entry.speaker,
+                               syllable=entry.syllable, trial=entry.trial)
+    return curves, table
