@@ -28,6 +28,12 @@ Yang et al. 2013) go to ``data/demo_truth.json``; tests hold the segmentation
 to them.  The output is deterministic (fixed seeds).
 
 Run: ``python scripts/make_demo_data.py [--out data]``.
+
+For scale tests, ``--speakers N --out DIR`` writes a larger synthetic corpus
+(N speakers x 4 syllables; the first three are the demo speakers, the others
+are drawn from seeded ranges around them, each with its own habits), and
+``--trains K`` / ``--syllables ta,ka`` make shorter or fewer files.  Such
+corpora are for benchmarks and tests: write them outside the repository.
 """
 
 from __future__ import annotations
@@ -143,12 +149,12 @@ def step_responses(t: np.ndarray, onsets: np.ndarray, steps: np.ndarray, omega: 
     return h @ steps, dh @ steps
 
 
-def schedule(speaker: str, syllable: str, rng: np.random.Generator):
+def schedule(speaker: str, syllable: str, rng: np.random.Generator, n_trains: int = TRAINS):
     """Gesture onsets: list of trains, each a list of (c_onset, v_onset) plus the return onset."""
     p = SPEAKERS[speaker]
     jitter = p["timing_jitter"]
     trains, t = [], REST_S
-    for _ in range(TRAINS):
+    for _ in range(n_trains):
         syllables = []
         for k in range(SYLLABLES_PER_TRAIN):
             stretch = 1.25 if k in (0, SYLLABLES_PER_TRAIN - 1) else 1.0  # edges are longer (§3.2)
@@ -357,12 +363,12 @@ def synthesize_audio(speaker: str, syllable: str, trains, productions, duration:
 
 
 # ---------------------------------------------------------------- the recording
-def synthesize(speaker: str, syllable: str) -> tuple[Recording, dict]:
+def synthesize(speaker: str, syllable: str, n_trains: int = TRAINS) -> tuple[Recording, dict]:
     """One demo file: the Recording (sensors named S<NDI Id>, metres) and its truth."""
     if speaker not in SPEAKERS or syllable not in SYLLABLES:
         raise ValueError(f"unknown speaker/syllable {speaker}/{syllable}")
     rng = np.random.default_rng(file_seed(speaker, syllable))
-    trains, duration = schedule(speaker, syllable, rng)
+    trains, duration = schedule(speaker, syllable, rng, n_trains)
     events = articulator_events(speaker, syllable, trains, rng)
     n = int(round(duration * SENSOR_RATE))
     times = np.arange(n) / SENSOR_RATE
@@ -397,6 +403,38 @@ def synthesize(speaker: str, syllable: str) -> tuple[Recording, dict]:
                         for row in productions],
     }
     return rec, truth
+
+
+def generated_speaker(number: int) -> dict:
+    """The habits of speaker ``spk<number>`` beyond the three demo speakers, drawn from seeded ranges around them."""
+    rng = np.random.default_rng(7000 + number)
+    tongue = rng.uniform(36.0, 42.0)
+    f0 = rng.uniform(100.0, 220.0)
+    formant_scale = rng.uniform(0.95, 1.17)
+    tip_jitter = float(rng.uniform(0.0, 0.2)) if rng.random() < 0.3 else 0.0
+    left, right = rng.uniform(0.8, 1.4), rng.uniform(0.7, 1.1)
+    return dict(
+        description=f"generated (seed {7000 + number}): left/right lateral gain {left:.2f}/{right:.2f}, "
+                    f"tip jitter {tip_jitter:.2f}",
+        seed=10_000 + 101 * number, period=rng.uniform(0.25, 0.30), consonant_share=rng.uniform(0.40, 0.44),
+        jaw_open=rng.uniform(0.8, 1.2),
+        omega={"tongue": tongue, "TT": tongue - rng.uniform(0.0, 6.0), "JAW": rng.uniform(27.0, 31.0)},
+        f0=(f0, f0 * rng.uniform(0.84, 0.9)),
+        formants_a=tuple(float(round(f * formant_scale)) for f in (730, 1090, 2440)),
+        k_dorsum=rng.uniform(0.5, 1.0), tip_jitter=tip_jitter,
+        timing_jitter=float(rng.uniform(0.0, 0.012)) if tip_jitter else 0.0,
+        lateral_gain=(left, right),
+        layout_shift={"TL": (0, rng.uniform(0.0, 1.5), 0), "TR": (0, rng.uniform(-1.0, 0.5), 0)},
+    )
+
+
+def speaker_names(count: int) -> list[str]:
+    """``spk1`` .. ``spk<count>``; the ones beyond the demo speakers are added to SPEAKERS."""
+    names = [f"spk{k}" for k in range(1, count + 1)]
+    for k, name in enumerate(names, start=1):
+        if name not in SPEAKERS:
+            SPEAKERS[name] = generated_speaker(k)
+    return names
 
 
 def sensor_map_document() -> dict:
@@ -458,9 +496,23 @@ def _write_text(path: Path, text: str) -> None:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=REPO / "data", help="output folder (default: data/)")
+    parser.add_argument("--speakers", type=int, metavar="N",
+                        help="a corpus of N speakers (default: the three demo speakers); beyond three they are "
+                             "generated, each with its own habits")
+    parser.add_argument("--trains", type=int, default=TRAINS, metavar="K",
+                        help=f"five-syllable trains per file (default {TRAINS})")
+    parser.add_argument("--syllables", default=",".join(SYLLABLES),
+                        help=f"comma-separated, from {','.join(SYLLABLES)} (default: all)")
     args = parser.parse_args(argv)
     from tonguevis.io import write_recording
 
+    syllables = [s.strip() for s in args.syllables.split(",") if s.strip()]
+    if not syllables or any(s not in SYLLABLES for s in syllables):
+        parser.error(f"--syllables: choose from {','.join(SYLLABLES)}")
+    if args.trains < 1 or (args.speakers is not None and args.speakers < 1):
+        parser.error("--speakers and --trains must be at least 1")
+    demo = args.speakers is None and args.trains == TRAINS and syllables == list(SYLLABLES)
+    speakers = list(SPEAKERS) if args.speakers is None else speaker_names(args.speakers)
     args.out.mkdir(parents=True, exist_ok=True)
     truth = {
         "synthetic": True,
@@ -468,18 +520,21 @@ def main(argv=None) -> int:
                 "not a recording of a person. Times in seconds; productions run from one tongue-tip "
                 "release to the next (the last of a train to the train's acoustic end).",
         "sensor_rate_hz": SENSOR_RATE, "audio_rate_hz": AUDIO_RATE, "noise_mm": NOISE_MM,
-        "speakers": {name: p["description"] for name, p in SPEAKERS.items()},
+        "speakers": {name: SPEAKERS[name]["description"] for name in speakers},
         "files": {},
     }
-    for speaker in SPEAKERS:
-        for syllable in SYLLABLES:
-            rec, file_truth = synthesize(speaker, syllable)
+    for speaker in speakers:
+        for syllable in syllables:
+            rec, file_truth = synthesize(speaker, syllable, args.trains)
             name = f"{speaker}_{syllable}.tsv"
             write_recording(rec, args.out / name)
             truth["files"][name] = file_truth
             print(f"wrote {args.out / name} ({rec.duration:.1f} s)")
     _write_json(args.out / "demo_truth.json", truth)
-    _write_text(args.out / "README.md", DATA_README)
+    _write_text(args.out / "README.md", DATA_README if demo else (
+        f"# SYNTHETIC corpus\n\nMade by `scripts/make_demo_data.py --speakers {len(speakers)} --trains {args.trains} "
+        f"--syllables {','.join(syllables)}` (deterministic). **It is synthetic: no person was recorded.** "
+        "The files are laid out as in the demo corpus; see the script's docstring.\n"))
     _write_json(args.out / "sensor_map.json", sensor_map_document())
     print(f"wrote {args.out / 'demo_truth.json'} and {args.out / 'sensor_map.json'}")
     return 0
