@@ -1,0 +1,184 @@
+"""``run(paths, out, jobs=..., client=...)``: a whole corpus, resumable, on this machine or a Dask cluster."""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Iterable
+
+from tonguevis._progress import ProgressCallback, report
+from tonguevis.batch import store
+from tonguevis.batch.settings import BatchError, BatchSettings, ModelSpec, input_digest, model_key, step_keys
+
+logger = logging.getLogger("tonguevis")
+
+
+@dataclass
+class BatchResult:
+    """What :func:`run` did.
+
+    out : the output folder.  files : the corpus (paths relative to its folder).
+    done : recordings processed in this run without failure.  up_to_date :
+    recordings with nothing to redo.  failures : (file, step, error) of every
+    recording that failed (also in ``out/failures.csv``).  tables : name ->
+    path of the corpus tables written.  seconds : wall time.  workers : pid ->
+    largest resident memory (MiB) of the process that ran recordings.
+    """
+
+    out: Path
+    files: list[str]
+    done: list[str] = field(default_factory=list)
+    up_to_date: list[str] = field(default_factory=list)
+    failures: list[tuple[str, str, str]] = field(default_factory=list)
+    tables: dict[str, Path] = field(default_factory=dict)
+    seconds: float = 0.0
+    workers: dict[int, float] = field(default_factory=dict)
+    prepare_seconds: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return not self.failures
+
+    def summary(self) -> str:
+        """One line: counts, time, where the results are."""
+        n = len(self.files)
+        parts = [f"{len(self.done)} done"]
+        if self.up_to_date:
+            parts.append(f"{len(self.up_to_date)} up to date")
+        parts.append(f"{len(self.failures)} failed" + (f" (see {self.out / store.FAILURES})" if self.failures else ""))
+        return (f"batch: {n} recording{'s' if n != 1 else ''} in {self.seconds:.1f} s: {', '.join(parts)}; "
+                f"tables in {self.out}")
+
+
+def _counts(done: int, failed: int, fresh: int, total: int) -> str:
+    return f"{done} done, {failed} failed, {total - done - failed - fresh} remaining" + (
+        f" ({fresh} up to date)" if fresh else "")
+
+
+def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.PathLike, *, jobs: int = 1,
+        client=None, model=None, mesh: str | os.PathLike | None = None, axes: str | None = None,
+        labels: str | os.PathLike | None = None, settings: BatchSettings | None = None, force: bool = False,
+        progress: ProgressCallback | None = None, **options) -> BatchResult:
+    """Process every recording of ``paths`` (files, or folders walked recursively) into ``out``.
+
+    jobs : worker processes on this machine (1: in this process).
+    client : a ``distributed.Client``: run on its Dask cluster instead (``jobs`` unused).
+    model : a TongueModel; or ``mesh`` (a file, with ``axes``) read by each worker;
+        default the shipped tongue.
+    labels : CSV table of speaker/syllable/trial per file (as ``tonguevis energy --labels``).
+    settings / options : :class:`BatchSettings`, or its fields as keywords
+        (``steps="simulate,energy"``, ``modes=40``, ``csv=True``...).
+    force : redo every step even where the results are up to date.
+    progress : ``progress(finished, total, "3 done, 1 failed, 6 remaining")`` after every recording.
+
+    Per-recording results are written as each finishes; a failing recording is
+    recorded (``out/failures.csv``) and the others go on; then the corpus tables
+    are gathered.  Interrupting loses only the recordings in flight: a rerun
+    with the same inputs and settings skips what is done (content hashes, see
+    :mod:`tonguevis.batch.settings`).
+    """
+    from tonguevis.analysis.corpus import find_recordings, load_corpus
+
+    started = time.perf_counter()
+    require("pyarrow", *(["distributed"] if client is not None else ["joblib"] if jobs > 1 else []))
+    settings = replace(settings or BatchSettings(), **options) if options else (settings or BatchSettings())
+    if jobs < 1:
+        raise BatchError(f"jobs must be at least 1, got {jobs}")
+    paths = [Path(paths)] if isinstance(paths, (str, os.PathLike)) else [Path(p) for p in paths]
+    out = Path(out)
+    out_abs = Path(os.path.abspath(out))
+    files = find_recordings(paths)
+    excluded = {Path(os.path.abspath(labels))} if labels is not None else set()
+    files = [f for f in files if out_abs not in Path(os.path.abspath(f)).parents
+             and Path(os.path.abspath(f)) not in excluded]
+    if not files:
+        raise BatchError(f"no recordings found in {', '.join(map(str, paths))}")
+    corpus = load_corpus(files, table=labels)
+    root, names = store.relative_files([e.path for e in corpus], paths)
+    out.mkdir(parents=True, exist_ok=True)
+    folders = store.output_folders(names, out_abs)
+
+    spec = ModelSpec.of(model, mesh, axes)
+    built = model if model is not None else spec.build()
+    spec.key = model_key(built)
+    keys = []
+    tasks = []
+    result = BatchResult(out, names)
+    from tonguevis.batch.tasks import Task
+
+    for entry, name, folder in zip(corpus, names, folders):
+        table_labels = {"speaker": entry.speaker, "syllable": entry.syllable, "trial": entry.trial,
+                        "source": entry.source}
+        try:
+            digest = input_digest(entry.path, settings.sensors, table_labels)
+        except OSError as exc:
+            digest = f"unreadable: {exc}"
+        k = step_keys(digest, spec.key, settings)
+        keys.append(k)
+        todo = settings.steps if force else store.steps_to_do(folder, k, settings.steps, settings.csv)
+        if todo:
+            tasks.append(Task(Path(os.path.abspath(entry.path)), name, folder, entry, k, todo, settings))
+        else:
+            result.up_to_date.append(name)
+
+    failed: dict[str, tuple[str, str]] = {}
+    total = len(names)
+
+    def on_done(outcome) -> None:
+        if outcome.failure:
+            failed[outcome.file] = outcome.failure
+            logger.info("%s failed at %s: %s", outcome.file, *outcome.failure)
+        else:
+            result.done.append(outcome.file)
+        result.workers[outcome.pid] = max(result.workers.get(outcome.pid, 0.0), outcome.max_rss_mb)
+        finished = len(result.done) + len(failed) + len(result.up_to_date)
+        report(progress, finished, total, _counts(len(result.done), len(failed), len(result.up_to_date), total))
+
+    report(progress, len(result.up_to_date), total, _counts(0, 0, len(result.up_to_date), total))
+    if tasks:
+        result.prepare_seconds = _prepare(built, settings)
+        from tonguevis.batch import runners, tasks as task_module
+
+        if client is not None:
+            runners.run_dask(tasks, spec, client, on_done)
+        elif jobs == 1:
+            task_module.remember_model(spec, built)
+            runners.run_here(tasks, spec, on_done)
+        else:
+            runners.run_loky(tasks, spec, jobs, on_done)
+    result.tables = store.gather(out_abs, folders, keys, settings.steps, settings.csv)
+    result.failures = [(name, *failed[name]) for name in names if name in failed]
+    store.write_failures(out_abs, result.failures)
+    result.seconds = time.perf_counter() - started
+    from tonguevis import __version__
+
+    store.write_settings(out_abs, {
+        "tonguevis": __version__, "corpus": str(root), "recordings": len(names), "settings": settings.as_dict(),
+        "model": {"kind": spec.kind, "mesh": str(spec.mesh) if spec.kind == "file" else None, "key": spec.key},
+        "runner": "dask" if client is not None else ("here" if jobs == 1 else f"loky, {jobs} workers"),
+        "last_run": {"done": len(result.done), "up_to_date": len(result.up_to_date),
+                     "failed": len(result.failures), "seconds": result.seconds},
+    })
+    return result
+
+
+def require(*modules: str) -> None:
+    """BatchError naming the ``batch`` extra when one of ``modules`` is not installed."""
+    import importlib.util
+
+    missing = [m for m in modules if importlib.util.find_spec(m) is None]
+    if missing:
+        raise BatchError(f"the batch needs {', '.join(missing)}: pip install 'tonguevis[batch]'")
+
+
+def _prepare(model, settings: BatchSettings) -> float:
+    """The modal basis on disk and the warp kernels compiled, once, before any worker starts; returns seconds."""
+    from tonguevis._backend import prepare_kernels
+
+    started = time.perf_counter()
+    model.basis(settings.modes)
+    prepare_kernels()
+    return time.perf_counter() - started

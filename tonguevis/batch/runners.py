@@ -1,0 +1,60 @@
+"""Where the tasks run: in this process, in joblib's loky worker processes, or on a Dask cluster.
+
+Each runner calls ``on_done(outcome)`` in the parent as every recording
+finishes, in completion order.  The parent has already built the model's
+modal basis (disk cache) and compiled the warp kernels (kernel cache), so
+workers load both instead of computing them at once.
+"""
+
+from __future__ import annotations
+
+import uuid
+from typing import Callable
+
+from tonguevis.batch.settings import BatchError, ModelSpec
+from tonguevis.batch.tasks import Outcome, Task, process
+
+OnDone = Callable[[Outcome], None]
+
+
+def run_here(tasks: list[Task], spec: ModelSpec, on_done: OnDone) -> None:
+    """One after the other in this process (``jobs=1``)."""
+    for task in tasks:
+        on_done(process(task, spec))
+
+
+def run_loky(tasks: list[Task], spec: ModelSpec, jobs: int, on_done: OnDone) -> None:
+    """``jobs`` loky worker processes with one BLAS/OpenMP thread each; results as they finish."""
+    from joblib import Parallel, delayed
+    from joblib.externals.loky.process_executor import TerminatedWorkerError
+
+    parallel = Parallel(n_jobs=jobs, backend="loky", inner_max_num_threads=1, return_as="generator_unordered",
+                        pre_dispatch="2*n_jobs", batch_size=1)
+    try:
+        for outcome in parallel(delayed(process)(task, spec) for task in tasks):
+            on_done(outcome)
+    except TerminatedWorkerError as exc:
+        raise BatchError("a worker process died (out of memory?); the recordings finished so far are kept: "
+                         f"rerun to resume ({exc})") from exc
+
+
+def run_dask(tasks: list[Task], spec: ModelSpec, client, on_done: OnDone) -> None:
+    """On a Dask distributed cluster through ``client``; a task lost with its worker is recorded as a failure."""
+    from distributed import as_completed
+
+    if not tasks:
+        return
+    run = uuid.uuid4().hex[:8]
+    shared = client.scatter(spec, broadcast=True)
+    futures = {client.submit(process, task, shared, key=f"tonguevis-{run}-{k}-{task.file}"): task
+               for k, task in enumerate(tasks)}
+    try:
+        for future in as_completed(futures):
+            task = futures[future]
+            try:
+                outcome = future.result()
+            except Exception as exc:  # noqa: BLE001 - the worker died or the task could not run there
+                outcome = Outcome(task.file, failure=("worker", f"{type(exc).__name__}: {exc}"))
+            on_done(outcome)
+    finally:
+        client.cancel(list(futures))

@@ -1,0 +1,94 @@
+"""``tonguevis batch CORPUS --out DIR``: every recording of a corpus, resumable, in parallel or on a Dask cluster.
+
+Per recording (the same steps as ``simulate``, ``energy``, ``segment
+--production K`` and ``validate``, with their defaults): the motion
+(``motion.npz``), its energy curves and productions, the autoseeded
+constraint-mode segmentation of each production (§5) and, with ``--steps
+...,validate``, the leave-one-sensor-out validation; each written under
+``DIR/recordings/`` as it finishes, then gathered into ``DIR/energy.parquet``
+(the columns of ``tonguevis energy``), ``productions``, ``simulation``,
+``segmentation`` and ``validation.parquet`` (``--csv``: CSV too).  A rerun
+skips what is done with the same inputs and settings.  A recording that fails
+is listed in ``DIR/failures.csv`` and the others go on; the exit status is 1
+when any failed, else 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from tonguevis.batch.settings import DEFAULT_STEPS, STEPS
+    from tonguevis.cli._common import add_model_arguments, add_productions_from_argument, add_rest_argument
+
+    parser.add_argument("paths", nargs="+", type=Path, metavar="CORPUS",
+                        help="a folder of recordings (walked recursively) or recording files")
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (reused to resume)")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--jobs", type=int, default=1, metavar="N",
+                       help="worker processes on this machine (default 1: in this process)")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run on a Dask distributed cluster, e.g. tcp://10.0.0.5:8786 (DIR and the corpus "
+                            "must be visible to its workers at the same paths)")
+    parser.add_argument("--steps", default=",".join(DEFAULT_STEPS),
+                        help=f"comma-separated steps from {','.join(STEPS)} (default {','.join(DEFAULT_STEPS)})")
+    parser.add_argument("--csv", action="store_true", help="CSV beside every Parquet table")
+    parser.add_argument("--sensors", metavar="MAP",
+                        help="sensor map (JSON file or preset) for every recording; default: "
+                             "sensor_map.json beside each recording if any")
+    parser.add_argument("--labels", metavar="TABLE", type=Path,
+                        help="CSV with columns file,speaker,syllable[,trial] overriding the names")
+    parser.add_argument("--all", action="store_true", help="every production, not only the 2nd-4th of each train")
+    parser.add_argument("--window", choices=("release", "vowel"), default="release",
+                        help="energy curve span, as tonguevis energy --window (default: release)")
+    add_productions_from_argument(parser)
+    parser.add_argument("--segment-first", type=int, metavar="N",
+                        help="segment only the first N productions of each recording (default: every one; "
+                             "segmentation takes several seconds per production)")
+    parser.add_argument("--no-static", action="store_true", help="validation without the quasi-static baseline")
+    parser.add_argument("--force", action="store_true", help="redo every step, even those up to date")
+    add_model_arguments(parser)
+    add_rest_argument(parser, every=True)
+
+
+def load_model(args):
+    """The tongue model of ``--mesh``/``--axes`` as (model, None), or (None, mesh file) for the workers to read.
+
+    A hook the tests replace.
+    """
+    return None, args.mesh
+
+
+def run(args: argparse.Namespace) -> int:
+    from tonguevis._progress import tqdm_progress
+    from tonguevis.batch import BatchSettings, run as run_batch
+    from tonguevis.cli._common import rest_arg
+
+    settings = BatchSettings(
+        steps=args.steps, modes=args.modes, landmarks=args.landmarks, warping=not args.linear,
+        sensor_stiffness=args.sensor_stiffness, rest=rest_arg(args), sensors=args.sensors,
+        keep=None if args.all else (2, 3, 4), window=args.window, tier=args.productions_from,
+        segment_first=args.segment_first, quasi_static=not args.no_static, csv=args.csv)
+    model, mesh = load_model(args)
+    client = None
+    if args.scheduler is not None:
+        from tonguevis.batch.api import require
+
+        require("distributed")
+        from distributed import Client
+
+        client = Client(args.scheduler)
+    try:
+        with tqdm_progress("batch", disable=args.quiet) as progress:
+            result = run_batch(args.paths, args.out, jobs=args.jobs, client=client, model=model, mesh=mesh,
+                               axes=args.axes, labels=args.labels, settings=settings, force=args.force,
+                               progress=progress)
+    finally:
+        if client is not None:
+            client.close()
+    for file, step, error in result.failures:
+        print(f"failed: {file} ({step}): {error}")
+    print(result.summary())
+    return 0 if result.ok else 1
