@@ -16,6 +16,7 @@ when any failed, else 0.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 
@@ -85,6 +86,10 @@ def run(args: argparse.Namespace) -> int:
             result = run_batch(args.paths, args.out, jobs=args.jobs, client=client, model=model, mesh=mesh,
                                axes=args.axes, labels=args.labels, settings=settings, force=args.force,
                                progress=progress)
+    except KeyboardInterrupt:
+        print(f"the recordings finished are kept in {args.out}: run the same command again to resume",
+              file=sys.stderr)
+        raise
     finally:
         if client is not None:
             client.close()
