@@ -131,8 +131,11 @@ def test_compiled_integrator_equals_the_numpy_reference(warping, compliance, mon
         comp[110:130, 2] = np.inf
         comp[130:140, 2] = np.linspace(5.0, 0.0, 10) * unit
     settings = _settings(model, warping)
-    ref = integrate(lam, phi_s, w_s, targets, settings, compliance=comp)
-    fast = integrate_compiled(lam, phi_s, w_s, targets, settings, compliance=comp)
+    scale_q = np.abs(integrate(lam, phi_s, w_s, targets, settings).q).max()
+    push = np.zeros((200, len(lam)))
+    push[80:120, :3] = 0.05 * lam[:3] * scale_q  # an external modal force, as the palate's contact forces
+    ref = integrate(lam, phi_s, w_s, targets, settings, compliance=comp, external=push)
+    fast = integrate_compiled(lam, phi_s, w_s, targets, settings, compliance=comp, external=push)
     scale = np.abs(ref.q).max()
     assert np.abs(fast.q - ref.q).max() < 1e-10 * scale
     assert np.abs(fast.qd - ref.qd).max() < 1e-8 * np.abs(ref.qd).max()
@@ -145,5 +148,6 @@ def test_compiled_integrator_equals_the_numpy_reference(warping, compliance, mon
     if compliance == "runaway" and warping:
         assert ref.recovered.any()
     # Several trials in one launch give the same as one at a time.
-    both = integrate_compiled(lam, phi_s, w_s, np.stack([targets, 0.5 * targets]), settings, compliance=comp)
+    both = integrate_compiled(lam, phi_s, w_s, np.stack([targets, 0.5 * targets]), settings, compliance=comp,
+                              external=push)
     np.testing.assert_allclose(both[0].q, fast.q, rtol=0, atol=1e-15 * scale)

@@ -26,6 +26,7 @@ COMMANDS: list[tuple[str, str, str]] = [
     ("morph", "morph", "morph one simulated shape into another"),
     ("segment", "segment", "deformation segmentation with rigid or constraint modes"),
     ("validate", "validate", "leave-one-sensor-out validation of the model"),
+    ("palate", "palate", "the speaker's palate surface from palate-trace recordings"),
     ("batch", "batch", "a whole corpus: simulate, energy, segment, validate; resumable, in parallel"),
 ]
 

@@ -146,6 +146,10 @@ def simulate_args(args, recording, model, modes: int | None = None, progress=Non
     options = dict(modes=args.modes if modes is None else modes, warping=not getattr(args, "linear", False),
                    landmarks=getattr(args, "landmarks", "speaker"), rest=rest_arg(args),
                    sensor_stiffness=getattr(args, "sensor_stiffness", "default"))
+    if getattr(args, "palate", None) is not None:
+        from tonguevis.palate import PalateSurface
+
+        options["palate"] = PalateSurface.load(args.palate)
     if progress is not None:
         return simulate_recording(recording, model, progress=progress, **options)
     with tqdm_progress("simulating", disable=getattr(args, "quiet", False)) as bar:

@@ -19,6 +19,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_recording_arguments(parser)
     add_model_arguments(parser)
     add_rest_argument(parser)
+    parser.add_argument("--palate", type=Path, metavar="PALATE",
+                        help="the speaker's palate (from `tonguevis palate`): keep the tongue below it and report "
+                             "penetration and contact")
     parser.add_argument("--out", type=Path, metavar="DIR",
                         help="write motion.npz and a VTK series (motion.pvd + .vtu frames) for ParaView here")
 
@@ -53,6 +56,13 @@ def summary(motion) -> list[str]:
         f"energy peak: {1e3 * motion.energy[peak]:.3f} mJ at {motion.times[peak]:.2f} s",
         f"drift at the end: {1e3 * np.linalg.norm(end, axis=1).max():.3f} mm (largest node displacement, last frame)",
     ]
+    if "contact" in meta:
+        c = meta["contact"]
+        lines.append(
+            f"palate contact: deepest penetration {c['penetration_max_mm']:.2f} mm, {c['frames_in_contact']} frames in "
+            f"contact, largest contact area {c['contact_area_max_mm2']:.0f} mm²; sensors above the palate (they win): "
+            + (", ".join(f"{motion.sensor_names[int(k)]} in {n} frames" for k, n in c["conflicts"]["by_sensor_index"].items())
+               or "none"))
     if meta.get("ignored_sensors"):
         lines.append("ignored (no landmark on the model): " + ", ".join(meta["ignored_sensors"]))
     return lines

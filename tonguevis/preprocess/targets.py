@@ -39,6 +39,9 @@ class PreparedTargets:
     midsagittal : whether the fit kept the midsagittal plane;
     alignment_rms : RMS distance (m) between aligned rest sensors and their nodes before snapping.
     aligned_rest : (S, 3) rest positions of the sensors in the model frame (m).
+    jaw_offset : (F, 3) the jaw's translation from its rest in the model frame (m), zeros
+        without a JAW sensor: what carries the tongue (simulated in the jaw's frame)
+        into the head's frame, where the palate is fixed.
     """
 
     names: list[str]
@@ -50,6 +53,7 @@ class PreparedTargets:
     midsagittal: bool
     alignment_rms: float
     aligned_rest: np.ndarray
+    jaw_offset: np.ndarray | None = None
 
     @property
     def rest_interval(self) -> tuple[float, float]:
@@ -92,7 +96,10 @@ def prepare_targets(
         rest = choose_rest_interval(recording, sensors=names, given=rest)
     rest_interval = rest.interval
     rec = pp.head_corrected(recording, rest_interval=rest_interval)
+    jaw_moved = None
     if "JAW" in rec.sensors:
+        jaw = rec.sensors["JAW"]
+        jaw_moved = jaw - pp.rest_pose(rec, rest_interval, sensors=["JAW"])["JAW"]
         rec = pp.correct_jaw(rec, rest_interval=rest_interval)
     if smooth_window:
         rec = pp.smooth(rec, window=smooth_window, sensors=names)
@@ -117,6 +124,18 @@ def prepare_targets(
     positions = np.stack([rec.sensors[n] for n in names], axis=1)  # (F, S, 3)
     # Displacement from rest, rotated and scaled into the model frame.
     displacement = transform.scale * (positions - source[None]) @ transform.rotation.T
+    jaw_offset = np.zeros((recording.n_samples, 3))
+    if jaw_moved is not None:
+        jaw_offset = _filled(transform.scale * jaw_moved @ transform.rotation.T)
     return PreparedTargets(
-        names, nodes, displacement, transform, ignored, rest, midsagittal, alignment_rms, aligned_rest
+        names, nodes, displacement, transform, ignored, rest, midsagittal, alignment_rms, aligned_rest, jaw_offset
     )
+
+
+def _filled(x: np.ndarray) -> np.ndarray:
+    """(F, 3) with missing samples interpolated linearly in time (held at the ends; zeros if none valid)."""
+    ok = np.all(np.isfinite(x), axis=1)
+    if ok.all() or not ok.any():
+        return np.where(ok[:, None], x, 0.0)
+    idx = np.arange(len(x))
+    return np.column_stack([np.interp(idx, idx[ok], x[ok, k]) for k in range(3)])

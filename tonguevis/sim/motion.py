@@ -40,6 +40,12 @@ class Motion:
     volume_change : (F,) float64, (V - V_rest) / V_rest of the warped mesh.
     converged : (F,) bool, whether Newton met the constraint tolerance.
     metadata : recording source, alignment, settings.
+    penetration : (F,) metres, the deepest tongue node inside the palate (sensor
+        conflicts excluded), or None when simulated without a palate.
+    contact_area : (F,) m², the tongue surface within 0.3 mm of the palate, or None.
+    jaw_offset : (F, 3) metres, the jaw's translation from rest in the model
+        frame (what carries the tongue from the jaw's frame, where it is
+        simulated, into the head's frame, where the palate is), or None.
     """
 
     times: np.ndarray
@@ -54,6 +60,9 @@ class Motion:
     volume_change: np.ndarray
     converged: np.ndarray
     metadata: dict[str, Any] = field(default_factory=dict)
+    penetration: np.ndarray | None = None
+    contact_area: np.ndarray | None = None
+    jaw_offset: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -112,6 +121,8 @@ class Motion:
                     energy=self.energy,
                     volume_change=self.volume_change,
                     converged=self.converged,
+                    **{k: v for k, v in (("penetration", self.penetration), ("contact_area", self.contact_area),
+                                         ("jaw_offset", self.jaw_offset)) if v is not None},
                     points=model.mesh.points,
                     tets=model.mesh.tets,
                     anchors=model.anchors,
@@ -149,6 +160,8 @@ class Motion:
             targets=arrays["targets"], sensor_residual=arrays["sensor_residual"],
             energy=arrays["energy"], volume_change=arrays["volume_change"],
             converged=arrays["converged"].astype(bool), metadata=meta["metadata"],
+            penetration=arrays.get("penetration"), contact_area=arrays.get("contact_area"),
+            jaw_offset=arrays.get("jaw_offset"),
         )
 
     def to_vtk_series(self, folder, frames=None, progress=None):

@@ -74,18 +74,21 @@ def integrate(
     targets: np.ndarray,
     settings: NewmarkSettings,
     compliance: np.ndarray | float = 0.0,
+    external: np.ndarray | None = None,
     progress: ProgressCallback | None = None,
 ) -> IntegrationResult:
     """Integrate all frames (the NumPy reference of :mod:`newmark_kernel`).
 
     targets : (F, S, 3) sensor displacements from rest (m), NaN = missing.
     compliance : (F, S) or a scalar, m/N; 0 = hard, inf = the sensor does not act.
+    external : (F, m) external modal forces (e.g. the palate's contact forces), or None.
     The first frame starts from rest (q = q̇ = q̈ = 0 before it).
     """
     lam = np.asarray(eigenvalues, dtype=np.float64)
     m = len(lam)
     n_frames, n_sensors, _ = targets.shape
     comp = np.broadcast_to(np.asarray(compliance, dtype=np.float64), (n_frames, n_sensors))
+    ext = np.zeros((n_frames, m)) if external is None else np.asarray(external, dtype=np.float64)
     h = settings.dt
     bn = h * h / 4.0
     damp = settings.alpha + settings.beta * lam
@@ -110,7 +113,7 @@ def integrate(
     for i in range(n_frames):
         q_pred = q + h * qd + bn * qdd
         qd_pred = qd + 0.5 * h * qdd
-        b = -damp * qd_pred - lam * q_pred
+        b = -damp * qd_pred - lam * q_pred + ext[i]
         active = np.all(np.isfinite(targets[i]), axis=1) & np.isfinite(comp[i])
         if not active.any():
             qdd_k = a_inv * b

@@ -250,6 +250,7 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
         def newmark(lam: wp.array(dtype=f64), a_inv: wp.array(dtype=f64), damp: wp.array(dtype=f64),
                     phi: wp.array2d(dtype=f64), ws: wp.array2d(dtype=f64), qm: wp.array2d(dtype=f64),
                     pm: wp.array2d(dtype=f64), targets: wp.array3d(dtype=f64), comp: wp.array3d(dtype=f64),
+                    ext: wp.array3d(dtype=f64),
                     h: f64, bn: f64, tol: f64, stat_rtol: f64, max_iter: int, max_rot: f64, runaway: f64,
                     warping: int,
                     out_q: wp.array3d(dtype=f64), out_qd: wp.array3d(dtype=f64), out_qdd: wp.array3d(dtype=f64),
@@ -272,7 +273,7 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                     qdp = vecs[t, _V_QD, j] + f64(0.5) * h * vecs[t, _V_QDD, j]
                     vecs[t, _V_QP, j] = qp
                     vecs[t, _V_QDP, j] = qdp
-                    vecs[t, _V_B, j] = -damp[j] * qdp - lam[j] * qp
+                    vecs[t, _V_B, j] = -damp[j] * qdp - lam[j] * qp + ext[t, i, j]
                 n_act = int(0)
                 for s in range(n_sensors):
                     ok = int(1)
@@ -500,6 +501,7 @@ def integrate_compiled(
     targets: np.ndarray,
     settings: NewmarkSettings,
     compliance: np.ndarray | float = 0.0,
+    external: np.ndarray | None = None,
     device: str = "cpu",
 ) -> IntegrationResult | list[IntegrationResult]:
     """Compiled :func:`tonguevis.sim.newmark.integrate`.
@@ -507,6 +509,7 @@ def integrate_compiled(
     targets : (F, S, 3) for one trial, or (T, F, S, 3) for T trials integrated
     in one launch (then a list of results is returned).
     compliance : m/N, broadcast to (F, S) or (T, F, S); 0 = hard, inf = not acting.
+    external : external modal forces, (F, m) or (T, F, m), or None.
     """
     from tonguevis.sim.constrained import MAX_ROTATION_STEP, RUNAWAY_ROTATION, STATIONARITY_RTOL
 
@@ -516,6 +519,8 @@ def integrate_compiled(
     tg = targets if batch else targets[None]
     n_trials, n_frames, n_sensors, _ = tg.shape
     comp = np.broadcast_to(np.asarray(compliance, dtype=np.float64), tg.shape[:3])
+    ext = (np.zeros((n_trials, n_frames, len(eigenvalues))) if external is None
+           else np.broadcast_to(np.asarray(external, dtype=np.float64), (n_trials, n_frames, len(eigenvalues))))
     lam = np.ascontiguousarray(eigenvalues, dtype=np.float64)
     m = len(lam)
     n_c = 3 * n_sensors
@@ -546,7 +551,7 @@ def integrate_compiled(
         dim=n_trials,
         inputs=[
             arr(lam), arr(a_inv), arr(damp), arr(phi2), arr(w_s.reshape(n_c, m)), arr(q_full), arr(p_full),
-            arr(tg.reshape(n_trials, n_frames, n_c)), arr(comp),
+            arr(tg.reshape(n_trials, n_frames, n_c)), arr(comp), arr(ext),
             h, bn, float(settings.tolerance), float(STATIONARITY_RTOL), int(settings.max_iterations),
             float(MAX_ROTATION_STEP), float(RUNAWAY_ROTATION),
             int(bool(settings.warping)),

@@ -37,6 +37,7 @@ def simulate(
     tolerance: float = 1e-8,
     sensor_stiffness: float | None | str = "default",
     backend: str = "warp",
+    palate=None,
     progress: ProgressCallback | None = None,
 ) -> Motion:
     """Drive ``model`` (default: our shipped tongue) with ``recording``.
@@ -60,6 +61,13 @@ def simulate(
     refused with SimulationError.  ``metadata["plausibility"]`` holds the
     far-field amplification (largest node displacement over the largest sensor
     displacement), volume change and sensor misfit.
+
+    palate : None, a :class:`~tonguevis.palate.PalateSurface` or a palate file
+        (``tonguevis palate``), in the recording's frame: the tongue surface is
+        kept below it (:mod:`tonguevis.sim.contact`), and ``motion.penetration``
+        and ``motion.contact_area`` report, per frame, the deepest node inside
+        it and the area in contact; sensors above it win and are listed in
+        ``metadata["contact"]["conflicts"]``.
     """
     from tonguevis._backend import check_backend
     from tonguevis.sim.constrained import point_stiffness
@@ -83,16 +91,23 @@ def simulate(
         tolerance=tolerance, warping=warping,
     )
     k_ref = point_stiffness(basis.eigenvalues, phi_s)
+    contact = None
+    if palate is not None:
+        contact = _contact_context(palate, prep, model, basis, recording)
     targets, compliance, schedule = drive_schedule(prep.displacement, recording.rate, basis.eigenvalues, phi_s,
-                                                   sensor_stiffness)
+                                                   sensor_stiffness, contact=contact)
     report(progress, 1, 3, "integrating")
     if backend == "warp":
         from tonguevis.sim.newmark_kernel import integrate_compiled
 
-        result = integrate_compiled(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance)
+        result = integrate_compiled(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance,
+                                    external=schedule.get("external"))
     else:
         result = integrate(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance,
-                           progress=_stage(progress, 1, 3))
+                           external=schedule.get("external"), progress=_stage(progress, 1, 3))
+    if contact is not None:
+        result.q, corrected = _keep_below_palate(result.q, contact, schedule, basis, phi_s)
+        schedule["corrected_frames"] = corrected
     report(progress, 2, 3, "reconstructing the mesh")
     displacements = model.displacements(result.q, warping=warping, backend=backend)
     volume_change = model.volume_change(displacements, backend=backend)
@@ -122,6 +137,9 @@ def simulate(
             "nodes far from the speaker's layout make it bend unnaturally", 100 * worst_volume, modes)
     rest_nodes = model.mesh.points[prep.nodes]
     released = schedule["released"]
+    contact_figures, penetration, contact_area = {}, None, None
+    if contact is not None:
+        penetration, contact_area, contact_figures = _contact_report(displacements, contact, schedule, model, times)
     metadata = {
         "recording": dict(recording.metadata),
         "landmarks": landmarks,
@@ -141,6 +159,7 @@ def simulate(
         "recovered_frames": recovered.tolist(),
         "implausible_frames": absurd.tolist(),
         "plausibility": plausibility,
+        **({"contact": contact_figures} if contact is not None else {}),
         "newton_iterations_mean": float(result.iterations.mean()) if len(result.iterations) else 0.0,
     }
     report(progress, 3, 3, "done")
@@ -156,12 +175,15 @@ def simulate(
         energy=energy,
         volume_change=volume_change,
         converged=result.converged & ~result.recovered,
+        penetration=penetration,
+        contact_area=contact_area,
+        jaw_offset=prep.jaw_offset,
         metadata=metadata,
     )
 
 
 def drive_schedule(displacement: np.ndarray, rate: float, eigenvalues: np.ndarray, phi_s: np.ndarray,
-                   sensor_stiffness: float | None):
+                   sensor_stiffness: float | None, contact: dict | None = None):
     """What the integrator is driven with: (targets (F, S, 3), compliance (F, S), info).
 
     The measured sensor displacements (F, S, 3; NaN = missing) are projected
@@ -175,7 +197,10 @@ def drive_schedule(displacement: np.ndarray, rate: float, eigenvalues: np.ndarra
     in the dynamic solve itself would lag behind fast speech (the sensor
     node, a mass on a spring with the modes' damping, trailed a real /ta/ by
     up to 7 mm).  info: {"bridged": gaps interpolated, "released": (F, S)
-    frames a sensor was missing after bridging}.
+    frames a sensor was missing after bridging}.  With ``contact`` (from
+    :func:`_contact_context`) the projection keeps the tongue below the palate
+    (:func:`tonguevis.sim.contact.solve_contact`) and info adds the contact
+    forces ("external", (F, m) modal) for the dynamic solve, "active" and "conflicts".
     """
     from tonguevis.sim.constrained import compliant_targets, point_stiffness
     from tonguevis.sim.dropouts import blend_targets, bridge_short_gaps, handover
@@ -183,11 +208,119 @@ def drive_schedule(displacement: np.ndarray, rate: float, eigenvalues: np.ndarra
     filled, bridged = bridge_short_gaps(displacement, rate)
     present = np.all(np.isfinite(filled), axis=2)
     base = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * point_stiffness(eigenvalues, phi_s))
-    projected = compliant_targets(eigenvalues, phi_s, filled, np.where(present, base, np.inf))
+    springs = np.where(present, base, np.inf)
+    info = {"bridged": bridged, "released": ~present}
+    if contact is None:
+        projected = compliant_targets(eigenvalues, phi_s, filled, springs)
+    else:
+        from tonguevis.sim.contact import solve_contact
+
+        solved = solve_contact(eigenvalues, contact["phi_nodes"], phi_s, filled, springs, contact["points"],
+                               contact["sensor_nodes"], contact["candidates"], contact["palate"],
+                               contact["jaw_offset"])
+        projected = solved.pop("targets")
+        info.update(solved)
     trust, acting = handover(present, rate)
     targets = blend_targets(np.where(present[:, :, None], projected, np.nan), projected, trust, acting)
     compliance = np.where(np.all(np.isfinite(targets), axis=2), 0.0, np.inf)
-    return targets, compliance, {"bridged": bridged, "released": ~present}
+    return targets, compliance, info
+
+
+def _contact_context(palate, prep, model, basis, recording) -> dict:
+    """What the contact solve needs: the palate in the model frame, candidate nodes and their modes."""
+    from tonguevis.palate import PalateSurface
+
+    if not isinstance(palate, PalateSurface):
+        palate = PalateSurface.load(palate)
+    shift = 0.0
+    if palate.metadata.get("frame") != "model":  # a speaker's palate: placed by the sensors' alignment
+        t = prep.transform
+        palate = palate.transformed(t.rotation, t.scale, t.translation)
+        palate, shift = _register_palate(palate, prep)
+    candidates = np.asarray(model.dorsal_nodes)
+    gap, _ = palate.clearance(model.mesh.points[candidates])
+    inside = np.nanmean(gap < -1e-3) if np.isfinite(gap).any() else 0.0
+    if inside > 0.2:
+        raise SimulationError(
+            f"the palate cuts through the tongue at rest ({100 * inside:.0f} % of its upper surface more than 1 mm "
+            f"inside it, up to {-1e3 * np.nanmin(gap):.0f} mm): is it this speaker's palate, from this session?",
+            recording.metadata.get("file"))
+    dofs = (3 * candidates[:, None] + np.arange(3)).ravel()
+    return {"palate": palate, "candidates": candidates, "points": model.mesh.points,
+            "phi_nodes": basis.phi[dofs].reshape(len(candidates), 3, -1), "sensor_nodes": np.asarray(prep.nodes),
+            "jaw_offset": prep.jaw_offset if prep.jaw_offset is not None else np.zeros((recording.n_samples, 3)),
+            "registration_shift_m": shift}
+
+
+def _keep_below_palate(q, contact, schedule, basis, phi_s):
+    """The dynamic shapes projected out of the palate where inertia carried them in (see contact.correct_frames)."""
+    from tonguevis.sim.contact import CONFLICT_RADIUS, correct_frames
+
+    cand, pts = contact["candidates"], contact["points"]
+    near = np.linalg.norm(pts[cand][:, None] - pts[contact["sensor_nodes"]][None], axis=2) < CONFLICT_RADIUS
+    allowed = np.ones((len(q), len(cand)), dtype=bool)
+    for f, s in schedule["conflicts"]:
+        allowed[f] &= ~near[:, s]
+    return correct_frames(basis.eigenvalues, contact["phi_nodes"], phi_s, q, pts, cand, contact["palate"],
+                          contact["jaw_offset"], allowed)
+
+
+def _contact_report(displacements, contact, schedule, model, times):
+    """Per frame: deepest penetration (m), contact area (m²); and the figures for metadata."""
+    from tonguevis.sim.contact import CONFLICT_RADIUS, penetration as deepest
+
+    cand, pts, palate, offset = contact["candidates"], contact["points"], contact["palate"], contact["jaw_offset"]
+    near = np.linalg.norm(pts[cand][:, None] - pts[contact["sensor_nodes"]][None], axis=2) < CONFLICT_RADIUS
+    exclude = np.zeros((len(times), len(cand)), dtype=bool)
+    for f, s in schedule["conflicts"]:
+        exclude[f] |= near[:, s]
+    pen = deepest(displacements, pts, cand, palate, offset, exclude)
+    # Contact area: surface triangles whose three nodes are all within 0.3 mm of the palate.
+    gap = np.full((len(times), len(pts)), np.inf)
+    g, _ = palate.clearance((pts[cand][None] + displacements[:, cand] + offset[:, None]).reshape(-1, 3))
+    gap[:, cand] = np.where(np.isfinite(g), g, np.inf).reshape(len(times), -1)
+    faces = model.surface_faces
+    touching = np.all(gap[:, faces] < 3e-4, axis=2)  # (F, faces)
+    p = pts[None] + displacements
+    a, b, c = (p[:, faces[:, k]] for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=2)
+    contact_area = np.sum(np.where(touching, area, 0.0), axis=1)
+    conflicts = sorted({s for _, s in schedule["conflicts"]})
+    figures = {
+        "penetration_max_mm": float(1e3 * pen.max()) if len(pen) else 0.0,
+        "frames_in_contact": int(np.sum(schedule["active"] > 0)),
+        "frames_corrected_after_the_dynamics": int(len(schedule.get("corrected_frames", []))),
+        "contact_area_max_mm2": float(1e6 * contact_area.max()) if len(contact_area) else 0.0,
+        "conflicts": {"frames": len({f for f, _ in schedule["conflicts"]}),
+                      "by_sensor_index": {int(s): sum(1 for _, t in schedule["conflicts"] if t == s) for s in conflicts},
+                      "first_s": float(times[schedule["conflicts"][0][0]]) if schedule["conflicts"] else None},
+        "palate": {k: v for k, v in contact["palate"].metadata.items() if k in ("rms_m", "source", "frame", "kept")},
+        "palate_raised_mm": float(1e3 * contact.get("registration_shift_m", 0.0)),
+    }
+    return pen, contact_area, figures
+
+
+def _register_palate(palate, prep, percentile: float = 1.0):
+    """The palate raised, if need be, until the tongue sensors stay below it; (palate, shift in m).
+
+    A palate traced in another sitting than the speech (no head references to
+    relate the two, as in Opti-Speech exports) can sit millimetres too low: on
+    the real /ta/ and /ka/ the dorsum sensor read 5-11 mm above the traced
+    palate, which no tongue does.  The sensors' positions over the whole
+    recording (head frame) are the evidence: the palate is moved up along
+    the model's z until all but ``percentile`` % of them are below it.
+    """
+    head = prep.aligned_rest[None] + prep.displacement + prep.jaw_offset[:, None]
+    gap, _ = palate.clearance(head.reshape(-1, 3))
+    gap = gap[np.isfinite(gap)]
+    if len(gap) == 0:
+        return palate, 0.0
+    shift = max(0.0, -float(np.percentile(gap, percentile)))
+    if shift > 0:
+        logger.warning("the palate lies %.1f mm below where the tongue sensors went: raised by that much "
+                       "(traced in another sitting?)", 1e3 * shift)
+        palate = palate.transformed(np.eye(3), 1.0, np.array([0.0, 0.0, shift]))
+    return palate, shift
 
 
 def _sensor_misfit(q, phi_s, w_s, measured, warping):

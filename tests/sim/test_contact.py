@@ -1,0 +1,173 @@
+"""Tongue-palate contact: the QP against a generic solver, a bar pushed into a plane, palates fitted to traces."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.conftest import shared_file
+from tests.sim._models import bar_model, sensor_rows
+from tonguevis.palate import PalateSurface, fit_palate
+from tonguevis.sim.contact import MARGIN, correct_frames, penetration, solve_contact
+
+HEIGHT = 0.02
+
+
+def plane(z: float, tilt: float = 0.0, ridge: float = 0.0) -> PalateSurface:
+    """A flat 'palate' z = z0 + tilt·x over the bar (model frame), with a ridge hanging ``ridge`` lower at x = 9 cm."""
+    x = np.arange(-0.01, 0.14, 0.001)
+    y = np.arange(-0.01, 0.03, 0.002)
+    gx, _ = np.meshgrid(x, y)
+    return PalateSurface(x, y, z + tilt * gx - ridge * np.exp(-(((gx - 0.09) / 0.01) ** 2)), metadata={"frame": "model"})
+
+
+@pytest.fixture(scope="module")
+def bar():
+    model = bar_model(sensors=("TT", "TD"))
+    nodes = np.array([model.landmarks.sensors[s] for s in ("TT", "TD")])
+    lam, phi_s, _ = sensor_rows(model, nodes, 16)
+    top = np.flatnonzero(model.mesh.points[:, 2] > HEIGHT - 1e-9)
+    basis = model.basis(16, cache=False)
+    dofs = (3 * top[:, None] + np.arange(3)).ravel()
+    return model, nodes, lam, phi_s, top, basis.phi[dofs].reshape(len(top), 3, -1)
+
+
+def test_the_plane_gives_the_right_clearance_and_normal():
+    surface = plane(0.03, tilt=0.1)
+    gap, normal = surface.clearance(np.array([[0.05, 0.01, 0.03], [0.05, 0.01, 0.04]]))
+    cos = 1 / np.sqrt(1 + 0.1**2)
+    np.testing.assert_allclose(gap, [0.005 * cos, -0.005 * cos], atol=1e-12)
+    np.testing.assert_allclose(normal[0], [0.1 * cos, 0.0, -cos], atol=1e-12)  # down, away from the palate
+    moved = surface.transformed(np.eye(3), 2.0, np.array([0.0, 0.0, 0.01]))
+    g2, _ = moved.clearance(np.array([[0.1, 0.02, 0.07]]))  # own point (0.05, 0.01, 0.03) mapped
+    np.testing.assert_allclose(g2, 2 * gap[:1], atol=1e-12)
+
+
+def test_contact_solution_equals_a_generic_constrained_solver(bar):
+    """The active-set / NNLS solve against SciPy's SLSQP on the same QP (linearised plane: exact)."""
+    from scipy.optimize import minimize
+
+    from tonguevis.sim.contact import _active_set
+
+    model, nodes, lam, phi_s, top, phi_top = bar
+    roof = plane(HEIGHT + 0.004)
+    target = np.array([0.0, 0.0, 0.010, 0.0, 0.0, 0.0])  # the tip pulled 10 mm up, 6 mm beyond the roof
+    P = phi_s.reshape(6, -1)
+    gram = (P / lam) @ P.T
+    comp = np.full(6, 1e-3)
+    q0 = P.T @ np.linalg.solve(gram + 1e-3 * np.eye(6), target) / lam
+    pts = model.mesh.points
+    q, lam_c, rows = _active_set(lam, P, gram, phi_top, pts[top], roof, np.zeros(3), target, comp,
+                                 np.ones(6, bool), q0, np.ones(len(top), bool), 0.0)
+    A = phi_top[:, 2, :]  # the plane is flat: the clearance row is the vertical displacement
+    gap0 = HEIGHT + 0.004 - pts[top, 2]
+    objective = lambda q: 0.5 * q @ (lam * q) + 0.5 * np.sum((P @ q - target) ** 2) / 1e-3  # noqa: E731
+    ref = minimize(objective, np.zeros(len(lam)), jac=lambda q: lam * q + P.T @ (P @ q - target) / 1e-3,
+                   constraints=[{"type": "ineq", "fun": lambda q: gap0 - A @ q, "jac": lambda q: -A}],
+                   method="SLSQP", options={"ftol": 1e-15, "maxiter": 1000})
+    np.testing.assert_allclose(P @ q, P @ ref.x, atol=2e-7)
+    np.testing.assert_allclose(A @ q, A @ ref.x, atol=2e-7)
+    assert len(lam_c) > 0 and np.all(lam_c > 0) and np.all(A @ q <= gap0 + 1e-9)
+    # Complementarity: the pushing nodes are exactly on the roof.
+    np.testing.assert_allclose(-rows @ q, (-rows @ q)[0], atol=1e-9)
+
+
+def test_a_sensor_above_the_palate_wins_and_is_reported():
+    model = bar_model(nx=36, sensors=("TT", "TD"))  # nodes every 3.3 mm, as on a tongue
+    nodes = np.array([model.landmarks.sensors[s] for s in ("TT", "TD")])
+    lam, phi_s, _ = sensor_rows(model, nodes, 60)
+    top = np.flatnonzero(model.mesh.points[:, 2] > HEIGHT - 1e-9)
+    dofs = (3 * top[:, None] + np.arange(3)).ravel()
+    phi_top = model.basis(60, cache=False).phi[dofs].reshape(len(top), 3, -1)
+    roof = plane(HEIGHT + 0.004)
+    targets = np.zeros((3, 2, 3))
+    targets[1, 0, 2] = 0.010  # frame 1: the tip sensor itself 6 mm above the roof
+    res = solve_contact(lam, phi_top, phi_s, targets, np.zeros((3, 2)), model.mesh.points, nodes, top, roof,
+                        np.zeros((3, 3)))  # hard sensors: the tip must reach its target
+    assert res["conflicts"] == [(1, 0)]
+    assert res["targets"][1, 0, 2] == pytest.approx(0.010)  # followed through the roof: the sensor wins
+    # ... and only its neighbourhood goes with it: the rest of the bar is held below the roof.
+    q = _static_shapes(lam, phi_s.reshape(6, -1), res, targets)[1]
+    z = model.mesh.points[top, 2] + np.einsum("kcm,m->kc", phi_top, q)[:, 2]
+    far = np.linalg.norm(model.mesh.points[top] - model.mesh.points[nodes[0]], axis=1) > 0.012
+    assert z[~far].max() > HEIGHT + 0.004 and z[far].max() <= HEIGHT + 0.004 + 1e-9
+    assert res["targets"][0, 0, 2] == 0.0 and res["active"][1] >= 0
+
+
+def test_a_bar_pulled_into_a_plane_stays_below_it_and_touches_it(bar):
+    model, nodes, lam, phi_s, top, phi_top = bar
+    roof = plane(HEIGHT + 0.004, ridge=0.003)  # 4 mm above the bar, a ridge down to 1 mm at x = 9 cm
+    t = np.arange(100) / 100.0
+    targets = np.zeros((100, 2, 3))
+    targets[:, :, 2] = 0.003 * np.sin(np.pi * t)[:, None] ** 2  # middle (6 cm) and tip (12 cm) rise 3 mm: under
+    # the roof themselves, but the bar between them meets the ridge
+    comp = np.full((100, 2), 1e-3)
+    res = solve_contact(lam, phi_top, phi_s, targets, comp, model.mesh.points, nodes, top, roof, np.zeros((100, 3)))
+    P = phi_s.reshape(6, -1)
+    q_free = ((np.linalg.solve((P / lam) @ P.T + 1e-3 * np.eye(6), targets.reshape(100, 6).T)).T @ P) / lam
+    free = penetration(np.einsum("kcm,fm->fkc", phi_top, q_free), model.mesh.points[top], np.arange(len(top)),
+                       roof, np.zeros((100, 3)))
+    assert free.max() > 1.5e-3  # without contact the bar would go 1.5+ mm into the ridge
+    # With contact: every frame's static shape is below the roof (to the margin), and some frames touch it.
+    q_c = _static_shapes(lam, P, res, targets)
+    u = np.einsum("kcm,fm->fkc", phi_top, q_c)
+    pen = penetration(u, model.mesh.points[top], np.arange(len(top)), roof, np.zeros((100, 3)))
+    assert pen.max() < 1e-9 and np.count_nonzero(res["active"]) > 20
+    # The dynamic shapes, corrected frame by frame, keep out too.
+    corrected, frames = correct_frames(lam, phi_top, phi_s, q_free, model.mesh.points, top, roof, np.zeros((100, 3)))
+    pen2 = penetration(np.einsum("kcm,fm->fkc", phi_top, corrected), model.mesh.points[top], np.arange(len(top)),
+                       roof, np.zeros((100, 3)))
+    assert len(frames) > 0 and pen2.max() < 1e-9
+    np.testing.assert_allclose(P @ corrected[frames[0]], P @ q_free[frames[0]], atol=1e-12)  # sensors unmoved
+
+
+def _static_shapes(lam, P, res, targets):
+    """q of each frame from the solve's sensor positions and contact forces (static balance)."""
+    gram = (P / lam) @ P.T
+    c = res["targets"].reshape(len(targets), -1)
+    mu = np.linalg.solve(gram, (c - (res["external"] / lam) @ P.T).T).T
+    return (mu @ P + res["external"]) / lam
+
+
+def test_a_palate_fitted_to_a_one_sided_noisy_trace_is_the_dome_mirrored():
+    rng = np.random.default_rng(0)
+    dome = lambda x, y: 0.012 - 40 * (x - 0.02) ** 2 - 60 * y**2  # noqa: E731 - metres, midline y = 0
+    x = rng.uniform(0.0, 0.04, 1500)
+    y = rng.uniform(0.0, 0.015, 1500)  # the left side only
+    z = dome(x, y) + rng.normal(0, 2e-4, len(x))
+    z[:40] += 0.01  # the probe leaving the mouth
+    surface = fit_palate(np.column_stack([x, y, z]), midline_y=0.0)
+    assert surface.metadata["kept"] <= 1500 - 40 and surface.metadata["rms_m"] < 4e-4
+    probe = np.array([[0.02, -0.01, 0.0], [0.03, 0.008, 0.0], [0.01, -0.012, 0.0]])  # right side: mirrored
+    gap, _ = surface.clearance(probe)
+    slope = np.hypot(-80 * (probe[:, 0] - 0.02), -120 * probe[:, 1])  # the clearance is slope-corrected
+    np.testing.assert_allclose(gap, dome(probe[:, 0], probe[:, 1]) / np.sqrt(1 + slope**2), atol=3e-4)
+    far, _ = surface.clearance(np.array([[0.09, 0.0, 0.0]]))
+    assert np.isnan(far[0])  # never extrapolated beyond the traced footprint
+
+
+def test_palate_files_round_trip(tmp_path):
+    surface = plane(0.03, tilt=0.05).transformed(np.eye(3), 1.0, np.array([0.0, 0.0, 0.002]))
+    surface.save(tmp_path / "palate.stl")
+    back = PalateSurface.load(tmp_path / "palate.stl")
+    pts = np.array([[0.05, 0.01, 0.02], [0.1, 0.0, 0.03]])
+    np.testing.assert_allclose(back.clearance(pts)[0], surface.clearance(pts)[0])
+    (tmp_path / "palate.palate.npz").unlink()  # the mesh alone: sampled from below
+    mesh_only = PalateSurface.load(tmp_path / "palate.stl")
+    np.testing.assert_allclose(mesh_only.clearance(pts)[0], surface.clearance(pts)[0], atol=2e-4)
+
+
+def test_the_speakers_palate_from_the_real_traces():
+    from tonguevis.io import read_recording
+    from tonguevis.palate import midline_of, trace_points
+
+    files = ["002_OSN12_Palate_MidSagital_HR.tsv", "003_OSN12_Palate_Coronal_HR.tsv", "004_OSN12_Palate_Scribble_HR.tsv"]
+    recs = [read_recording(shared_file("ema", "optispeech", f)) for f in files]
+    pts = np.concatenate([trace_points(r) for r in recs])
+    surface = fit_palate(pts, midline_y=float(np.mean([midline_of(r) for r in recs])))
+    assert surface.metadata["rms_m"] < 1.5e-3 and surface.metadata["kept"] > 0.8 * len(pts)
+    # A vault: the midline rises from the alveolar ridge (front) to the hard palate behind it.
+    y0 = surface.metadata["midline_y"]
+    front, _ = surface.clearance(np.array([[0.008, y0, -0.1]]))
+    back, _ = surface.clearance(np.array([[-0.012, y0, -0.1]]))
+    assert back[0] > front[0] + 0.003

@@ -1,0 +1,56 @@
+"""``tonguevis palate TRACE... --out PALATE``: the speaker's palate from palate-trace recordings.
+
+Reads each trace recording (any format; a probe sensor drawn along the
+palate: Opti-Speech calls it PROBE), head-corrects it like the speech
+recordings of the same session, fits one smooth surface to all the probe's
+positions (:func:`tonguevis.palate.fit_palate`: outliers dropped, mirrored
+about the midline, never extrapolated beyond the traced footprint) and writes
+it as a surface mesh in the recordings' own frame (metres) with its grid
+beside it (``PALATE.palate.npz``).  ``tonguevis simulate REC --palate PALATE``
+then keeps the tongue below it.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("traces", type=Path, nargs="+", metavar="TRACE", help="palate-trace recordings")
+    parser.add_argument("--out", type=Path, required=True, metavar="PALATE",
+                        help="surface mesh to write (.stl, .obj, .vtk, .ply ...)")
+    parser.add_argument("--probe", default="PROBE", metavar="SENSOR",
+                        help="the sensor drawn along the palate (default PROBE, Opti-Speech's name)")
+    parser.add_argument("--sensors", metavar="MAP", help="sensor map (preset or JSON) for the trace recordings")
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from tonguevis.palate import PalateError, fit_palate, midline_of, trace_points
+    from tonguevis.workflows import open_recording
+
+    points, midlines = [], []
+    for path in args.traces:
+        rec = open_recording(path, args.sensors, audio=False)
+        pts = trace_points(rec, args.probe)
+        points.append(pts)
+        midline = midline_of(rec)
+        if midline is not None:
+            midlines.append(midline)
+        print(f"{path}: {len(pts)} probe samples")
+    if not args.out.suffix:
+        raise PalateError("give the mesh a file extension (.stl, .obj, .vtk, .ply ...)", args.out)
+    surface = fit_palate(np.concatenate(points), midline_y=float(np.mean(midlines)) if midlines else None,
+                         sources=[str(p) for p in args.traces])
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    surface.save(args.out)
+    meta = surface.metadata
+    extent = np.isfinite(surface.z)
+    xs = surface.x[np.any(extent, axis=0)]
+    print(f"palate: {meta['kept']} of {meta['points']} trace points kept (outliers dropped), RMS distance to the "
+          f"surface {1e3 * meta['rms_m']:.2f} mm; midline y = {1e3 * meta['midline_y']:.1f} mm; "
+          f"{1e3 * (xs.max() - xs.min()):.0f} mm front to back")
+    print(f"wrote {args.out} and {args.out.with_name(args.out.stem + '.palate.npz')} (the recordings' frame, metres)")
+    return 0

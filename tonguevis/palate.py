@@ -1,0 +1,294 @@
+"""The speaker's palate: a smooth surface fitted to palate traces, and distances to it.
+
+EMA sessions routinely trace the palate with a probe sensor drawn along the
+midline, across, or scribbled over it.  :func:`fit_palate` turns the probe's
+positions (head-corrected like the speech recordings of the same session, in
+the recording's frame: x anterior, y left, z up, metres) into a
+:class:`PalateSurface`: a height field z = h(x, y) on a regular grid,
+
+* mirrored about the midline (the mean y of the tongue's lateral sensors
+  when the trace recording has them, else the points' median y), so a palate
+  traced on one side only is whole;
+* fitted by a smoothing thin-plate spline (SciPy's ``RBFInterpolator``), with
+  points more than 3 robust standard deviations off the fit dropped and the
+  fit repeated (the probe entering or leaving the mouth, a slip off the palate);
+* kept only within 3 mm of the traced points' footprint: forward to the
+  alveolar ridge and back towards the soft palate as far as the points go,
+  never extrapolated further.
+
+The surface is stored in the frame of the recordings it came from;
+``transform`` (a similarity, e.g. the speech recording's alignment onto the
+tongue model) carries it into another frame, and every query takes points in
+that other frame.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tonguevis.errors import TonguevisError
+
+GRID_STEP = 1e-3  # m
+FOOTPRINT_MARGIN = 3e-3  # m: how far beyond the traced points the surface reaches
+OUTLIER_SIGMAS = 3.0
+
+
+class PalateError(TonguevisError):
+    """A palate trace or file that cannot make a palate."""
+
+
+@dataclass
+class PalateSurface:
+    """A palate as a height field z = h(x, y), metres, in its own (recording) frame.
+
+    x : (nx,) and y : (ny,) increasing grid coordinates; z : (ny, nx) heights,
+    NaN outside the palate's footprint.  ``rotation`` (3, 3), ``scale`` and
+    ``translation`` (3,) map its frame into the frame queries are made in:
+    p_query = scale · R p_own + t (identity by default).  ``metadata``: fit
+    figures (``rms_m``, point counts, sources).
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    scale: float = 1.0
+    translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    # ---------------------------------------------------------------- frames
+    def transformed(self, rotation: np.ndarray, scale: float, translation: np.ndarray) -> "PalateSurface":
+        """The same palate seen through one more similarity p -> scale · R p + t (applied after its own)."""
+        rot = np.asarray(rotation, dtype=np.float64)
+        return PalateSurface(self.x, self.y, self.z, rot @ self.rotation, float(scale) * self.scale,
+                             float(scale) * rot @ self.translation + np.asarray(translation, dtype=np.float64),
+                             dict(self.metadata))
+
+    def _to_own(self, points: np.ndarray) -> np.ndarray:
+        return ((np.asarray(points, dtype=np.float64) - self.translation) @ self.rotation) / self.scale
+
+    def _from_own(self, points: np.ndarray) -> np.ndarray:
+        return self.scale * np.asarray(points) @ self.rotation.T + self.translation
+
+    # ---------------------------------------------------------------- queries
+    def _interp(self, xy: np.ndarray):
+        """Height (k,) and slopes (k, 2) of the own-frame (k, 2) points (bilinear; NaN outside)."""
+        x, y, z = self.x, self.y, self.z
+        fx = (xy[:, 0] - x[0]) / (x[1] - x[0])
+        fy = (xy[:, 1] - y[0]) / (y[1] - y[0])
+        inside = (fx >= 0) & (fx <= len(x) - 1) & (fy >= 0) & (fy <= len(y) - 1)
+        i = np.clip(np.floor(fx).astype(int), 0, len(x) - 2)
+        j = np.clip(np.floor(fy).astype(int), 0, len(y) - 2)
+        tx, ty = np.clip(fx - i, 0, 1), np.clip(fy - j, 0, 1)
+        z00, z10, z01, z11 = z[j, i], z[j, i + 1], z[j + 1, i], z[j + 1, i + 1]
+        h = (1 - ty) * ((1 - tx) * z00 + tx * z10) + ty * ((1 - tx) * z01 + tx * z11)
+        dx = ((1 - ty) * (z10 - z00) + ty * (z11 - z01)) / (x[1] - x[0])
+        dy = ((1 - tx) * (z01 - z00) + tx * (z11 - z10)) / (y[1] - y[0])
+        h = np.where(inside, h, np.nan)
+        return h, np.column_stack([dx, dy])
+
+    def clearance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distance (k,) below the palate, m (negative: inside it), and outward normals (k, 3).
+
+        points : (k, 3) in the query frame.  The distance is the vertical gap
+        times the cosine of the palate's slope there (exact for a plane); NaN
+        where the point lies outside the palate's footprint.  Normals point
+        down, away from the palate into the mouth, in the query frame.
+        """
+        own = self._to_own(points)
+        h, grad = self._interp(own[:, :2])
+        normal_own = np.column_stack([grad, -np.ones(len(own))])
+        norm = np.linalg.norm(normal_own, axis=1)
+        gap = (h - own[:, 2]) / norm * self.scale
+        normal = (normal_own / norm[:, None]) @ self.rotation.T
+        return gap, normal
+
+    # ---------------------------------------------------------------- meshes
+    def triangles(self) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 3) vertices in the query frame and (f, 3) triangles of the surface (for drawing and export)."""
+        nx, ny = len(self.x), len(self.y)
+        gx, gy = np.meshgrid(self.x, self.y)
+        pts = np.column_stack([gx.ravel(), gy.ravel(), self.z.ravel()])
+        ok = np.isfinite(pts[:, 2])
+        index = np.full(len(pts), -1)
+        index[ok] = np.arange(ok.sum())
+        ids = np.arange(nx * ny).reshape(ny, nx)
+        quads = np.stack([ids[:-1, :-1], ids[:-1, 1:], ids[1:, 1:], ids[1:, :-1]], axis=-1).reshape(-1, 4)
+        tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+        tris = tris[np.all(ok[tris], axis=1)]
+        return self._from_own(pts[ok]), index[tris]
+
+    def save(self, path) -> None:
+        """Write the surface mesh (.stl, .obj, .vtk, .ply ... by meshio; metres) and the grid beside it
+        (``<name>.palate.npz``, read back by :meth:`load`), each through a temporary file."""
+        import meshio
+
+        from tonguevis._files import atomic_write
+
+        path = Path(path)
+        pts, tris = self.triangles()
+        atomic_write(path, lambda tmp: meshio.write(tmp, meshio.Mesh(pts, [("triangle", tris)])))
+        meta = json.dumps(self.metadata, default=float)
+        atomic_write(grid_path(path), lambda tmp: np.savez_compressed(
+            tmp, x=self.x, y=self.y, z=self.z, rotation=self.rotation, scale=self.scale,
+            translation=self.translation, meta=np.array(meta)))
+
+    @classmethod
+    def load(cls, path) -> "PalateSurface":
+        """A palate written by :meth:`save` (its grid file), or any surface mesh (sampled from below)."""
+        path = Path(path)
+        grid = grid_path(path) if not path.name.endswith(".palate.npz") else path
+        if grid.exists():
+            try:
+                with np.load(grid, allow_pickle=False) as d:
+                    return cls(d["x"], d["y"], d["z"], d["rotation"], float(d["scale"]), d["translation"],
+                               json.loads(str(d["meta"])))
+            except (OSError, ValueError, KeyError) as exc:
+                raise PalateError(f"cannot read the palate grid: {exc}", grid) from exc
+        return from_mesh(path)
+
+
+def grid_path(mesh_path) -> Path:
+    """The grid file stored beside a palate mesh: ``palate.stl`` -> ``palate.palate.npz``."""
+    mesh_path = Path(mesh_path)
+    return mesh_path.with_name(mesh_path.stem + ".palate.npz")
+
+
+def from_mesh(path, step: float = GRID_STEP) -> PalateSurface:
+    """A palate height field from any surface mesh: at each grid point, the lowest surface above it."""
+    import meshio
+
+    try:
+        mesh = meshio.read(path)
+    except Exception as exc:  # meshio raises many kinds on bad files
+        raise PalateError(f"cannot read a surface mesh: {exc}", path) from exc
+    tris = [c.data for c in mesh.cells if c.type == "triangle"]
+    if not tris:
+        raise PalateError("the mesh has no triangles", path)
+    return _height_field(np.asarray(mesh.points, dtype=np.float64)[:, :3], np.concatenate(tris), step,
+                         {"source": [str(path)]})
+
+
+def _height_field(points, tris, step, metadata) -> PalateSurface:
+    """Lowest z of the triangles over each grid point (x, y)."""
+    lo, hi = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
+    x = np.arange(lo[0], hi[0] + step / 2, step)
+    y = np.arange(lo[1], hi[1] + step / 2, step)
+    gx, gy = np.meshgrid(x, y)
+    q = np.column_stack([gx.ravel(), gy.ravel()])
+    z = np.full(len(q), np.inf)
+    a, b, c = (points[tris[:, k]] for k in range(3))
+    for t in range(len(tris)):  # few hundred triangles; each touches a small box of grid points
+        box_lo = np.minimum(np.minimum(a[t, :2], b[t, :2]), c[t, :2])
+        box_hi = np.maximum(np.maximum(a[t, :2], b[t, :2]), c[t, :2])
+        sel = np.flatnonzero(np.all((q >= box_lo - 1e-12) & (q <= box_hi + 1e-12), axis=1))
+        if len(sel) == 0:
+            continue
+        v0, v1 = b[t, :2] - a[t, :2], c[t, :2] - a[t, :2]
+        den = v0[0] * v1[1] - v0[1] * v1[0]
+        if abs(den) < 1e-18:
+            continue
+        w = q[sel] - a[t, :2]
+        u = (w[:, 0] * v1[1] - w[:, 1] * v1[0]) / den
+        v = (v0[0] * w[:, 1] - v0[1] * w[:, 0]) / den
+        inside = (u >= -1e-9) & (v >= -1e-9) & (u + v <= 1 + 1e-9)
+        zz = a[t, 2] + u * (b[t, 2] - a[t, 2]) + v * (c[t, 2] - a[t, 2])
+        z[sel[inside]] = np.minimum(z[sel[inside]], zz[inside])
+    z = np.where(np.isfinite(z), z, np.nan).reshape(len(y), len(x))
+    return PalateSurface(x, y, z, metadata=metadata)
+
+
+def fit_palate(points: np.ndarray, midline_y: float | None = None, smoothing: float = 5e-7,
+               step: float = GRID_STEP, sources: list[str] | None = None) -> PalateSurface:
+    """Fit a palate to (k, 3) trace points (metres, x anterior, y left, z up); see the module docstring.
+
+    midline_y : the midline's y (default: the points' median y).
+    smoothing : the thin-plate spline's smoothing (m²; larger is smoother).
+    The fit's figures are in ``metadata``: ``rms_m`` (trace points kept, to the
+    surface), ``points``, ``kept``, ``midline_y``.
+    """
+    from scipy.interpolate import RBFInterpolator
+
+    pts = np.asarray(points, dtype=np.float64)
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    if len(pts) < 20:
+        raise PalateError(f"a palate needs at least 20 trace points, got {len(pts)}")
+    y0 = float(np.median(pts[:, 1]) if midline_y is None else midline_y)
+    keep = np.ones(len(pts), dtype=bool)
+    for _ in range(4):
+        both = _binned(_mirrored(pts[keep], y0), step)
+        spline = RBFInterpolator(both[:, :2], both[:, 2], kernel="thin_plate_spline",
+                                 smoothing=smoothing, degree=1)
+        resid = pts[:, 2] - spline(pts[:, :2])
+        scale = 1.4826 * np.median(np.abs(resid[keep] - np.median(resid[keep])))
+        new = np.abs(resid - np.median(resid[keep])) <= OUTLIER_SIGMAS * max(scale, 1e-5)
+        if np.array_equal(new, keep):
+            break
+        keep = new
+    kept = _mirrored(pts[keep], y0)
+    lo = kept[:, :2].min(axis=0) - FOOTPRINT_MARGIN
+    hi = kept[:, :2].max(axis=0) + FOOTPRINT_MARGIN
+    x = np.arange(lo[0], hi[0] + step / 2, step)
+    half = max(abs(hi[1] - y0), abs(y0 - lo[1]))
+    y = y0 + np.arange(-np.ceil(half / step), np.ceil(half / step) + 1) * step
+    gx, gy = np.meshgrid(x, y)
+    grid = np.column_stack([gx.ravel(), gy.ravel()])
+    z = spline(grid)
+    from scipy.spatial import cKDTree
+
+    near = cKDTree(kept[:, :2]).query(grid, distance_upper_bound=FOOTPRINT_MARGIN)[0] <= FOOTPRINT_MARGIN
+    z = np.where(near, z, np.nan).reshape(len(y), len(x))
+    surface = PalateSurface(x, y, z, metadata={"points": int(len(pts)), "kept": int(keep.sum()),
+                                               "midline_y": y0, "smoothing": smoothing,
+                                               "source": list(sources or [])})
+    gap, _ = surface.clearance(pts[keep])
+    surface.metadata["rms_m"] = float(np.sqrt(np.nanmean(gap ** 2)))
+    return surface
+
+
+def _binned(points: np.ndarray, step: float) -> np.ndarray:
+    """One point per occupied (x, y) cell of side ``step``: the cell's mean x, y and median z.
+
+    Traces hold thousands of samples along a few paths; the spline needs their
+    shape, not every sample (its solve grows with the cube of the count).
+    """
+    cells = np.floor(points[:, :2] / step).astype(np.int64)
+    _, inverse, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    order = np.argsort(inverse, kind="stable")
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    xy = np.add.reduceat(points[order, :2], starts, axis=0) / counts[:, None]
+    z = np.array([np.median(points[order[a:a + n], 2]) for a, n in zip(starts, counts)])
+    return np.column_stack([xy, z])
+
+
+def _mirrored(points: np.ndarray, y0: float) -> np.ndarray:
+    mirror = points.copy()
+    mirror[:, 1] = 2 * y0 - mirror[:, 1]
+    return np.concatenate([points, mirror])
+
+
+def trace_points(recording, probe: str = "PROBE") -> np.ndarray:
+    """(k, 3) valid positions of the probe sensor of a palate-trace recording, head-corrected when it can be."""
+    from tonguevis.errors import RecordingError
+    from tonguevis.workflows import head_corrected
+
+    if probe not in recording.sensors:
+        raise RecordingError(f"no probe sensor {probe!r} (sensors: {', '.join(recording.sensor_names)}); "
+                             "name it with --probe SENSOR", recording.metadata.get("file"))
+    rec = head_corrected(recording)
+    pts = rec.sensors[probe]
+    return pts[np.all(np.isfinite(pts), axis=1)]
+
+
+def midline_of(recording) -> float | None:
+    """The midline's y from a recording's lateral tongue sensors (mean of TL and TR), if it has both."""
+    if "TL" in recording.sensors and "TR" in recording.sensors:
+        both = np.concatenate([recording.sensors["TL"], recording.sensors["TR"]])
+        return float(np.nanmean(both[:, 1]))
+    return None

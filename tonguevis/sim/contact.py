@@ -1,0 +1,205 @@
+"""Tongue-palate contact: the tongue surface stays below the palate, the sensors win conflicts.
+
+Contact is solved where the sensor targets are: in the static projection of
+the targets onto the tongue's deformations (see
+:func:`tonguevis.sim.simulate.drive_schedule`).  Per frame, with the sensors
+as springs of compliance C (0 = hard),
+
+    min ½ qᵀΛq + Σ_s |Φ_s q - c_s|² / 2C_s   subject to   clearance_i(q) >= margin
+
+for the candidate surface nodes i (upward-facing, the ones that can meet the
+palate), clearance being the node's signed distance below the palate
+(:meth:`tonguevis.palate.PalateSurface.clearance`, with the palate carried by
+the jaw's motion into the jaw's frame the tongue is simulated in).  An active
+set on the linearised clearances, in force form: q = Λ⁻¹(Φ_sᵀμ - Aᵀλ) with the
+sensor forces μ and contact forces λ >= 0, re-linearised after each pass.
+The contact forces -Aᵀλ are then applied as external modal forces in the
+dynamic solve, whose hard sensor targets are the contact solution's sensor
+positions: in the static limit it reproduces the contact solution exactly.
+
+Where a sensor itself lies above the palate (noise, alignment), the sensor
+wins: nodes within ``CONFLICT_RADIUS`` of its node get no contact constraint
+in that frame, and the conflict is reported.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+MARGIN = 1e-4  # m: clearance the solve keeps, so that warping's small rotations do not cross the palate
+CONFLICT_RADIUS = 10e-3  # m: nodes this close to a sensor above the palate are left to that sensor
+MAX_PASSES = 8
+BAND = 2e-3  # m: candidates this close to the margin join each pass's linearisation
+
+
+def solve_contact(eigenvalues, phi_nodes, phi_s, targets, compliance, points, sensor_nodes, candidates, palate,
+                  jaw_offset, margin: float = MARGIN):
+    """Contact-aware static solution per frame.
+
+    eigenvalues : (m,); phi_nodes : (k, 3, m) rows of Φ at the candidate nodes;
+    phi_s : (S, 3, m); targets : (F, S, 3) m (NaN = not acting); compliance :
+    (F, S) m/N; points : (n, 3) rest positions; sensor_nodes : (S,);
+    candidates : (k,) node ids; palate : a PalateSurface in the model frame;
+    jaw_offset : (F, 3) the jaw's translation (the palate moves by minus it
+    in the jaw's frame).
+    Returns {"targets": (F, S, 3) sensor-node displacements of the solution (for
+    the sensors not acting too: where the others put them),
+    "external": (F, m) contact forces in modal space, "active": (F,) contact
+    constraints per frame, "conflicts": [(frame, sensor index)]}.
+    """
+    lam = np.asarray(eigenvalues, dtype=np.float64)
+    n_frames, n_s, _ = targets.shape
+    m = len(lam)
+    P = phi_s.reshape(3 * n_s, m)
+    gram = (P / lam) @ P.T
+    comp3 = np.repeat(np.asarray(compliance, dtype=np.float64), 3, axis=1)
+    c_all = targets.reshape(n_frames, 3 * n_s)
+    acting = np.repeat(np.all(np.isfinite(targets), axis=2) & np.isfinite(compliance), 3, axis=1)
+    # Unconstrained solution of every frame at once (as compliant_targets).
+    mats = np.where(acting[:, :, None] & acting[:, None, :], gram[None], 0.0)
+    idx = np.arange(3 * n_s)
+    mats[:, idx, idx] += np.where(acting, np.where(np.isfinite(comp3), comp3, 0.0), 1.0)
+    mult = np.linalg.solve(mats, np.where(acting, c_all, 0.0)[:, :, None])[:, :, 0]
+    q_all = (mult @ P) / lam  # (F, m)
+    cand_pts = points[candidates]
+    u = np.einsum("kcm,fm->fkc", phi_nodes, q_all)
+    gap, _ = palate.clearance((cand_pts[None] + u + jaw_offset[:, None]).reshape(-1, 3))
+    gap = gap.reshape(n_frames, -1)
+    out_targets = (q_all @ P.T).reshape(targets.shape)
+    external = np.zeros((n_frames, m))
+    active_count = np.zeros(n_frames, dtype=np.int64)
+    conflicts: list[tuple[int, int]] = []
+    # Sensors above the palate: their neighbourhoods are left to them.
+    sensor_gap, _ = palate.clearance((points[sensor_nodes][None] + np.nan_to_num(targets)
+                                      + jaw_offset[:, None]).reshape(-1, 3))
+    sensor_gap = sensor_gap.reshape(n_frames, n_s)
+    near_sensor = np.linalg.norm(cand_pts[:, None] - points[sensor_nodes][None], axis=2) < CONFLICT_RADIUS  # (k, S)
+    for f in np.flatnonzero(np.nanmin(np.where(np.isfinite(gap), gap, np.inf), axis=1) < margin):
+        above = np.flatnonzero((sensor_gap[f] < 0) & np.all(np.isfinite(targets[f]), axis=1))
+        conflicts.extend((int(f), int(s)) for s in above)
+        allowed = ~near_sensor[:, above].any(axis=1) if len(above) else np.ones(len(candidates), bool)
+        q, lam_f, rows = _active_set(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset[f], c_all[f],
+                                     comp3[f], acting[f], q_all[f], allowed, margin)
+        if rows is None:
+            continue
+        external[f] = -(rows.T @ lam_f)
+        active_count[f] = len(lam_f)
+        out_targets[f] = (P @ q).reshape(n_s, 3)
+    return {"targets": out_targets, "external": external, "active": active_count, "conflicts": conflicts}
+
+
+def _active_set(lam, P, gram, phi_nodes, cand_pts, palate, offset, c, comp, acting, q0, allowed, margin):
+    """One frame's contact solution: (q, contact forces λ (a,), their rows A (a, m)) or (q0, None, None).
+
+    Each pass linearises the clearance of the candidates near the palate
+    (within ``BAND`` of the margin) at the current shape and solves the
+    resulting QP exactly: the sensors eliminated, q(λ) = q₀ + Bλ, and the
+    contact forces the non-negative least-squares solution of the equivalent
+    bound-constrained problem (SciPy's NNLS), so λ >= 0 and complementarity
+    hold by construction.  Passes repeat until no candidate is closer than
+    the margin (the palate is curved), at most MAX_PASSES.
+    """
+    from scipy.optimize import nnls
+
+    act = np.flatnonzero(acting)
+    p_act = P[act]
+    g_c = gram[np.ix_(act, act)] + np.diag(np.where(np.isfinite(comp[act]), comp[act], 0.0))
+    solve_g = np.linalg.pinv(g_c)
+    q, lam_a, rows = q0, None, None
+    for _ in range(MAX_PASSES):
+        u = np.einsum("kcm,m->kc", phi_nodes, q)
+        gap, normal = palate.clearance(cand_pts + u + offset)
+        ok = allowed & np.isfinite(gap)
+        if not np.any(ok & (gap < margin - 1e-7)):
+            break
+        near = np.flatnonzero(ok & (gap < margin + BAND))
+        a_rows = -np.einsum("kc,kcm->km", normal[near], phi_nodes[near])
+        rhs = gap[near] - margin + a_rows @ q
+        # q(λ) = q₀ + Bλ with the sensors re-balanced: B = Λ⁻¹(Pᵀ G⁻¹ P Λ⁻¹ Aᵀ - Aᵀ).
+        at_l = (a_rows / lam).T  # Λ⁻¹Aᵀ (m, a)
+        b_mat = (p_act.T @ (solve_g @ (p_act @ at_l))) / lam[:, None] - at_l
+        m_mat = -a_rows @ b_mat
+        r = rhs - a_rows @ q0
+        chol = _cholesky(0.5 * (m_mat + m_mat.T))
+        lam_a = nnls(chol.T, -np.linalg.lstsq(chol, r, rcond=None)[0], maxiter=50 * len(r))[0]
+        on = lam_a > 0
+        if on.any():  # polish: the active constraints exactly tight (NNLS stops at its own tolerance)
+            polished = np.linalg.lstsq(m_mat[np.ix_(on, on)], -r[on], rcond=None)[0]
+            if np.all(polished >= 0):
+                lam_a[on] = polished
+        rows = a_rows
+        q = q0 + b_mat @ lam_a
+    if lam_a is None or not np.any(lam_a > 0):
+        return q0, None, None
+    # A contact push moves the surface about as far as it was inside the palate: a solve that moves it
+    # much further has failed (near-singular rows), and the frame keeps its contact-free shape.
+    u0 = np.einsum("kcm,m->kc", phi_nodes[allowed], q0)
+    depth = max(0.0, -float(np.nanmin(palate.clearance(cand_pts[allowed] + u0 + offset)[0])))
+    moved = float(np.abs(np.einsum("kcm,m->kc", phi_nodes[allowed], q - q0)).max())
+    if not np.isfinite(moved) or moved > 2 * depth + 2e-3:
+        return q0, None, None
+    used = lam_a > 0
+    return q, lam_a[used], rows[used]
+
+
+def _cholesky(matrix: np.ndarray) -> np.ndarray:
+    """Lower Cholesky factor of a symmetric PSD matrix, with the smallest jitter that makes it succeed.
+
+    Near-duplicate clearance rows (neighbouring nodes against the same patch of
+    palate) make M singular to round-off.
+    """
+    scale = max(np.trace(matrix) / len(matrix), 1e-300)
+    for jitter in (1e-12, 1e-10, 1e-8, 1e-6):
+        try:
+            return np.linalg.cholesky(matrix + jitter * scale * np.eye(len(matrix)))
+        except np.linalg.LinAlgError:
+            continue
+    w, v = np.linalg.eigh(matrix)
+    return v * np.sqrt(np.maximum(w, 1e-6 * scale))  # a square root; not triangular, fine for the solves
+
+
+def correct_frames(eigenvalues, phi_nodes, phi_s, q, points, candidates, palate, jaw_offset, allowed=None,
+                   margin: float = MARGIN) -> tuple[np.ndarray, np.ndarray]:
+    """Dynamic shapes (F, m) moved out of the palate where they went in: (corrected q, frames corrected).
+
+    The integrator does not see the palate (only the contact forces of the
+    static solution): inertia can still carry the free parts of the tongue
+    into it.  Each such frame is projected onto the nearest shape, in the
+    elastic-energy metric, that keeps every sensor node where it is and every
+    candidate node below the palate: the same QP as :func:`solve_contact`
+    with hard sensors at their dynamic positions.  allowed : (F, k) bool,
+    candidates that may get a constraint (False near a conflicting sensor).
+    """
+    lam = np.asarray(eigenvalues, dtype=np.float64)
+    n_s = phi_s.shape[0]
+    P = phi_s.reshape(3 * n_s, len(lam))
+    gram = (P / lam) @ P.T
+    cand_pts = points[candidates]
+    u = np.einsum("kcm,fm->fkc", phi_nodes, q)
+    gap, _ = palate.clearance((cand_pts[None] + u + jaw_offset[:, None]).reshape(-1, 3))
+    gap = gap.reshape(len(q), -1)
+    if allowed is not None:
+        gap = np.where(allowed, gap, np.nan)
+    out = np.array(q, copy=True)
+    frames = np.flatnonzero(np.nanmin(np.where(np.isfinite(gap), gap, np.inf), axis=1) < margin - 1e-7)
+    ones = np.ones(3 * n_s, dtype=bool)
+    for f in frames:
+        ok = np.ones(len(candidates), bool) if allowed is None else allowed[f]
+        out[f] = _active_set(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset[f], P @ q[f], np.zeros(3 * n_s),
+                             ones, q[f], ok, margin)[0]
+    return out, frames
+
+
+def penetration(displacements: np.ndarray, points: np.ndarray, nodes: np.ndarray, palate, jaw_offset: np.ndarray,
+                exclude: np.ndarray | None = None) -> np.ndarray:
+    """(F,) deepest penetration (m, >= 0) of the given nodes into the palate, per frame.
+
+    displacements : (F, n, 3); exclude : (F, len(nodes)) bool, nodes not to count (sensor conflicts).
+    """
+    pts = points[nodes][None] + displacements[:, nodes] + jaw_offset[:, None]
+    gap, _ = palate.clearance(pts.reshape(-1, 3))
+    gap = gap.reshape(len(displacements), -1)
+    if exclude is not None:
+        gap = np.where(exclude, np.nan, gap)
+    deepest = np.nanmin(np.where(np.isfinite(gap), gap, np.inf), axis=1)
+    return np.maximum(0.0, -np.where(np.isfinite(deepest), deepest, 0.0))
