@@ -198,3 +198,19 @@ def test_basis_cache_round_trip_and_rejects_other_keys(tmp_path):
     assert load_basis(path, "other") is None
     path.write_bytes(b"garbage")
     assert load_basis(path, "abc") is None
+
+
+def test_a_truncated_basis_cache_is_solved_again_with_a_warning(tmp_path, monkeypatch, caplog):
+    """A crash or a full disk while writing the cache must not stop every later command (issue 10)."""
+    from tests.sim._models import bar_model
+
+    monkeypatch.setenv("TONGUEVIS_CACHE", str(tmp_path))
+    model = bar_model()
+    first = model.basis(8)
+    (cached,) = tmp_path.glob("basis-*.npz")
+    data = cached.read_bytes()
+    cached.write_bytes(data[: len(data) // 2])  # cut in the middle of the zip
+    again = bar_model().basis(8)
+    np.testing.assert_allclose(again.eigenvalues, first.eigenvalues, rtol=1e-9)
+    assert "solved again" in caplog.text
+    assert load_basis(cached, first.key) is not None  # and the cache is whole again

@@ -17,6 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import zipfile
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -178,6 +180,7 @@ def load_basis(path: Path, key: str | None = None) -> ModalBasis | None:
                 key=str(data["key"]),
                 info={"loaded_from": str(path)},
             )
-    except (OSError, ValueError, KeyError) as exc:
-        logger.warning("ignoring unreadable modal-basis cache %s: %s", path, exc)
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        # A crash or a full disk while writing leaves a truncated file: solve again, say so.
+        logger.warning("ignoring unreadable modal-basis cache %s (%s): the modes are solved again", path, exc)
         return None
