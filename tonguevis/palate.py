@@ -153,6 +153,25 @@ class PalateSurface:
         return from_mesh(path)
 
 
+def generic_palate() -> PalateSurface:
+    """The shipped generic palate (``meshes/palate.stl``), already in the model frame of the shipped tongue."""
+    from tonguevis.mesh.default import context_surface_path
+
+    path = context_surface_path("palate")
+    surface = from_mesh(path)
+    surface.metadata.update({"frame": "model", "generic": True})
+    return surface
+
+
+def load_palate(spec) -> PalateSurface:
+    """A palate from ``"generic"`` (the shipped one, model frame) or a file (a speaker's, recording frame)."""
+    if isinstance(spec, PalateSurface):
+        return spec
+    if str(spec) == "generic":
+        return generic_palate()
+    return PalateSurface.load(spec)
+
+
 def grid_path(mesh_path) -> Path:
     """The grid file stored beside a palate mesh: ``palate.stl`` -> ``palate.palate.npz``."""
     mesh_path = Path(mesh_path)

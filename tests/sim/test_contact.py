@@ -171,3 +171,28 @@ def test_the_speakers_palate_from_the_real_traces():
     front, _ = surface.clearance(np.array([[0.008, y0, -0.1]]))
     back, _ = surface.clearance(np.array([[-0.012, y0, -0.1]]))
     assert back[0] > front[0] + 0.003
+
+
+def test_simulate_keeps_the_demo_tongue_below_the_generic_palate(capsys):
+    """The paper's hard constraints push the demo /ta/ 2 mm into the shipped palate; contact keeps it out."""
+    from tonguevis.cli import main
+    from tonguevis.io import read_recording
+    from tonguevis.palate import generic_palate
+    from tonguevis.paths import DATA_DIR
+    from tonguevis.sim import TongueModel, simulate
+    from tonguevis.sim.contact import penetration as deepest
+    from tonguevis.preprocess.targets import prepare_targets
+
+    rec = read_recording(DATA_DIR / "spk1_ta.tsv")
+    model = TongueModel.default()
+    free = simulate(rec, model, sensor_stiffness=None)
+    jaw = prepare_targets(rec, model).jaw_offset
+    before = deepest(free.displacements(), model.mesh.points, model.dorsal_nodes, generic_palate(), jaw)
+    assert before.max() > 1e-3
+    held = simulate(rec, model, sensor_stiffness=None, palate="generic")
+    assert held.penetration.max() < 5e-4 and held.metadata["contact"]["frames_in_contact"] > 10
+    assert held.contact_area.max() > 0 and np.all(held.contact_area[held.penetration > 0] >= 0)
+    assert held.metadata["plausibility"]["volume_change_max_percent"] < 2.0
+    assert main(["simulate", str(DATA_DIR / "spk1_ta.tsv"), "--palate", "generic", "--sensor-stiffness", "hard",
+                 "--quiet"]) == 0
+    assert "palate contact: deepest penetration 0." in capsys.readouterr().out

@@ -147,9 +147,9 @@ def simulate_args(args, recording, model, modes: int | None = None, progress=Non
                    landmarks=getattr(args, "landmarks", "speaker"), rest=rest_arg(args),
                    sensor_stiffness=getattr(args, "sensor_stiffness", "default"))
     if getattr(args, "palate", None) is not None:
-        from tonguevis.palate import PalateSurface
+        from tonguevis.palate import load_palate
 
-        options["palate"] = PalateSurface.load(args.palate)
+        options["palate"] = load_palate(args.palate)
     if progress is not None:
         return simulate_recording(recording, model, progress=progress, **options)
     with tqdm_progress("simulating", disable=getattr(args, "quiet", False)) as bar:

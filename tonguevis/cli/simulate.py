@@ -19,9 +19,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_recording_arguments(parser)
     add_model_arguments(parser)
     add_rest_argument(parser)
-    parser.add_argument("--palate", type=Path, metavar="PALATE",
-                        help="the speaker's palate (from `tonguevis palate`): keep the tongue below it and report "
-                             "penetration and contact")
+    parser.add_argument("--palate", metavar="PALATE",
+                        help="keep the tongue below a palate and report penetration and contact: the speaker's "
+                             "(a file from `tonguevis palate`) or 'generic' (the shipped one)")
     parser.add_argument("--out", type=Path, metavar="DIR",
                         help="write motion.npz and a VTK series (motion.pvd + .vtu frames) for ParaView here")
 

@@ -228,10 +228,9 @@ def drive_schedule(displacement: np.ndarray, rate: float, eigenvalues: np.ndarra
 
 def _contact_context(palate, prep, model, basis, recording) -> dict:
     """What the contact solve needs: the palate in the model frame, candidate nodes and their modes."""
-    from tonguevis.palate import PalateSurface
+    from tonguevis.palate import load_palate
 
-    if not isinstance(palate, PalateSurface):
-        palate = PalateSurface.load(palate)
+    palate = load_palate(palate)
     shift = 0.0
     if palate.metadata.get("frame") != "model":  # a speaker's palate: placed by the sensors' alignment
         t = prep.transform
@@ -281,10 +280,12 @@ def _contact_report(displacements, contact, schedule, model, times):
     gap[:, cand] = np.where(np.isfinite(g), g, np.inf).reshape(len(times), -1)
     faces = model.surface_faces
     touching = np.all(gap[:, faces] < 3e-4, axis=2)  # (F, faces)
-    p = pts[None] + displacements
-    a, b, c = (p[:, faces[:, k]] for k in range(3))
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=2)
-    contact_area = np.sum(np.where(touching, area, 0.0), axis=1)
+    contact_area = np.zeros(len(times))
+    for f in np.flatnonzero(touching.any(axis=1)):  # only the frames in contact: a few of them
+        p = pts + displacements[f]
+        tri = faces[touching[f]]
+        a, b, c = p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]]
+        contact_area[f] = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
     conflicts = sorted({s for _, s in schedule["conflicts"]})
     figures = {
         "penetration_max_mm": float(1e3 * pen.max()) if len(pen) else 0.0,
