@@ -80,6 +80,7 @@ def segment(
     max_adjust_evaluations: int | None = None,
     poisson: float | None = None,
     progress: ProgressCallback | None = None,
+    threads: int | None = None,
 ) -> SegmentationResult:
     """Segment a mesh by how well local rigid or constraint modes fit ``target``.
 
@@ -99,6 +100,9 @@ def segment(
         tried move costs two sparse factorisations.
     max_adjust_evaluations : moves tried at most (default 5000 rigid, 60 constraint).
     progress : ``progress(done, total, message)``, may raise Cancelled.
+    threads : threads for independent fits and solves (None: the fitter's
+        default, up to 2 for constraint modes; 1 where processes already run
+        one per core, as in ``tonguevis batch``).  The result does not depend on it.
     """
     started = time.perf_counter()
     points, tets, anchors, model_poisson = _mesh_of(model_or_mesh)
@@ -106,6 +110,8 @@ def segment(
         constrained_nodes = anchors if mode == "constraint" and anchors is not None else []
     poisson = poisson if poisson is not None else (model_poisson if model_poisson is not None else 0.49)
     fitter = make_fitter(points, tets, target, mode, constrained_nodes, poisson)
+    if threads is not None:
+        fitter.threads = max(1, int(threads))
     history: list[tuple[int, float]] = []
     automatic = isinstance(seeds, str)
     if automatic:

@@ -215,7 +215,7 @@ class ConstraintFitter(LocalFitter):
         solve, k_ia, direct, parent = None, None, False, None
         if len(interior) and len(around):
             k_ia = rows[:, _dofs(around)].tocsr()
-            threaded = len(interior) >= 300
+            threaded = len(interior) >= 300 and self.threads > 1
             pinned = self._pinned(around)
             if pinned:
                 parent = self._parent(mask, len(interior))
