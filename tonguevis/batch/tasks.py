@@ -56,12 +56,14 @@ class Task:
 
 @dataclass
 class Outcome:
-    """What a worker reports back: the steps done now, the failure (step, message) if any, seconds, memory."""
+    """What a worker reports back: the steps done now, the failure (step, message) if any, wall and CPU
+    seconds (of the worker's thread), the worker's process id and its largest resident memory (MiB)."""
 
     file: str
     done: tuple[str, ...] = ()
     failure: tuple[str, str] | None = None
     seconds: float = 0.0
+    cpu_seconds: float = 0.0
     pid: int = field(default_factory=os.getpid)
     max_rss_mb: float = 0.0
 
@@ -95,11 +97,20 @@ class _Collect(logging.Handler):
 
 
 def _max_rss_mb() -> float:
+    """This process's largest resident memory so far, MiB (VmHWM: unlike ru_maxrss, not inherited
+    from the parent a worker was forked from)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0  # kB
+    except OSError:
+        pass
     try:
         import resource
 
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
-    except (ImportError, OSError):  # pragma: no cover - not on Linux
+    except (ImportError, OSError):  # pragma: no cover - neither Linux nor Unix
         return float("nan")
 
 
@@ -107,7 +118,7 @@ def process(task: Task, spec: ModelSpec) -> Outcome:
     """Run ``task.todo`` for one recording; never raises for a bad recording (see :class:`Outcome`)."""
     from tonguevis._blas import single_threaded_blas
 
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), time.thread_time()
     collect = _Collect()
     logger.addHandler(collect)
     manifest = store.read_manifest(task.folder) or {}
@@ -146,7 +157,7 @@ def process(task: Task, spec: ModelSpec) -> Outcome:
         store.write_manifest(task.folder, manifest)
     failure = manifest["failure"]
     return Outcome(task.file, tuple(done), (failure["step"], failure["error"]) if failure else None,
-                   time.perf_counter() - started, os.getpid(), _max_rss_mb())
+                   time.perf_counter() - started, time.thread_time() - cpu, os.getpid(), _max_rss_mb())
 
 
 def _motion(task: Task, manifest: dict, rec, model, save: bool):
@@ -198,7 +209,8 @@ def _segment(task, entry, rec, model, motion, seconds):
         productions = productions[:s.segment_first]
     rows, labels, which = [], [], []
     for number, production in enumerate(productions, start=1):
-        result = segment(motion.model, production_target(motion, production), "constraint")
+        # one thread: the workers already use the cores (and threaded SuperLU solves keep memory)
+        result = segment(motion.model, production_target(motion, production), "constraint", threads=1)
         rows += tables.segmentation_rows(entry, task.file, number, production, result)
         labels.append(result.labels.astype(np.int32))
         which.append((number, production.train, production.index))
