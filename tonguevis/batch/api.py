@@ -24,8 +24,13 @@ class BatchResult:
     done : recordings processed in this run without failure.  up_to_date :
     recordings with nothing to redo.  failures : (file, step, error) of every
     recording that failed (also in ``out/failures.csv``).  tables : name ->
-    path of the corpus tables written.  seconds : wall time.  workers : pid ->
-    largest resident memory (MiB) of the process that ran recordings.
+    path of the corpus tables written.  seconds : wall time, and ``timings``
+    its parts: "model" (building it in this process), "plan" (walking the
+    corpus, hashing the inputs, reading the manifests), "prepare"
+    (modal basis and warp kernels, before any worker starts), "run" (the
+    recordings) and "gather" (the corpus tables).  workers : pid -> largest
+    resident memory (MiB) of each process that ran recordings.  cpu_seconds :
+    CPU time the recordings took in their workers' threads.
     """
 
     out: Path
@@ -36,7 +41,8 @@ class BatchResult:
     tables: dict[str, Path] = field(default_factory=dict)
     seconds: float = 0.0
     workers: dict[int, float] = field(default_factory=dict)
-    prepare_seconds: float = 0.0
+    timings: dict[str, float] = field(default_factory=dict)
+    cpu_seconds: float = 0.0
 
     @property
     def ok(self) -> bool:
@@ -101,12 +107,14 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
     out.mkdir(parents=True, exist_ok=True)
     folders = store.output_folders(names, out_abs)
 
+    t0 = time.perf_counter()
     spec = ModelSpec.of(model, mesh, axes)
     built = model if model is not None else spec.build()
     spec.key = model_key(built)
     keys = []
     tasks = []
     result = BatchResult(out, names)
+    result.timings["model"] = time.perf_counter() - t0
     from tonguevis.batch.tasks import Task
 
     for entry, name, folder in zip(corpus, names, folders):
@@ -124,6 +132,7 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
         else:
             result.up_to_date.append(name)
 
+    result.timings["plan"] = time.perf_counter() - started - result.timings["model"]
     failed: dict[str, tuple[str, str]] = {}
     total = len(names)
 
@@ -134,12 +143,14 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
         else:
             result.done.append(outcome.file)
         result.workers[outcome.pid] = max(result.workers.get(outcome.pid, 0.0), outcome.max_rss_mb)
+        result.cpu_seconds += outcome.cpu_seconds
         finished = len(result.done) + len(failed) + len(result.up_to_date)
         report(progress, finished, total, _counts(len(result.done), len(failed), len(result.up_to_date), total))
 
     report(progress, len(result.up_to_date), total, _counts(0, 0, len(result.up_to_date), total))
+    result.timings["prepare"] = _prepare(built, settings) if tasks else 0.0
+    t0 = time.perf_counter()
     if tasks:
-        result.prepare_seconds = _prepare(built, settings)
         from tonguevis.batch import runners, tasks as task_module
 
         if client is not None:
@@ -149,7 +160,10 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
             runners.run_here(tasks, spec, on_done)
         else:
             runners.run_loky(tasks, spec, jobs, on_done)
+    result.timings["run"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     result.tables = store.gather(out_abs, folders, keys, settings.steps, settings.csv)
+    result.timings["gather"] = time.perf_counter() - t0
     result.failures = [(name, *failed[name]) for name in names if name in failed]
     store.write_failures(out_abs, result.failures)
     result.seconds = time.perf_counter() - started
