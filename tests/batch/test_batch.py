@@ -356,3 +356,22 @@ def test_real_recordings(tmp_path):
     assert all(rest in ("detected", "stillest window") for rest in simulation["rest_how"])
     recordings = set(_table(tmp_path / "energy.parquet")["recording"])
     assert {"006_OSN12_Kah_nofb_natural_take2_HR", "009_OSN12_Tah_withFb_natural_HR"} <= recordings
+
+
+def test_generator_makes_more_speakers(tmp_path):
+    """make_demo_data.py --speakers N: speakers beyond the demo three have their own habits, and their
+    productions are found where the generator put them."""
+    from tonguevis.preprocess import find_productions
+    from tonguevis.workflows import head_corrected, open_recording
+    from tonguevis.io import write_recording
+
+    make = _generator()
+    names = make.speaker_names(6)
+    assert names == [f"spk{k}" for k in range(1, 7)]
+    assert make.SPEAKERS["spk5"] == make.generated_speaker(5) != make.generated_speaker(6)
+    rec, truth = make.synthesize("spk5", "ka", n_trains=2)
+    write_recording(rec, tmp_path / "spk5_ka.tsv")
+    (tmp_path / "sensor_map.json").write_text(json.dumps(make.sensor_map_document()))
+    table = find_productions(head_corrected(open_recording(tmp_path / "spk5_ka.tsv")), keep=None)
+    assert len(table) == len(truth["productions"]) == 10
+    np.testing.assert_allclose(table.as_array()[:, 2], [p["start"] for p in truth["productions"]], atol=0.03)
