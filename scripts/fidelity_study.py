@@ -459,7 +459,7 @@ def run_study(model=None, only=None, log=print) -> dict:
         available = [a for a in available if a[2] in only or a[0].stem in only]
     if not available:
         return {"rows": [], "recordings": {}, "elapsed_s": 0.0,
-                "skipped": f"{SHARED} was not available: no real recording studied."}
+                "skipped": "../shared/data was not available: no real recording studied."}
     rows, facts = [], {}
     var = variants(model)
     for path, smap, name in available:
