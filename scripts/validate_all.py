@@ -731,8 +731,7 @@ def render(groups, sensitivity, elapsed, study=None) -> str:
     lines += ["## Per recording", "",
               "Full simulation with every tongue sensor driving: the default sensor stiffness, and after the slash "
               "the paper's hard constraints. The drift's *beyond static* compares with the quasi-static shape "
-              "for the raw targets held exactly (the paper's constraint), so under the default it also holds the "
-              "difference between the projected and the raw targets.", "",
+              "for the same targets and the same sensor springs as the motion.", "",
               recording_rows([d for docs in groups.values() for d in docs]), ""]
     if study and not study.get("skipped"):
         lines += ["## Fidelity study: every row", "",

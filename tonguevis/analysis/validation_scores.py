@@ -129,6 +129,7 @@ def recording_summary(recording: Recording, motion, prep, interval, rest_how: st
 def _static_shape(motion, targets: np.ndarray) -> np.ndarray:
     """(n, 3) warped quasi-static mesh displacement for one frame's sensor targets (S, 3), metres."""
     from tonguevis.analysis.quasistatic import quasi_static
+    from tonguevis.sim.constrained import point_stiffness
 
     model = motion.model
     basis = model.basis(motion.q.shape[1])
@@ -137,5 +138,9 @@ def _static_shape(motion, targets: np.ndarray) -> np.ndarray:
     dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
     phi_s = basis.phi[dofs].reshape(len(nodes), 3, -1)
     w_s = w_full[dofs].reshape(len(nodes), 3, -1)
-    q, _, _ = quasi_static(basis.eigenvalues, phi_s, w_s, targets[None])
+    # The same sensor springs as the motion (its sensor nodes follow the projected targets), else the
+    # comparison would charge the springs' smoothing to drift.
+    stiffness = motion.metadata.get("sensor_stiffness")
+    compliance = 0.0 if stiffness is None else 1.0 / (stiffness * point_stiffness(basis.eigenvalues, phi_s))
+    q, _, _ = quasi_static(basis.eigenvalues, phi_s, w_s, targets[None], compliance=compliance)
     return model.displacement(q[0], warping=True)
