@@ -107,18 +107,23 @@ def validate(
     ``sensor_stiffness`` as :func:`tonguevis.sim.simulate` (every physical predictor uses it).
     """
     from tonguevis.sim import TongueModel
-    from tonguevis.preprocess.targets import TONGUE_SENSORS, prepare_targets
+    from tonguevis.io.sensor_map import how_to_map
+    from tonguevis.preprocess.targets import TONGUE_SENSORS, prepare_targets, working_tongue_sensors
     from tonguevis.sim.constrained import point_stiffness
     from tonguevis.sim.simulate import DEFAULT_SENSOR_STIFFNESS, drive_schedule, simulate
 
     model = model or TongueModel.default()
     file = recording.metadata.get("file")
-    candidates = [n for n in TONGUE_SENSORS if n in recording.sensors and n in model.landmarks.sensors]
+    working = working_tongue_sensors(recording)  # warns about a coil that never worked, once
+    dead = [n for n in TONGUE_SENSORS if n in recording.sensors and n not in working]
+    if dead:
+        recording = recording.with_sensors({k: v for k, v in recording.sensors.items() if k not in dead})
+    candidates = [n for n in working if n in model.landmarks.sensors]
     if len(candidates) < 3:
         raise SimulationError(
             f"leave-one-sensor-out needs at least 3 tongue sensors with model landmarks, found "
             f"{candidates or 'none'} (recording sensors: {', '.join(recording.sensor_names)}); "
-            "map the channels with a sensor map", file)
+            + how_to_map(recording), file)
     prep = prepare_targets(recording, model, landmarks, rest_interval)
     names, nodes = prep.names, np.asarray(prep.nodes)
     basis = model.basis(modes)

@@ -43,6 +43,21 @@ def preset_names() -> list[str]:
     return sorted(p.stem for p in PRESET_DIR.glob("*.json"))
 
 
+def how_to_map(recording: Recording) -> str:
+    """How to name a recording's tongue channels, for the message of a command that found too few.
+
+    Gives the command-line option, the presets and a JSON example built from
+    the recording's own channels (those with valid samples first).
+    """
+    working = [n for n in recording.sensor_names if recording.valid(n).any()]
+    channels = working + [n for n in recording.sensor_names if n not in working]
+    example = json.dumps(dict(zip(("TT", "TB", "TD"), channels)))
+    return ("name the tongue channels with a sensor map: --sensors MAP, a preset "
+            f"({', '.join(preset_names())}) or a JSON file of name -> channel such as {example} "
+            "(names: TT tip, TB blade, TD dorsum, TBK back, TL/TR left/right lateral, JAW); "
+            "a sensor_map.json beside the file is used when there is one")
+
+
 def load_sensor_map(spec: dict | str | os.PathLike) -> SensorMap:
     """A sensor map from a dict, a JSON file path or a preset name ('paper', 'haskins', 'mngu0').
 

@@ -70,8 +70,8 @@ def find_rest_interval(rec: Recording, sensors=None, min_duration: float = MIN_R
             f"(the recording has {', '.join(rec.sensor_names) or 'none'})", rec.metadata.get("file"))
     window = min(window, rec.n_samples - (1 - rec.n_samples % 2))
     if window < 5:
-        raise RecordingError(f"recording too short for rest detection ({rec.n_samples} samples)",
-                             rec.metadata.get("file"))
+        raise RecordingError(f"recording too short for rest detection ({rec.n_samples} samples); "
+                             f"{HOW_TO_GIVE_REST}", rec.metadata.get("file"))
     stacked = np.stack([rec.sensors[n] for n in names], axis=1)  # (N, S, 3)
     velocity = savgol(stacked, window, 2, deriv=1, delta=1.0 / rec.rate)
     speed = np.linalg.norm(velocity, axis=2)  # NaN where invalid
@@ -125,8 +125,9 @@ def stillest_window(recording: Recording, sensors=None, duration: float = STILLE
     step = np.linalg.norm(np.diff(stacked, axis=0), axis=2).max(axis=1)
     width = max(1, int(round(duration * recording.rate)))
     if len(step) < width:
-        raise RecordingError(f"recording too short ({recording.n_samples} samples) for a rest window of "
-                             f"{duration:g} s", recording.metadata.get("file"))
+        raise RecordingError(f"recording too short ({recording.n_samples} samples, {recording.duration:.2f} s) "
+                             f"to find a rest window of {duration:g} s in it; {HOW_TO_GIVE_REST}",
+                             recording.metadata.get("file"))
     csum = np.concatenate([[0.0], np.cumsum(np.where(np.isfinite(step), step, 1e9))])
     means = (csum[width:] - csum[:-width]) / width
     start = int(np.argmin(means))

@@ -82,16 +82,18 @@ def prepare_targets(
     file = recording.metadata.get("file")
     if landmarks not in ("rule", "speaker"):
         raise SimulationError(f"landmarks must be 'rule' or 'speaker', got {landmarks!r}", file)
-    present = [n for n in TONGUE_SENSORS if n in recording.sensors]
+    present = working_tongue_sensors(recording)
     names = [n for n in present if n in model.landmarks.sensors]
     ignored = [n for n in present if n not in model.landmarks.sensors]
     if ignored:
         logger.warning("sensors %s have no landmark on the model and are ignored", ", ".join(ignored))
     if len(names) < 2:
+        from tonguevis.io.sensor_map import how_to_map
+
         raise SimulationError(
             f"too few tongue sensors to drive the model: found {names or 'none'} of "
             f"{', '.join(TONGUE_SENSORS)} (recording sensors: {', '.join(recording.sensor_names)}); "
-            "map the channels with a sensor map", file)
+            + how_to_map(recording), file)
     if not isinstance(rest, RestChoice):
         rest = choose_rest_interval(recording, sensors=names, given=rest)
     rest_interval = rest.interval
@@ -130,6 +132,22 @@ def prepare_targets(
     return PreparedTargets(
         names, nodes, displacement, transform, ignored, rest, midsagittal, alignment_rms, aligned_rest, jaw_offset
     )
+
+
+def working_tongue_sensors(recording: Recording) -> list[str]:
+    """The tongue sensors of ``recording`` that hold at least one valid sample, in canonical order.
+
+    A coil that never worked (every sample NaN, e.g. a whole NDI Wave column of
+    bad status) is left out with a warning: it has no rest position to align
+    and nothing to drive, and the others can drive the model without it.
+    """
+    present = [n for n in TONGUE_SENSORS if n in recording.sensors]
+    dead = [n for n in present if not recording.valid(n).any()]
+    if dead:
+        logger.warning("%s: %s %s no valid sample in the whole recording and %s left out",
+                       recording.metadata.get("file", "recording"), ", ".join(dead),
+                       "has" if len(dead) == 1 else "have", "is" if len(dead) == 1 else "are")
+    return [n for n in present if n not in dead]
 
 
 def _filled(x: np.ndarray) -> np.ndarray:
