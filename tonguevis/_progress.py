@@ -24,11 +24,11 @@ def report(progress: Optional[ProgressCallback], done: int, total: int, message:
 
 
 @contextmanager
-def tqdm_progress(description: str, disable: bool = False) -> Iterator[ProgressCallback]:
-    """A progress callback drawing a tqdm bar on stderr, closed on exit."""
+def tqdm_progress(description: str, disable: bool = False, unit: str = "step") -> Iterator[ProgressCallback]:
+    """A progress callback drawing a tqdm bar on stderr (counting ``unit``), closed on exit."""
     from tqdm import tqdm
 
-    bar = tqdm(total=1, desc=description, disable=disable, leave=False, unit="step")
+    bar = tqdm(total=1, desc=description, disable=disable, leave=False, unit=unit)
 
     def callback(done: int, total: int, message: str = "") -> None:
         if bar.total != total:

@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
 
         client = Client(args.scheduler)
     try:
-        with tqdm_progress("batch", disable=args.quiet) as progress:
+        with tqdm_progress("batch", disable=args.quiet, unit="recording") as progress:
             result = run_batch(args.paths, args.out, jobs=args.jobs, client=client, model=model, mesh=mesh,
                                axes=args.axes, labels=args.labels, settings=settings, force=args.force,
                                progress=progress)
