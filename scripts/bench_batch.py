@@ -130,6 +130,7 @@ def main(argv=None) -> int:
             "cpu_s_per_recording": result.cpu_seconds / max(n, 1),
             "step_s_per_recording": steps,
             "cpu_share_of_wall": result.cpu_seconds / (jobs * worker_s) if worker_s else None,
+            "cores_used": result.cpu_seconds / worker_s if worker_s else None,
             "max_rss_mb_per_worker": sorted(result.workers.values()),
             "worker_startup_s": startup,
             "files_per_recording": len(files) / max(n, 1),
@@ -152,8 +153,16 @@ def main(argv=None) -> int:
         report["ratio"] = runs[1]["recordings_per_minute"] / runs[0]["recordings_per_minute"]
         report["ratio_steady"] = runs[1]["recordings_per_minute_steady"] / runs[0]["recordings_per_minute_steady"]
         report["goal_ratio"] = 1.8
+        two = runs[1]
+        # what the same work would give with a free core per worker: the measured CPU per recording
+        # (its growth is the workers' cost on each other: caches, memory bandwidth) and start-up
+        report["estimated_ratio_free_cores"] = (
+            counts[1] / counts[0] * runs[0]["cpu_s_per_recording"] / two["cpu_s_per_recording"]
+            * (1.0 - two["worker_startup_s"] / two["wall_s"]))
         print(f"ratio {counts[1]} vs {counts[0]} workers: {report['ratio']:.2f} "
-              f"({report['ratio_steady']:.2f} once the workers have started; goal >= 1.8)")
+              f"({report['ratio_steady']:.2f} once the workers have started; goal >= 1.8); cores used "
+              f"{runs[0]['cores_used']:.2f} vs {two['cores_used']:.2f}; with a free core per worker "
+              f"~{report['estimated_ratio_free_cores']:.2f}")
     report["projection"] = projection(runs)
     p = report["projection"]
     print(f"projection: {p['recordings']} recordings on {p['cores']} cores ~ {p['estimated_s'] / 60:.0f} min, "
