@@ -203,3 +203,39 @@ def penetration(displacements: np.ndarray, points: np.ndarray, nodes: np.ndarray
         gap = np.where(exclude, np.nan, gap)
     deepest = np.nanmin(np.where(np.isfinite(gap), gap, np.inf), axis=1)
     return np.maximum(0.0, -np.where(np.isfinite(deepest), deepest, 0.0))
+
+
+#: m: surface triangles whose three nodes are this close to the palate are in contact.
+TOUCH = 3e-4
+
+
+def contact_frames(displacements: np.ndarray, points: np.ndarray, candidates: np.ndarray, palate,
+                   jaw_offset: np.ndarray, faces: np.ndarray, exclude: np.ndarray | None = None,
+                   touch: float = TOUCH) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame of ``displacements`` (F, n, 3) m: (deepest penetration (F,) m, contact area (F,) m²).
+
+    Penetration as :func:`penetration` over the ``candidates`` (exclude : (F, k)
+    candidates not counted: sensor conflicts); contact area: the surface
+    triangles ``faces`` (f, 3) whose three nodes are all within ``touch`` of the
+    palate (only candidates can touch it).  ``jaw_offset`` (F, 3) carries the
+    tongue into the palate's frame.  One clearance evaluation serves both, and
+    any run of frames gives the same values as the whole motion, so a long
+    motion is measured chunk by chunk (:func:`tonguevis.sim.figures.frame_figures`).
+    """
+    n_frames, n_nodes = displacements.shape[0], len(points)
+    pts = points[candidates][None] + displacements[:, candidates] + jaw_offset[:, None]
+    gap, _ = palate.clearance(pts.reshape(-1, 3))
+    gap = gap.reshape(n_frames, -1)
+    counted = gap if exclude is None else np.where(exclude, np.nan, gap)
+    deepest = np.nanmin(np.where(np.isfinite(counted), counted, np.inf), axis=1) if n_frames else np.zeros(0)
+    pen = np.maximum(0.0, -np.where(np.isfinite(deepest), deepest, 0.0))
+    full = np.full((n_frames, n_nodes), np.inf)
+    full[:, candidates] = np.where(np.isfinite(gap), gap, np.inf)
+    touching = np.all(full[:, faces] < touch, axis=2)  # (F, faces)
+    area = np.zeros(n_frames)
+    for f in np.flatnonzero(touching.any(axis=1)):  # only the frames in contact: a few of them
+        p = points + displacements[f]
+        tri = faces[touching[f]]
+        a, b, c = p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]]
+        area[f] = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
+    return pen, area

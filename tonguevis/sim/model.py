@@ -54,7 +54,7 @@ class TongueModel:
         self.anchors = anchors
         self._bases: dict[int, ModalBasis] = {}
         self._rotation_matrices: dict[str, np.ndarray] = {}
-        self._transposed: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+        self._transposed: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
 
     # ------------------------------------------------------------------ builders
     @classmethod
@@ -154,20 +154,26 @@ class TongueModel:
 
     # ------------------------------------------------------------------ reconstruction
     def displacements(
-        self, q: np.ndarray, warping: bool = True, backend: str = "warp", dtype=np.float64
+        self, q: np.ndarray, warping: bool = True, backend: str = "warp", dtype=np.float64,
+        nodes: np.ndarray | None = None,
     ) -> np.ndarray:
         """(F, n, 3) node displacements in m for modal displacements ``q`` (F, m).
 
         Linear: Φq.  Warped: ũ_i = R̃((Wq)_i) (Φq)_i, the rotation in warp-lang
-        (``backend="warp"``) or NumPy (``"numpy"``).  Frames are processed in chunks to bound memory.
+        (``backend="warp"``) or NumPy (``"numpy"``).  Frames are processed in chunks to bound
+        the temporaries, but the result holds every frame: F × n × 3 values (for a
+        long recording iterate over chunks of q instead, see :meth:`Motion.iter_displacements`).
         ``dtype=np.float32`` halves the work for rendering (about 1e-7 relative).
+        ``nodes`` : (k,) node ids to reconstruct (e.g. the surface's), giving (F, k, 3); each
+        node's displacement depends on its own rows of Φ and W only, so the values equal
+        those of the whole mesh.
         """
         dtype = np.dtype(dtype)
         q = np.atleast_2d(np.asarray(q, dtype=np.float64))
         basis = self.basis(q.shape[1])
-        n = self.mesh.n_nodes
+        phi_t, w_t = self._reconstruction_matrices(basis, dtype, nodes)
+        n = phi_t.shape[1] // 3
         out = np.empty((len(q), n, 3), dtype=dtype)
-        phi_t, w_t = self._reconstruction_matrices(basis, dtype)
         q = q.astype(dtype, copy=False)
         small = len(q) <= SMALL_BATCH
         for start in range(0, len(q), CHUNK_FRAMES):
@@ -185,13 +191,18 @@ class TongueModel:
             out[start : start + len(chunk)] = lin
         return out
 
-    def _reconstruction_matrices(self, basis: ModalBasis, dtype: np.dtype) -> tuple[np.ndarray, np.ndarray]:
-        """Φᵀ and Wᵀ (m, 3n) in ``dtype``, contiguous, kept per basis and dtype."""
-        key = (basis.key, dtype.str)
+    def _reconstruction_matrices(self, basis: ModalBasis, dtype: np.dtype,
+                                 nodes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Φᵀ and Wᵀ (m, 3n) in ``dtype`` (columns of ``nodes`` only, if given), contiguous, kept per
+        basis, dtype and node set."""
+        if nodes is not None:
+            nodes = np.asarray(nodes, dtype=np.int64)
+        key = (basis.key, dtype.str, None if nodes is None else nodes.tobytes())
         if key not in self._transposed:
+            cols = slice(None) if nodes is None else (3 * nodes[:, None] + np.arange(3)).ravel()
             self._transposed[key] = (
-                np.ascontiguousarray(basis.phi.T, dtype=dtype),
-                np.ascontiguousarray(self.rotation_matrix(basis).T, dtype=dtype),
+                np.ascontiguousarray(basis.phi[cols].T, dtype=dtype),
+                np.ascontiguousarray(self.rotation_matrix(basis)[cols].T, dtype=dtype),
             )
         return self._transposed[key]
 

@@ -22,9 +22,18 @@ def plausibility_figures(displacements, sensor_displacement, volume_change, resi
 
     displacements : (F, n, 3) node displacements; sensor_displacement : (F, S, 3)
     measured sensor displacements (NaN = missing); volume_change (F,);
-    residual (F, S) sensor misfit, metres.
+    residual (F, S) sensor misfit, metres.  The whole array is the plain
+    reference; a long motion gives :func:`plausibility_from_largest` the
+    largest node displacement per frame, computed chunk by chunk
+    (:func:`tonguevis.sim.figures.frame_figures`).
     """
-    node = np.linalg.norm(displacements, axis=2).max(axis=1)
+    node = np.linalg.norm(displacements, axis=2).max(axis=1) if len(displacements) else np.zeros(0)
+    return plausibility_from_largest(node, sensor_displacement, volume_change, residual)
+
+
+def plausibility_from_largest(node, sensor_displacement, volume_change, residual):
+    """:func:`plausibility_figures` from ``node`` (F,), the largest node displacement of each frame in metres."""
+    node = np.asarray(node, dtype=np.float64)
     with np.errstate(invalid="ignore"):
         sensor = np.nanmax(np.linalg.norm(sensor_displacement, axis=2), axis=1, initial=0.0)
     sensor = np.where(np.isfinite(sensor), sensor, 0.0)
