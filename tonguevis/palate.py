@@ -144,12 +144,15 @@ class PalateSurface:
         path = Path(path)
         grid = grid_path(path) if not path.name.endswith(".palate.npz") else path
         if grid.exists():
+            import zipfile
+
             try:
                 with np.load(grid, allow_pickle=False) as d:
-                    return cls(d["x"], d["y"], d["z"], d["rotation"], float(d["scale"]), d["translation"],
-                               json.loads(str(d["meta"])))
-            except (OSError, ValueError, KeyError) as exc:
+                    surface = cls(d["x"], d["y"], d["z"], d["rotation"], float(d["scale"]), d["translation"],
+                                  json.loads(str(d["meta"])))
+            except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
                 raise PalateError(f"cannot read the palate grid: {exc}", grid) from exc
+            return _checked(surface, grid)
         return from_mesh(path)
 
 
@@ -164,12 +167,27 @@ def generic_palate() -> PalateSurface:
 
 
 def load_palate(spec) -> PalateSurface:
-    """A palate from ``"generic"`` (the shipped one, model frame) or a file (a speaker's, recording frame)."""
+    """A palate from ``"generic"`` (the shipped one, model frame) or a file (a speaker's, recording frame).
+
+    The shipped file itself (``meshes/palate.stl``) is the generic palate too: read as a
+    speaker's, it would be moved by the recording's alignment.
+    """
     if isinstance(spec, PalateSurface):
         return spec
-    if str(spec) == "generic":
+    if str(spec) == "generic" or _is_generic_file(spec):
         return generic_palate()
-    return PalateSurface.load(spec)
+    surface = PalateSurface.load(spec)
+    surface.metadata["file"] = str(spec)  # which file it came from (its "source" lists the traces)
+    return surface
+
+
+def _is_generic_file(path) -> bool:
+    from tonguevis.mesh.default import context_surface_path
+
+    try:
+        return Path(path).resolve() == context_surface_path("palate").resolve()
+    except (OSError, ValueError):
+        return False
 
 
 def grid_path(mesh_path) -> Path:
@@ -189,8 +207,19 @@ def from_mesh(path, step: float = GRID_STEP) -> PalateSurface:
     tris = [c.data for c in mesh.cells if c.type == "triangle"]
     if not tris:
         raise PalateError("the mesh has no triangles", path)
-    return _height_field(np.asarray(mesh.points, dtype=np.float64)[:, :3], np.concatenate(tris), step,
-                         {"source": [str(path)]})
+    return _checked(_height_field(np.asarray(mesh.points, dtype=np.float64)[:, :3], np.concatenate(tris), step,
+                                  {"source": [str(path)]}), path)
+
+
+def _checked(surface: PalateSurface, path) -> PalateSurface:
+    """``surface`` if it is a usable height field (a grid of at least 2 x 2 with some height), else PalateError."""
+    x, y, z = (np.asarray(a) for a in (surface.x, surface.y, surface.z))
+    if x.ndim != 1 or y.ndim != 1 or len(x) < 2 or len(y) < 2 or z.shape != (len(y), len(x)):
+        raise PalateError(f"not a palate surface: seen from below it covers no area (grid {z.shape}, "
+                          f"{len(x)} x {len(y)} points)", path)
+    if not np.isfinite(z).any():
+        raise PalateError("not a palate surface: no triangle faces down onto the grid", path)
+    return surface
 
 
 def _height_field(points, tris, step, metadata) -> PalateSurface:
@@ -290,6 +319,37 @@ def _mirrored(points: np.ndarray, y0: float) -> np.ndarray:
     mirror = points.copy()
     mirror[:, 1] = 2 * y0 - mirror[:, 1]
     return np.concatenate([points, mirror])
+
+
+def palate_from_traces(paths, probe: str = "PROBE", sensors=None, progress=None) -> PalateSurface:
+    """The speaker's palate fitted to palate-trace recordings (``tonguevis palate`` and the app's
+    File > Fit palate from traces): each read, its probe's positions head-corrected
+    (:func:`trace_points`), the midline taken from the lateral tongue sensors when the
+    traces have them, one surface fitted to all points (:func:`fit_palate`).  The
+    probe's sample count per file is in ``metadata["samples"]``.
+    """
+    from tonguevis._progress import report
+    from tonguevis.workflows import open_recording
+
+    paths = list(paths)
+    if not paths:
+        raise PalateError("no palate-trace recordings given")
+    points, midlines, samples = [], [], {}
+    for k, path in enumerate(paths):
+        report(progress, k, len(paths) + 1, f"reading {Path(path).name}")
+        rec = open_recording(path, sensors, audio=False)
+        pts = trace_points(rec, probe)
+        points.append(pts)
+        samples[str(path)] = int(len(pts))
+        midline = midline_of(rec)
+        if midline is not None:
+            midlines.append(midline)
+    report(progress, len(paths), len(paths) + 1, "fitting the palate")
+    surface = fit_palate(np.concatenate(points), midline_y=float(np.mean(midlines)) if midlines else None,
+                         sources=[str(p) for p in paths])
+    surface.metadata["samples"] = samples
+    report(progress, len(paths) + 1, len(paths) + 1, "palate fitted")
+    return surface
 
 
 def trace_points(recording, probe: str = "PROBE") -> np.ndarray:

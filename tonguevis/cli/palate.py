@@ -28,22 +28,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from tonguevis.palate import PalateError, fit_palate, midline_of, trace_points
-    from tonguevis.workflows import open_recording
+    from tonguevis.palate import PalateError, palate_from_traces
 
-    points, midlines = [], []
-    for path in args.traces:
-        rec = open_recording(path, args.sensors, audio=False)
-        pts = trace_points(rec, args.probe)
-        points.append(pts)
-        midline = midline_of(rec)
-        if midline is not None:
-            midlines.append(midline)
-        print(f"{path}: {len(pts)} probe samples")
     if not args.out.suffix:
         raise PalateError("give the mesh a file extension (.stl, .obj, .vtk, .ply ...)", args.out)
-    surface = fit_palate(np.concatenate(points), midline_y=float(np.mean(midlines)) if midlines else None,
-                         sources=[str(p) for p in args.traces])
+    surface = palate_from_traces(args.traces, args.probe, args.sensors)
+    for path, count in surface.metadata["samples"].items():
+        print(f"{path}: {count} probe samples")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     surface.save(args.out)
     meta = surface.metadata

@@ -226,16 +226,40 @@ def drive_schedule(displacement: np.ndarray, rate: float, eigenvalues: np.ndarra
     return targets, compliance, info
 
 
-def _contact_context(palate, prep, model, basis, recording) -> dict:
-    """What the contact solve needs: the palate in the model frame, candidate nodes and their modes."""
+def place_palate(palate, prep: PreparedTargets):
+    """The palate in the model frame, where the contact solve and the app's views use it: (surface, raised by m).
+
+    palate : a :class:`~tonguevis.palate.PalateSurface`, a palate file or "generic"
+    (:func:`tonguevis.palate.load_palate`).  A speaker's palate (the recording's frame,
+    from ``tonguevis palate``) is carried onto the model by the recording's alignment
+    ``prep.transform``, then raised where the tongue sensors went above it
+    (:func:`_register_palate`); one whose metadata say ``frame == "model"`` (the generic
+    one) is used as is.
+    """
     from tonguevis.palate import load_palate
 
     palate = load_palate(palate)
-    shift = 0.0
-    if palate.metadata.get("frame") != "model":  # a speaker's palate: placed by the sensors' alignment
-        t = prep.transform
-        palate = palate.transformed(t.rotation, t.scale, t.translation)
-        palate, shift = _register_palate(palate, prep)
+    if palate.metadata.get("frame") == "model":
+        return palate, 0.0
+    t = prep.transform
+    return _register_palate(palate.transformed(t.rotation, t.scale, t.translation), prep)
+
+
+def placed_palate(recording: Recording, palate, model: TongueModel | None = None, landmarks: str = "speaker",
+                  rest_interval: RestChoice | tuple[float, float] | None = None, smooth_window: int | None = None):
+    """The palate as :func:`simulate` places it for ``recording`` on ``model``: (surface in the model frame, raised by m).
+
+    For drawing a motion against its palate: pass the motion's landmarks and rest
+    (``motion.metadata["landmarks"]``, :func:`tonguevis.workflows.rest_of`) so the
+    alignment is the one the simulation used.
+    """
+    prep = prepare_targets(recording, model or TongueModel.default(), landmarks, rest_interval, smooth_window)
+    return place_palate(palate, prep)
+
+
+def _contact_context(palate, prep, model, basis, recording) -> dict:
+    """What the contact solve needs: the palate in the model frame, candidate nodes and their modes."""
+    palate, shift = place_palate(palate, prep)
     candidates = np.asarray(model.dorsal_nodes)
     gap, _ = palate.clearance(model.mesh.points[candidates])
     inside = np.nanmean(gap < -1e-3) if np.isfinite(gap).any() else 0.0
