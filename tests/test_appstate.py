@@ -132,6 +132,21 @@ def test_selection_and_colour():
     assert [(e.name, e.value) for e in events] == [("selection", "TT"), ("color", "energy")]
 
 
+def test_frame_of_reference_is_head_by_default_and_checked():
+    from tonguevis.appstate import REFERENCE_FRAMES
+    from tonguevis.sim.reference import REFERENCE_FRAMES as CORE_FRAMES
+
+    assert REFERENCE_FRAMES == CORE_FRAMES  # the app offers the frames the core knows
+    state = AppState()
+    events = recorder(state, "reference")
+    assert state.reference == "head"
+    state.set_reference("jaw", source="menu")
+    state.set_reference("jaw")  # unchanged: no event
+    with pytest.raises(ValueError, match="head, jaw"):
+        state.set_reference("skull")
+    assert [(e.value, e.source) for e in events] == [("jaw", "menu")] and state.reference == "jaw"
+
+
 def test_interval_at():
     intervals = [(0.0, 1.0), (1.5, 2.0)]
     assert interval_at(intervals, 1.7) == (1.5, 2.0)

@@ -20,6 +20,9 @@ Events (``event.name``; ``event.value`` is the new value):
 ``range``      the time span ``(start_s, end_s)`` and frame period changed
 ``selection``  selected sensor name or None
 ``color``      surface colouring: one of :data:`COLOR_MODES`
+``reference``  frame of reference of the 3D views: one of :data:`REFERENCE_FRAMES` ("head":
+               tongue and jaw carried by the jaw's motion, palate fixed; "jaw": the jaw's
+               motion removed, where the tongue is simulated)
 """
 
 from __future__ import annotations
@@ -33,9 +36,11 @@ log = logging.getLogger("tonguevis")
 
 MIN_SPEED = 0.25
 MAX_SPEED = 1.0
-#: Surface colourings the 3D view offers.
-COLOR_MODES = ("displacement", "energy", "plain")
-EVENT_NAMES = ("time", "playing", "speed", "loop", "range", "selection", "color")
+#: Surface colourings the 3D view offers ("contact": distance to the palate).
+COLOR_MODES = ("displacement", "energy", "contact", "plain")
+#: Frames of reference of the 3D views (the same as tonguevis.sim.reference.REFERENCE_FRAMES).
+REFERENCE_FRAMES = ("head", "jaw")
+EVENT_NAMES = ("time", "playing", "speed", "loop", "range", "selection", "color", "reference")
 
 
 @dataclass(frozen=True)
@@ -70,6 +75,7 @@ class AppState:
         self._loop: tuple[float, float] | None = None
         self._selection: str | None = None
         self._color = COLOR_MODES[0]
+        self._reference = REFERENCE_FRAMES[0]
 
     # -- observers ---------------------------------------------------------
     def subscribe(self, name: str, callback: Callback) -> Callable[[], None]:
@@ -203,6 +209,19 @@ class AppState:
             return
         self._color = mode
         self._emit("color", mode, source)
+
+    @property
+    def reference(self) -> str:
+        return self._reference
+
+    def set_reference(self, frame: str, source: Any = None) -> None:
+        """Show the 3D views in the head frame or the jaw frame (see :data:`REFERENCE_FRAMES`)."""
+        if frame not in REFERENCE_FRAMES:
+            raise ValueError(f"unknown frame of reference {frame!r}; choose one of {', '.join(REFERENCE_FRAMES)}")
+        if frame == self._reference:
+            return
+        self._reference = frame
+        self._emit("reference", frame, source)
 
 
 def interval_at(intervals: list[tuple[float, float]], t: float) -> tuple[float, float] | None:

@@ -38,7 +38,8 @@ def test_play_moves_the_tongue_and_every_cursor_together(qtbot, window):
     # Driven by a clock, not by frame counting: never ahead of real time (speed 1).
     assert state.time - 5.2 <= elapsed + 0.05
     i = session.frames.frame_at(state.time)
-    assert np.allclose(after, session.frames.points[i])
+    # In the head frame (the default): the simulated tongue carried by the jaw's translation.
+    assert np.allclose(after, session.frames.points[i] + session.motion.jaw_offset[i])
     # Every view shows the same time.
     times = cursors(window)
     assert all(t == state.time for t in times.values()), times
@@ -57,9 +58,10 @@ def test_click_in_sensor_plot_seeks_every_view(qtbot, window):
     state = window.state
     assert abs(state.time - 6.0) < 0.02  # within two frames of pixel rounding
     assert all(t == state.time for t in cursors(window).values())
-    # The 3D view shows the frame of that time.
+    # The 3D view shows the frame of that time (in the head frame: carried by the jaw's translation).
     frames = window.session.frames
-    assert np.allclose(window.view3d.scene.surface.points, frames.points[frames.frame_at(state.time)])
+    i = frames.frame_at(state.time)
+    assert np.allclose(window.view3d.scene.surface.points, frames.points[i] + frames.motion.jaw_offset[i])
 
 
 def test_waveform_drag_and_slider_and_steps(qtbot, window):

@@ -151,3 +151,56 @@ def test_production_intervals_from_objects_and_pairs():
 
     assert production_intervals([SimpleNamespace(start=2, end=3), (0.5, 1.0)]) == [(0.5, 1.0), (2.0, 3.0)]
     assert production_intervals(None) == []
+
+
+def test_draw_frame_in_the_head_and_the_jaw_frame(fake):
+    """Head frame: tongue, sensors and jaw moved by the jaw's translation, palate fixed; jaw frame: the reverse.
+    The distance to a flat palate is the vertical gap in both."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from tonguevis.gui.drawing import draw_frame, generic_shown, speaker_palate
+    from tonguevis.gui.frames import MotionFrames
+    from tonguevis.palate import PalateSurface
+
+    model, _, still = fake
+    n = still.n_frames
+    motion = replace(still, jaw_offset=np.column_stack([np.zeros(n), np.zeros(n), -0.004 * np.sin(np.linspace(0, np.pi, n))]))
+    frames = MotionFrames(motion)
+    x = np.linspace(-0.1, 0.2, 301)  # wider than the box can swing
+    y = np.linspace(-0.1, 0.15, 251)
+    roof = PalateSurface(x, y, np.full((len(y), len(x)), 0.05), metadata={"frame": "model"})
+    session = SimpleNamespace(frames=frames, shown_palate=speaker_palate(roof, "roof"), productions=[])
+    i = n // 2
+    off = motion.jaw_offset[i]
+    head = draw_frame(session, i, "head", "contact")
+    np.testing.assert_allclose(head.points, frames.points[i] + off, atol=1e-7)
+    np.testing.assert_allclose(head.sensor_points, frames.sensor_points[i] + off, atol=1e-7)
+    np.testing.assert_allclose(head.context_offsets["jaw"], off, atol=1e-7)
+    np.testing.assert_allclose(head.context_offsets["palate"], 0.0, atol=1e-12)
+    np.testing.assert_allclose(head.scalars, 50.0 - 1e3 * head.points[:, 2], atol=1e-3)
+    assert head.caption.startswith("head frame")
+    jaw = draw_frame(session, i, "jaw", "contact")
+    np.testing.assert_allclose(jaw.points, frames.points[i], atol=1e-7)
+    np.testing.assert_allclose(jaw.context_offsets["jaw"], 0.0, atol=1e-12)
+    np.testing.assert_allclose(jaw.context_offsets["palate"], -off, atol=1e-7)
+    np.testing.assert_allclose(jaw.scalars, head.scalars)  # contact is between tongue and palate
+    assert jaw.caption.startswith("jaw frame")
+    assert np.array_equal(draw_frame(session, i, "jaw", "energy").scalars, frames.scalars["energy"][i])
+    session.frames = MotionFrames(still)  # no jaw sensor: the frames coincide and say so
+    assert draw_frame(session, i, "head", "plain").caption == "head frame = jaw frame (no jaw motion recorded)"
+    if generic_shown() is not None:  # the shipped palate, drawn from its own mesh
+        assert generic_shown().generic and generic_shown().label == "generic palate"
+
+
+def test_midline_profile_runs_from_the_tip_back_along_the_mid_plane():
+    from tonguevis.gui.drawing import MIDLINE_BIN_MM, MidlineProfile
+
+    model = FakeModel(box_mesh(8, 4, 3, size=(0.07, 0.04, 0.03)))
+    model.dorsal_nodes = np.flatnonzero(np.isclose(model.mesh.points[:, 2], 0.03))
+    profile = MidlineProfile(model)
+    pts = model.mesh.points[profile.nodes]
+    assert np.allclose(pts[:, 1], 0.02) and np.allclose(pts[:, 2], 0.03)  # the top's mid-line
+    assert np.all(np.diff(profile.position_mm) > 0)
+    assert profile.position_mm[0] == pytest.approx(0.5 * MIDLINE_BIN_MM)  # the tip (x = 70 mm) first
+    assert profile.position_mm[-1] == pytest.approx(70 + 0.5 * MIDLINE_BIN_MM)

@@ -21,6 +21,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Iterable
 
@@ -33,6 +34,8 @@ MOTION = "motion.npz"
 SEGMENT_LABELS = "segmentation.npz"
 FAILURES = "failures.csv"
 SETTINGS = "batch.json"
+#: Threads reading the recordings' tables while gathering (the reads are small and mostly wait).
+READERS = 4
 
 
 def output_folders(files: list[str], out: Path) -> list[Path]:
@@ -92,9 +95,12 @@ def gather(out: Path, folders: list[Path], keys: list[dict], steps: Iterable[str
             path = out / f"{name}.parquet"
 
             def write_parquet(tmp, parts=parts, name=name):
-                with pq.ParquetWriter(tmp, tables.schema(name)) as writer:
-                    for part in parts:
-                        writer.write_table(pq.read_table(part, schema=tables.schema(name)))
+                schema = tables.schema(name)
+                with pq.ParquetWriter(tmp, schema) as writer, ThreadPoolExecutor(READERS) as pool:
+                    for start in range(0, len(parts), 64):  # read ahead a little, in threads, keep the order
+                        for table in pool.map(lambda part: pq.read_table(part, schema=schema),
+                                              parts[start:start + 64]):
+                            writer.write_table(table)
 
             atomic_write(path, write_parquet)
             written[name] = path

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from tonguevis.cli.view import COLOR_CHOICES
+
 
 def add_arguments(parser) -> None:
     from tonguevis.cli._common import add_companion_arguments, add_rest_argument
@@ -17,8 +19,14 @@ def add_arguments(parser) -> None:
     parser.add_argument("--modes", type=int, default=100, metavar="M", help="vibration modes (default 100)")
     parser.add_argument("--fps", type=int, default=25, help="video frames per second (default 25)")
     parser.add_argument("--size", default="1280x720", metavar="WxH", help="video size in pixels (default 1280x720)")
-    parser.add_argument("--color", choices=("displacement", "energy", "plain"), default="displacement",
-                        help="surface colouring (default: displacement magnitude)")
+    parser.add_argument("--color", choices=COLOR_CHOICES, default="displacement",
+                        help="surface colouring (default: displacement magnitude; contact = distance to the palate)")
+    parser.add_argument("--frame", choices=("head", "jaw"), default="head", dest="reference",
+                        help="frame of reference: head (default: tongue and jaw move with the jaw, palate fixed) "
+                             "or jaw (the jaw's motion removed, as simulated)")
+    parser.add_argument("--palate", metavar="PALATE",
+                        help="keep the tongue below a palate and draw it: the speaker's (a file from "
+                             "`tonguevis palate`) or 'generic' (the shipped one); default: no contact")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_rest_argument(parser)
     add_companion_arguments(parser, labels=False)  # the video has the sound, not the labels
@@ -39,11 +47,16 @@ def run(args) -> int:
         width, height = (int(v) for v in args.size.lower().split("x"))
     except ValueError:
         raise RecordingError(f"--size must look like 1280x720, got {args.size!r}") from None
+    palate = None
+    if args.palate is not None:
+        from tonguevis.palate import load_palate
+
+        palate = load_palate(args.palate)
     session = load_session(path, sensor_map=args.sensors, rest=rest_arg(args), audio=args.audio)
     with tqdm_progress("simulating", disable=args.quiet) as progress:
-        simulate_session(session, mesh_path=args.mesh, modes=args.modes, progress=progress)
+        simulate_session(session, mesh_path=args.mesh, modes=args.modes, progress=progress, palate=palate)
     with tqdm_progress("rendering", disable=args.quiet) as progress:
         out = export_video(session, args.out, args.start, args.end, fps=args.fps, size=(width, height),
-                           mode=args.color, progress=progress)
-    print(f"{session.rest.describe()}\n{out}")
+                           mode=args.color, progress=progress, frame=args.reference)
+    print(f"{session.rest.describe()}\n{out} ({args.reference} frame)")
     return 0

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+#: Surface colourings (tonguevis.appstate.COLOR_MODES, spelled out so the parser needs no import).
+COLOR_CHOICES = ("displacement", "energy", "contact", "plain")
+
 
 def add_arguments(parser) -> None:
     from tonguevis.cli._common import add_companion_arguments, add_rest_argument
@@ -16,6 +19,15 @@ def add_arguments(parser) -> None:
     parser.add_argument("--screenshot", type=Path, metavar="PNG",
                         help="open the window, show --frame, save the whole window as PNG and exit")
     parser.add_argument("--frame", type=int, metavar="N", help="frame shown for --screenshot (default: the middle)")
+    parser.add_argument("--palate", metavar="PALATE",
+                        help="keep the tongue below a palate and show the contact: the speaker's (a file from "
+                             "`tonguevis palate`) or 'generic' (the shipped one); default: no contact, the generic "
+                             "palate drawn")
+    parser.add_argument("--reference", choices=("head", "jaw"), default="head",
+                        help="frame of reference of the views: head (default: tongue and jaw move with the jaw, "
+                             "palate fixed) or jaw (the jaw's motion removed)")
+    parser.add_argument("--color", choices=COLOR_CHOICES, help="surface colouring (default: displacement magnitude; "
+                        "contact = distance to the palate)")
     add_rest_argument(parser)
     add_companion_arguments(parser)
 
@@ -24,7 +36,13 @@ def run(args) -> int:
     from tonguevis.cli._common import rest_arg
 
     rest = rest_arg(args)
+    palate = None
+    if args.palate is not None:  # a bad palate file stops here, as one line naming it
+        from tonguevis.palate import load_palate
+
+        palate = load_palate(args.palate)
     from tonguevis.gui.app import run_view  # Qt only loads here: `import tonguevis.cli.view` stays light
 
     return run_view(args.file, args.sensors, args.mesh, args.modes, args.screenshot, args.frame, rest=rest,
-                    audio=args.audio, labels=args.label_file)
+                    audio=args.audio, labels=args.label_file, palate=palate, reference=args.reference,
+                    color=args.color)

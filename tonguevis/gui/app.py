@@ -36,20 +36,24 @@ def install_error_hook(window) -> None:
 
 
 def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings=None, feature_tabs: bool = True,
-                  rest=None, audio=None, labels=None):
+                  rest=None, audio=None, labels=None, palate=None, frame: str | None = None):
     """A shown MainWindow that opens ``file`` (default: the demo), with ``rest`` (start_s, end_s) if given,
-    and the sound ``audio`` and TextGrid ``labels`` if given (else those found beside the file)."""
+    and the sound ``audio`` and TextGrid ``labels`` if given (else those found beside the file);
+    simulated against ``palate`` (a PalateSurface, a file or "generic"; None: no contact), shown in
+    ``frame`` ("head" or "jaw"; default head)."""
     from tonguevis.gui.window import MainWindow
 
     application()
-    window = MainWindow(settings=settings, modes=modes, mesh_path=mesh)
+    window = MainWindow(settings=settings, modes=modes, mesh_path=mesh, palate=palate)
+    if frame is not None:
+        window.state.set_reference(frame)
     if feature_tabs:
         from tonguevis.gui.tabs import add_feature_tabs
 
         add_feature_tabs(window)
     window.show()
     if file is None and rest is None and audio is None and labels is None:
-        window.open_demo()
+        window.open_demo()  # with the palate given, if any
     else:
         from tonguevis.gui.session import demo_recording_path
 
@@ -81,12 +85,17 @@ def opening_problem(window, file):
 
 
 def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None,
-             rest=None, audio=None, labels=None) -> int:
+             rest=None, audio=None, labels=None, palate=None, reference: str | None = None,
+             color: str | None = None) -> int:
     """``tonguevis view``: run the app; with ``screenshot``, save the window at ``frame``, print the
     rest line and exit.  ``rest``: (start_s, end_s) of the rest interval, None to find it; ``audio``,
-    ``labels``: a WAV and a TextGrid, None for those beside the file."""
+    ``labels``: a WAV and a TextGrid, None for those beside the file; ``palate``: simulate against it
+    (None: no contact); ``reference``: "head" or "jaw" frame; ``color``: the surface colouring."""
     app = application()
-    window = create_window(file, sensors, mesh, modes, rest=rest, audio=audio, labels=labels)
+    window = create_window(file, sensors, mesh, modes, rest=rest, audio=audio, labels=labels, palate=palate,
+                           frame=reference)
+    if color is not None:
+        window.state.set_color(color)
     if screenshot is None:
         install_error_hook(window)
         return app.exec()

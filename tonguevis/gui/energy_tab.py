@@ -98,6 +98,10 @@ class EnergyTab(QtWidgets.QWidget):
         row.addWidget(self.group_by)
         side.addLayout(row)
         main = QtWidgets.QVBoxLayout()
+        self.frame_label = QtWidgets.QLabel("Elastic energy of the tongue's deformation, in the jaw frame (the jaw's "
+                                            "motion removed: moving with the jaw costs no energy).")
+        self.frame_label.setWordWrap(True)
+        main.addWidget(self.frame_label)
         main.addWidget(self.canvas, 1)
         main.addWidget(self.hover_label)
         picks = QtWidgets.QHBoxLayout()

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from PySide6.QtCore import QPoint, Qt
 from PySide6.QtGui import QImage, QPainter
-from PySide6.QtWidgets import (QDialog, QDialogButtonBox, QDoubleSpinBox, QFileDialog, QFormLayout,
+from PySide6.QtWidgets import (QComboBox, QDialog, QDialogButtonBox, QDoubleSpinBox, QFileDialog, QFormLayout,
                                QProgressDialog)
 
 from tonguevis.appstate import interval_at
@@ -47,9 +47,13 @@ def atomic_save_image(image: QImage, path) -> None:
 
 
 class RangeDialog(QDialog):
-    """Start and end time of a video (defaults: the production under the cursor)."""
+    """Start and end time of a video (defaults: the production under the cursor), and its frame
+    of reference (default: the views')."""
 
     def __init__(self, state, productions, parent=None):
+        from tonguevis.appstate import REFERENCE_FRAMES
+        from tonguevis.gui.view3d import REFERENCE_LABELS
+
         super().__init__(parent)
         self.setWindowTitle("Video time range")
         default = interval_at(productions, state.time) or (state.start, state.end)
@@ -59,17 +63,23 @@ class RangeDialog(QDialog):
             box.setRange(state.start, state.end)
             box.setSuffix(" s")
             box.setValue(value)
+        self.frame = QComboBox()
+        for frame in REFERENCE_FRAMES:
+            self.frame.addItem(REFERENCE_LABELS[frame], frame)
+        self.frame.setCurrentIndex(REFERENCE_FRAMES.index(state.reference))
         form = QFormLayout(self)
         form.addRow("from", self.start)
         form.addRow("to", self.end)
+        form.addRow("frame", self.frame)
         buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Ok | QDialogButtonBox.StandardButton.Cancel)
         buttons.accepted.connect(self.accept)
         buttons.rejected.connect(self.reject)
         form.addRow(buttons)
 
 
-def run_with_progress(window, title: str, function, done_message: str, path) -> None:
-    """Run ``function(progress=...)`` in a worker with a progress dialog; errors -> dialog."""
+def run_with_progress(window, title: str, function, done_message: str, path, on_success=None) -> None:
+    """Run ``function(progress=...)`` in a worker with a progress dialog; errors -> dialog;
+    ``on_success(result)`` (on the GUI thread) when it finished."""
     from tonguevis.gui.worker import Worker
 
     worker = Worker(function, window)
@@ -79,6 +89,8 @@ def run_with_progress(window, title: str, function, done_message: str, path) -> 
     dialog.canceled.connect(worker.cancel)
     worker.progressed.connect(lambda d, t, m: (dialog.setMaximum(max(t, 1)), dialog.setValue(min(d, t))))
     worker.succeeded.connect(lambda _r: window.statusBar().showMessage(done_message))
+    if on_success is not None:
+        worker.succeeded.connect(on_success)
     worker.failed.connect(lambda message: window.show_error(f"{title} failed", message, path))
     worker.cancelled.connect(lambda: window.statusBar().showMessage(f"{title}: cancelled"))
     worker.finished.connect(dialog.reset)
@@ -100,9 +112,11 @@ def ask_video(window) -> None:
     if not path:
         return
     start, end, mode = ranges.start.value(), ranges.end.value(), window.state.color
+    frame = ranges.frame.currentData()
     run_with_progress(window, "Video export",
-                      lambda progress: export_video(session, path, start, end, mode=mode, progress=progress),
-                      f"saved {path}", path)
+                      lambda progress: export_video(session, path, start, end, mode=mode, progress=progress,
+                                                    frame=frame),
+                      f"saved {path} ({frame} frame)", path)
 
 
 def ask_vtk(window) -> None:
@@ -112,11 +126,12 @@ def ask_vtk(window) -> None:
     if session is None or session.frames is None:
         window.show_error("Nothing to export", "open a recording and let its simulation finish first")
         return
-    folder = QFileDialog.getExistingDirectory(window, "Folder for the VTK series")
+    frame = window.state.reference  # what the views show (View ▸ Head frame / Jaw frame)
+    folder = QFileDialog.getExistingDirectory(window, f"Folder for the VTK series ({frame} frame, as the views)")
     if folder:
         run_with_progress(window, "VTK export",
-                          lambda progress: export_vtk_series(session, folder, progress=progress),
-                          f"saved {folder}/motion.pvd", folder)
+                          lambda progress: export_vtk_series(session, folder, progress=progress, frame=frame),
+                          f"saved {folder}/motion.pvd in the {frame} frame (README.txt there says so)", folder)
 
 
 __all__ = ["TonguevisError", "ask_video", "ask_vtk", "atomic_save_image", "grab_window"]

@@ -6,8 +6,8 @@ from pathlib import Path
 
 from PySide6.QtGui import QAction, QActionGroup, QKeySequence
 
-from tonguevis.appstate import COLOR_MODES
-from tonguevis.gui.view3d import COLOUR_LABELS
+from tonguevis.appstate import COLOR_MODES, REFERENCE_FRAMES
+from tonguevis.gui.view3d import COLOUR_LABELS, REFERENCE_LABELS
 
 MAX_RECENT = 8
 
@@ -26,9 +26,15 @@ class MenusMixin:
         self._fill_recent()
         self._action(file_menu, "Open &demo", self.open_demo)
         file_menu.addSeparator()
+        self._action(file_menu, "Load &palate…", self.ask_load_palate)
+        self._action(file_menu, "&Fit palate from traces…", self.ask_fit_palate)
+        self._action(file_menu, "Use the &generic palate (contact on)", self.use_generic_palate)
+        self._action(file_menu, "&No palate (contact off)", self.use_no_palate)
+        file_menu.addSeparator()
         self._action(file_menu, "Export &screenshot (PNG)…", self.ask_export_screenshot)
         self._action(file_menu, "Export &video (MP4)…", self.ask_export_video)
-        self._action(file_menu, "Export motion as VTK &series…", self.ask_export_vtk)
+        self._action(file_menu, "Export motion for &ParaView (XDMF)…", self.ask_export_paraview)
+        self._action(file_menu, "Export motion as VTK &series (one file per frame)…", self.ask_export_vtk)
         file_menu.addSeparator()
         self._action(file_menu, "&Quit", self.close, QKeySequence.StandardKey.Quit)
         view = bar.addMenu("&View")
@@ -44,6 +50,17 @@ class MenusMixin:
             action.setCheckable(True)
             action.setChecked(mode == self.state.color)
             group.addAction(action)
+        view.addSeparator()
+        frames = QActionGroup(self)
+        self.reference_actions = {}
+        for frame, key in zip(REFERENCE_FRAMES, ("H", "Shift+H")):
+            action = self._action(view, REFERENCE_LABELS[frame].capitalize(),
+                                  lambda f=frame: self.state.set_reference(f, self), key)
+            action.setCheckable(True)
+            action.setChecked(frame == self.state.reference)
+            frames.addAction(action)
+            self.reference_actions[frame] = action
+        self.state.subscribe("reference", lambda event: self.reference_actions[event.value].setChecked(True))
         simulation = bar.addMenu("&Simulation")
         self.rest_action = self._action(simulation, "Set &rest interval…", self.ask_rest_interval)
         play = bar.addMenu("&Playback")

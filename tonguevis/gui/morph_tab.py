@@ -177,7 +177,7 @@ class MorphTab(QtWidgets.QWidget):
             plotter.subplot(k)
             plotter.add_mesh(self.surface, scalars="difference", cmap=COLORMAP, clim=(0, 1), show_scalar_bar=(k == 0),
                              scalar_bar_args=bar_args(morph))
-            plotter.add_text(view, font_size=8, position="upper_left")
+            plotter.add_text(f"{view} · jaw frame" if k == 0 else view, font_size=8, position="upper_left")
             place_camera(plotter, view, centre, radius, zoom=1.3)
         plotter.subplot(0)
 

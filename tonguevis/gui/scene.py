@@ -30,7 +30,14 @@ TONGUE_COLOUR = "#d98a8a"
 SENSOR_COLOUR = "#2ecc71"
 TARGET_COLOUR = "#ffd23f"
 CONTEXT_COLOUR = "#e8e2d0"
+#: A speaker's own palate stands out from the generic context (colour, opacity in the main view).
+SPEAKER_PALATE_STYLE = ("#8fc1e3", 0.3)
 COLORMAP = "plasma"
+#: Distance to the palate: red where the tongue touches it, blue far below; magenta inside it;
+#: the tongue's own colour where no palate lies above (outside a traced palate's footprint).
+CONTACT_COLORMAP = "RdYlBu"
+INSIDE_COLOUR = "#ff00ff"
+NO_PALATE_COLOUR = TONGUE_COLOUR
 BACKGROUND = ("#20242c", "#3b4252")  # bottom, top
 
 
@@ -72,6 +79,10 @@ class TongueScene:
         self.residuals: pv.PolyData | None = None
         self.surface_actors: list = []
         self.context_actors: list = []
+        self.context: dict[str, pv.PolyData] = {}
+        self._context_rest: dict[str, np.ndarray] = {}
+        self._context_offsets: dict[str, np.ndarray] = {}
+        self.view_labels: dict[int, object] = {}
         self.context_visible = True
         self.scalar_bar = None
         self.time_text = None
@@ -95,13 +106,17 @@ class TongueScene:
     def build(self, points: np.ndarray, faces: np.ndarray, n_sensors: int = 0,
               context: dict[str, pv.PolyData] | None = None,
               clim: dict[str, tuple[float, float]] | None = None,
-              titles: dict[str, str] | None = None) -> None:
+              titles: dict[str, str] | None = None,
+              context_style: dict[str, tuple[str, float]] | None = None) -> None:
         """(Re)create every actor: called once per model or motion, never per frame.
 
         points : (n, 3) node positions (metres); faces : (f, 3) boundary triangles;
         n_sensors : driving sensors (spheres, markers and residual lines);
-        context : static surfaces (jaw, palate) drawn transparent;
-        clim / titles : colour range and colour-bar title of each scalar mode.
+        context : rigid surfaces (jaw, palate) drawn transparent, moved per frame by
+        :meth:`update`'s ``context_offsets``; context_style : name -> (colour, opacity)
+        for those not in the default style;
+        clim / titles : colour range and colour-bar title of each scalar mode
+        ("contact" gets the distance-to-palate colour map).
         """
         plotter = self.plotter
         for index in self._each_view():
@@ -111,6 +126,11 @@ class TongueScene:
         plotter.scalar_bars.clear()
         self._clim = dict(clim or {})
         self._titles = dict(titles or {})
+        self.context = dict(context or {})
+        self._context_rest = {name: np.array(surface.points, dtype=np.float32) for name, surface in self.context.items()}
+        self._context_offsets = {name: np.zeros(3) for name in self.context}
+        self.view_labels = {}
+        self._luts = {"contact": _contact_lut(self._clim.get("contact", (0.0, 1.0)))}
         points = np.asarray(points, dtype=np.float32)
         self._normals = VertexNormals(faces, len(points))
         self.surface = pv.PolyData(points.copy(), faces_to_vtk(faces))
@@ -141,8 +161,9 @@ class TongueScene:
                                  name=f"residuals{index}", reset_camera=False)
             # Transparent context costs a second render pass per view (most of a frame under
             # software OpenGL): draw it where it tells most, the main and the lateral views.
-            for name, surface in (context or {}).items() if index in CONTEXT_VIEWS else ():
-                context_actor = plotter.add_mesh(surface, color=CONTEXT_COLOUR, opacity=0.12 if main else 0.1,
+            for name, surface in self.context.items() if index in CONTEXT_VIEWS else ():
+                colour, opacity = (context_style or {}).get(name, (CONTEXT_COLOUR, 0.12))
+                context_actor = plotter.add_mesh(surface, color=colour, opacity=opacity if main else 0.8 * opacity,
                                                  name=f"{name}{index}", reset_camera=False, show_scalar_bar=False)
                 context_actor.SetVisibility(self.context_visible)
                 self.context_actors.append(context_actor)
@@ -160,18 +181,28 @@ class TongueScene:
                     plotter.add_text("measured EMA (line = residual)", position=(8, 8), font_size=8,
                                      name="legend_t", color=TARGET_COLOUR)
             else:
-                plotter.add_text(VIEW_NAMES[index], position="upper_left", font_size=8, name=f"label{index}")
+                self.view_labels[index] = plotter.add_text(VIEW_NAMES[index], position="upper_left", font_size=8,
+                                                           name=f"label{index}")
                 plotter.enable_parallel_projection()
+        self._default_lut = self.surface_actors[0].mapper.lookup_table
         self.reset_cameras()
         self.set_mode(self._mode)
 
     # -- per frame -------------------------------------------------------------------
     def update(self, points: np.ndarray, scalars: np.ndarray | None = None,
                sensor_points: np.ndarray | None = None, targets: np.ndarray | None = None,
-               text: str | None = None, render: bool = True) -> None:
-        """Move to one frame: write points/scalars in place, then one render."""
+               text: str | None = None, render: bool = True,
+               context_offsets: dict[str, np.ndarray] | None = None) -> None:
+        """Move to one frame: write points/scalars in place, then one render.
+
+        context_offsets : name -> (3,) translation of a context surface from where it was
+        built (the jaw carried by the jaw's motion in the head frame, the palate by minus
+        it in the jaw frame); surfaces not named stay where they are.
+        """
         if self.surface is None:
             return
+        for name, offset in (context_offsets or {}).items():
+            self.move_context(name, offset)
         self.surface.points[:] = points
         self.surface.point_data["Normals"][:] = self._normals(points)
         if scalars is not None:
@@ -187,18 +218,45 @@ class TongueScene:
         if render:
             self.plotter.render()
 
+    def move_context(self, name: str, offset: np.ndarray) -> None:
+        """Translate context surface ``name`` to ``offset`` (3,) m from where it was built, in place."""
+        offset = np.asarray(offset, dtype=np.float64)
+        if name not in self.context or np.array_equal(offset, self._context_offsets[name]):
+            return
+        self.context[name].points[:] = self._context_rest[name] + offset.astype(np.float32)
+        self._context_offsets[name] = offset.copy()
+
+    def context_offset(self, name: str) -> np.ndarray:
+        """(3,) the current translation of context surface ``name`` from where it was built."""
+        return self._context_offsets[name].copy()
+
+    def set_view_labels(self, suffix: str) -> None:
+        """Caption the small views with their direction and ``suffix`` (e.g. the frame of reference)."""
+        for index, actor in self.view_labels.items():
+            actor.SetText(2, f"{VIEW_NAMES[index]}{suffix}")  # vtkCornerAnnotation: 2 = upper left
+
     def set_mode(self, mode: str) -> None:
-        """Colour by ``mode`` ('displacement', 'energy' or 'plain')."""
+        """Colour by ``mode`` ('displacement', 'energy', 'contact' or 'plain')."""
         self._mode = mode
         plain = mode not in self._clim
+        contact = mode == "contact" and not plain
+        lut = self._luts["contact"] if contact else getattr(self, "_default_lut", None)
         for actor in self.surface_actors:
             actor.mapper.scalar_visibility = not plain
             actor.prop.color = TONGUE_COLOUR
+            if lut is not None:
+                actor.mapper.lookup_table = lut
             if not plain:
                 actor.mapper.scalar_range = self._clim[mode]
         if self.scalar_bar is not None:
             self.scalar_bar.SetVisibility(not plain)
             self.scalar_bar.SetTitle(self._titles.get(mode, ""))
+            if lut is not None:
+                self.scalar_bar.SetLookupTable(lut)
+            self.scalar_bar.SetDrawBelowRangeSwatch(contact)
+            self.scalar_bar.SetDrawNanAnnotation(contact)
+            self.scalar_bar.SetBelowRangeAnnotation("inside")
+            self.scalar_bar.SetNanAnnotation("no palate above")
 
     def set_context_visible(self, visible: bool) -> None:
         """Show or hide the jaw and palate (hiding them triples the frame rate under software GL)."""
@@ -232,3 +290,12 @@ class TongueScene:
             else:
                 camera.zoom(1.3)
         self.plotter.subplot(MAIN)
+
+
+def _contact_lut(clim: tuple[float, float]) -> "pv.LookupTable":
+    """Distance to the palate: red (touching) to blue (far); inside the palate and no palate above in their own colours."""
+    lut = pv.LookupTable(cmap=CONTACT_COLORMAP, n_values=256)
+    lut.scalar_range = clim
+    lut.below_range_color = INSIDE_COLOUR
+    lut.nan_color = NO_PALATE_COLOUR
+    return lut

@@ -114,7 +114,7 @@ def draw_result(plotter, result, by_error: bool = False, scale: float = 1.0) -> 
     top = float(1000.0 * np.sqrt(result.element_errors.max())) or 1.0
     shown = "" if scale == 1 else f", displacement ×{scale:g}"
     panels = [("target", target_surface(result, scale=scale),
-               f"target{shown}\n{result.metadata.get('description', '')}"),
+               f"target{shown}, jaw frame\n{result.metadata.get('description', '')}"),
               ("approximation", approximation_surface(result, scale=scale),
                f"approximation, {result.mode} modes\nrelative e_G {100 * result.relative_error:.2g} %")]
     drawn = {}
@@ -134,7 +134,7 @@ def draw_result(plotter, result, by_error: bool = False, scale: float = 1.0) -> 
 
 
 def frame_caption(time: float) -> str:
-    return f"frame at {time:.3f} s (not segmented yet)"
+    return f"frame at {time:.3f} s, jaw frame (not segmented yet)"
 
 
 def draw_frame(plotter, points: np.ndarray, tets: np.ndarray, time: float) -> dict:

@@ -96,6 +96,10 @@ class Session:
     given_rest : (start_s, end_s) the user gave for the rest, or None to find it.
     rest : the :class:`~tonguevis.preprocess.RestChoice` the simulation used (None before).
     notes : what else the user should know about how it was simulated.
+    palate : the palate the motion was simulated against (a PalateSurface or "generic"; None: no contact).
+    shown_palate : the palate the views draw and measure against, in the model frame
+        (:class:`tonguevis.gui.drawing.ShownPalate`: ``palate`` placed as the simulation
+        placed it, else the generic one drawn only), or None.
     """
 
     recording: Recording
@@ -107,6 +111,8 @@ class Session:
     given_rest: tuple[float, float] | None = None
     rest: Any = None
     notes: list[str] = field(default_factory=list)
+    palate: Any = None
+    shown_palate: Any = None
     _signals: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -151,14 +157,18 @@ class Session:
             return list(self.motion.sensor_names)
         return [n for n in TONGUE_NAMES if n in self.recording.sensors]
 
-    def set_motion(self, motion, frames) -> None:
-        """The simulation's results: ``motion``, its drawing ``frames``, the rest it used and its note."""
+    def set_motion(self, motion, frames, palate=None, shown_palate=None) -> None:
+        """The simulation's results: ``motion``, its drawing ``frames``, the rest it used and its note;
+        the ``palate`` it was simulated against and the one the views show (see the class doc)."""
         from tonguevis.workflows import rest_of
 
         from tonguevis.sim.plausibility import plausibility_line
 
         self.motion, self.frames, self.rest = motion, frames, rest_of(motion)
+        self.palate, self.shown_palate = palate, shown_palate
         self.notes = [plausibility_line(motion.metadata)] if "plausibility" in motion.metadata else []
+        if "contact" in motion.metadata:
+            self.notes.append(contact_note(motion))
         self._signals.pop("displacement", None)  # displacements are from this rest now
 
     def _rest(self, names: list[str]) -> dict[str, np.ndarray]:
@@ -183,6 +193,18 @@ class Session:
             xyz = self.recording.sensors[n]
             out[n] = xyz[np.argmax(valid)] if valid.any() else np.zeros(3)
         return out
+
+
+def contact_note(motion) -> str:
+    """The palate-contact figures of a motion simulated against a palate, as one line."""
+    c = motion.metadata["contact"]
+    conflicts = c.get("conflicts", {}).get("by_sensor_index", {})
+    names = ", ".join(f"{motion.sensor_names[int(k)]} ({n} frames)" for k, n in conflicts.items())
+    text = (f"palate: deepest penetration {c['penetration_max_mm']:.2f} mm, {c['frames_in_contact']} frames in contact, "
+            f"largest contact area {c['contact_area_max_mm2']:.0f} mm²")
+    if c.get("palate_raised_mm", 0.0) > 0.05:
+        text += f", palate raised {c['palate_raised_mm']:.1f} mm"
+    return text + (f"; sensors above the palate (they win): {names}" if names else "")
 
 
 def load_session(path: str | os.PathLike, sensor_map: dict | str | None = None, rest=None, audio=None,

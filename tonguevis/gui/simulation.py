@@ -47,8 +47,13 @@ def simulate_session(
     warping: bool = True,
     landmarks: str = "speaker",
     progress: ProgressCallback | None = None,
+    palate=None,
 ) -> Session:
     """Simulate ``session.recording`` and return the session with ``motion``, ``frames`` and ``rest``.
+
+    ``palate`` (a PalateSurface, a palate file or "generic"; None: no contact): the tongue is kept
+    below it, and ``session.shown_palate`` is it placed in the model frame as the simulation
+    placed it (without one, the generic palate, drawn only).
 
     The rest is ``session.given_rest`` when the user gave one, else found as every
     front end finds it (:func:`tonguevis.workflows.simulate_recording`); ``session.rest``
@@ -61,8 +66,33 @@ def simulate_session(
         progress(0, 1000, "building the tongue model")
     if model is None:
         model = build_model(mesh_path)
+    options = {} if palate is None else {"palate": palate}
     motion = simulate_recording(session.recording, model, modes=modes, warping=warping, landmarks=landmarks,
-                                rest=session.given_rest, progress=staged(progress, 0, 2, "simulating"))
+                                rest=session.given_rest, progress=staged(progress, 0, 2, "simulating"), **options)
+    shown = shown_palate(session.recording, motion, model, palate)
     frames = MotionFrames(motion, progress=staged(progress, 1, 2, "reconstructing frames"))
-    session.set_motion(motion, frames)
+    session.set_motion(motion, frames, palate, shown)
     return session
+
+
+def shown_palate(recording, motion, model, palate):
+    """The palate the views draw for ``motion`` (:class:`tonguevis.gui.drawing.ShownPalate`), or None.
+
+    ``palate`` as given to the simulation: placed in the model frame by the same core
+    function the simulation used (:func:`tonguevis.sim.simulate.placed_palate`, with the
+    motion's landmarks and rest); None: the generic palate, drawn and measured only.
+    """
+    from tonguevis.gui.drawing import generic_shown, palate_label, speaker_palate
+
+    if palate is None:
+        return generic_shown(simulated=False)
+    from tonguevis.palate import load_palate
+    from tonguevis.sim.simulate import placed_palate
+    from tonguevis.workflows import rest_of
+
+    surface = load_palate(palate)
+    if surface.metadata.get("generic"):
+        return generic_shown(simulated=True)
+    placed, raised = placed_palate(recording, surface, model, landmarks=motion.metadata.get("landmarks", "speaker"),
+                                   rest_interval=rest_of(motion))
+    return speaker_palate(placed, palate_label(surface), simulated=True, raised_mm=1e3 * raised)

@@ -54,13 +54,20 @@ def frame_times(start: float, end: float, fps: float) -> np.ndarray:
 
 def export_video(session, out, start: float | None = None, end: float | None = None, fps: int = VIDEO_FPS,
                  size: tuple[int, int] = VIDEO_SIZE, mode: str = "displacement",
-                 progress: ProgressCallback | None = None) -> Path:
-    """Render ``session`` (simulated) from ``start`` to ``end`` seconds into an MP4 at ``out``."""
+                 progress: ProgressCallback | None = None, frame: str = "head") -> Path:
+    """Render ``session`` (simulated) from ``start`` to ``end`` seconds into an MP4 at ``out``.
+
+    frame : "head" (default: the tongue and jaw carried by the jaw's motion, the palate
+    fixed) or "jaw" (the jaw's motion removed); every picture says which.
+    """
     import pyvista as pv
 
+    from tonguevis.gui.drawing import draw_frame
     from tonguevis.gui.scene import TongueScene
-    from tonguevis.gui.view3d import context_surfaces, frame_text, scene_titles, surface_faces
+    from tonguevis.gui.view3d import frame_text, scene_setup, surface_faces
+    from tonguevis.sim.reference import check_reference
 
+    check_reference(frame)
     frames = session.frames
     if frames is None:
         raise ExportError("nothing to export: the recording has not been simulated", session.path)
@@ -74,8 +81,7 @@ def export_video(session, out, start: float | None = None, end: float | None = N
     plotter = pv.Plotter(shape="1|3", splitting_position=0.72, off_screen=True, window_size=(width, height))
     scene = TongueScene(plotter)
     motion = frames.motion
-    scene.build(frames.points[0], surface_faces(motion.model), len(motion.sensor_names), context_surfaces(),
-                clim=frames.clim, titles=scene_titles())
+    scene.build(frames.points[0], surface_faces(motion.model), **scene_setup(session))
     scene.set_mode(mode)
     times = frame_times(t0, t1, fps)
     with tempfile.TemporaryDirectory(prefix="tonguevis-video-") as tmp:
@@ -98,9 +104,11 @@ def export_video(session, out, start: float | None = None, end: float | None = N
         try:
             for k, t in enumerate(times):
                 i = frames.frame_at(t)
-                scalars = frames.scalars[mode][i] if mode in frames.scalars else None
-                scene.update(frames.points[i], scalars, frames.sensor_points[i], frames.targets[i],
-                             frame_text(frames, i, session.productions), render=False)
+                drawn = draw_frame(session, i, frame, mode)
+                scene.update(drawn.points, drawn.scalars, drawn.sensor_points, drawn.targets,
+                             frame_text(frames, i, session.productions, drawn.caption), render=False,
+                             context_offsets=drawn.context_offsets)
+                scene.set_view_labels(f" · {drawn.caption.split(':')[0]}")
                 image = plotter.screenshot(None, return_img=True, window_size=(width, height))
                 process.stdin.write(np.ascontiguousarray(image[:, :, :3]).tobytes())
                 report(progress, k + 1, len(times), "rendering video frames")
@@ -134,10 +142,18 @@ def _copy_replace(source: Path, target: Path) -> None:
     os.replace(tmp, target)
 
 
-def export_vtk_series(session, folder, progress: ProgressCallback | None = None) -> Path:
-    """Write every frame as ``frame_XXXXX.vtu`` (tets, displacement in m, energy density in
-    J/m³) and ``motion.pvd`` (the series, with times in seconds) into ``folder``."""
+def export_vtk_series(session, folder, progress: ProgressCallback | None = None, frame: str = "head") -> Path:
+    """Write every frame as ``frame_XXXXX.vtu`` (tets; point data displacement_m from rest in
+    ``frame``, deformation_m the tongue's own (jaw frame), energy density in J/m³; field data
+    reference_frame, a sentence, and jaw_offset_m) and ``motion.pvd`` (the series, with times
+    in seconds) into ``folder``, with README.txt and jaw_offset.csv saying which frame.
+
+    frame : "head" (default: the tongue carried by the jaw's translation, the palate's frame)
+    or "jaw" (as simulated).
+    """
     import pyvista as pv
+
+    from tonguevis.sim.reference import describe, jaw_moves, tongue_offset, write_export_notes
 
     frames = session.frames
     if frames is None:
@@ -148,11 +164,17 @@ def export_vtk_series(session, folder, progress: ProgressCallback | None = None)
     cells = np.hstack([np.full((mesh.n_tets, 1), 4), mesh.tets]).ravel()
     grid = pv.UnstructuredGrid(cells, np.full(mesh.n_tets, pv.CellType.TETRA, dtype=np.uint8),
                                np.asarray(mesh.points, dtype=np.float64))
+    offset = tongue_offset(frames.motion, frame)
+    jaw = tongue_offset(frames.motion, "head")
+    caption = describe(frame, jaw_moves(frames.motion))
     entries = []
     for i, t in enumerate(frames.times):
-        grid.points = frames.points[i].astype(np.float64)
-        grid.point_data["displacement_m"] = frames.points[i] - mesh.points
+        grid.points = frames.points[i].astype(np.float64) + offset[i]
+        grid.point_data["displacement_m"] = grid.points - mesh.points
+        grid.point_data["deformation_m"] = frames.points[i] - mesh.points
         grid.point_data["energy_density_J_m3"] = frames.scalars["energy"][i]
+        grid.field_data["reference_frame"] = [caption]
+        grid.field_data["jaw_offset_m"] = jaw[i]
         name = f"frame_{i:05d}.vtu"
         tmp = folder / f".{name}.partial.vtu"
         grid.save(tmp)
@@ -165,5 +187,6 @@ def export_vtk_series(session, folder, progress: ProgressCallback | None = None)
     tmp = folder / ".motion.pvd.partial"
     tmp.write_text(pvd, encoding="utf-8")
     os.replace(tmp, folder / "motion.pvd")
+    write_export_notes(folder, frames.motion, frame, suffix="_m")
     report(progress, frames.n_frames, frames.n_frames, "VTK series written")
     return folder / "motion.pvd"

@@ -5,19 +5,23 @@ from __future__ import annotations
 import logging
 
 import numpy as np
+from PySide6.QtCore import Signal
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
-from tonguevis.appstate import COLOR_MODES, AppState, interval_at
+from tonguevis.appstate import COLOR_MODES, REFERENCE_FRAMES, AppState, interval_at
+from tonguevis.gui.drawing import CONTACT_RANGE_MM, contact_line, draw_frame
 from tonguevis.gui.frames import SCALARS
-from tonguevis.gui.scene import TongueScene
+from tonguevis.gui.scene import SPEAKER_PALATE_STYLE, TongueScene
 
 log = logging.getLogger("tonguevis")
 COLOUR_LABELS = {"displacement": "displacement magnitude", "energy": "elastic energy density",
-                 "plain": "plain"}
+                 "contact": "distance to palate", "plain": "plain"}
+REFERENCE_LABELS = {"head": "head frame (jaw moving, palate fixed)", "jaw": "jaw frame (jaw's motion removed)"}
 
 
-def context_surfaces() -> dict:
-    """Jaw and palate surfaces shipped in meshes/ (empty if absent or unreadable)."""
+def context_surfaces(palate=None) -> dict:
+    """Jaw and palate surfaces shipped in meshes/ (empty if absent or unreadable); ``palate``
+    (a :class:`~tonguevis.gui.drawing.ShownPalate`) replaces the shipped palate."""
     import pyvista as pv
 
     from tonguevis.paths import MESH_DIR
@@ -38,6 +42,10 @@ def context_surfaces() -> dict:
 
             out[name] = pv.PolyData(np.asarray(points, dtype=np.float32), faces_to_vtk(faces))
             break
+    if palate is not None and not palate.generic:
+        from tonguevis.gui.scene import faces_to_vtk
+
+        out["palate"] = pv.PolyData(np.asarray(palate.points, dtype=np.float32), faces_to_vtk(palate.faces))
     return out
 
 
@@ -58,10 +66,24 @@ def surface_faces(model) -> np.ndarray:
 
 
 def scene_titles() -> dict[str, str]:
-    return {name: f"{label}\n({unit})" for name, (label, unit) in SCALARS.items()}
+    titles = {name: f"{label}\n({unit})" for name, (label, unit) in SCALARS.items()}
+    titles["contact"] = "distance to\npalate (mm)"
+    return titles
 
 
-def frame_text(frames, i: int, productions) -> str:
+def scene_setup(session) -> dict:
+    """The keyword arguments of :meth:`TongueScene.build` for a simulated session (window and video alike)."""
+    frames = session.frames
+    palate = getattr(session, "shown_palate", None)
+    clim = dict(frames.clim)
+    if palate is not None:
+        clim["contact"] = CONTACT_RANGE_MM
+    style = {} if palate is None or palate.generic else {"palate": SPEAKER_PALATE_STYLE}
+    return dict(n_sensors=len(frames.motion.sensor_names), context=context_surfaces(palate), clim=clim,
+                titles=scene_titles(), context_style=style)
+
+
+def frame_text(frames, i: int, productions, caption: str | None = None) -> str:
     t = frames.times[i]
     text = f"t = {t:.3f} s   frame {i + 1}/{frames.n_frames}"
     production = interval_at(productions, t)
@@ -70,10 +92,17 @@ def frame_text(frames, i: int, productions) -> str:
     residual = getattr(frames.motion, "sensor_residual", None)
     if residual is not None and len(residual):
         text += f"\nsensor residual max {1e3 * float(np.nanmax(residual[i])):.2f} mm"
+    if caption:
+        text += f"\n{caption}"
     return text
 
 
 class View3D(QWidget):
+    """The four 3D views.  ``described(str)`` says, at each new frame, which frame of reference
+    they show and the palate contact there (the window's status bar shows it)."""
+
+    described = Signal(str)
+
     def __init__(self, state: AppState, parent=None):
         super().__init__(parent)
         from pyvistaqt import QtInteractor
@@ -88,11 +117,17 @@ class View3D(QWidget):
         self.colour = QComboBox()
         for mode in COLOR_MODES:
             self.colour.addItem(COLOUR_LABELS[mode], mode)
+        self.reference = QComboBox()
+        for frame in REFERENCE_FRAMES:
+            self.reference.addItem(REFERENCE_LABELS[frame], frame)
+        self.reference.setToolTip("Head frame: the tongue and the jaw move with the jaw, the palate is fixed (as seen\n"
+                                  "from outside). Jaw frame: the jaw's motion removed, as the tongue is simulated.")
         self.reset = QPushButton("Reset camera")
         self.message = QLabel("")
         bar = QHBoxLayout()
         bar.addWidget(QLabel("Colour by"))
         bar.addWidget(self.colour)
+        bar.addWidget(self.reference)
         bar.addWidget(self.reset)
         bar.addWidget(self.message, 1)
         layout = QVBoxLayout(self)
@@ -100,10 +135,15 @@ class View3D(QWidget):
         layout.addLayout(bar)
         layout.addWidget(self.plotter.interactor, 1)
         self.colour.currentIndexChanged.connect(lambda _i: state.set_color(self.colour.currentData(), self))
+        self.reference.setCurrentIndex(REFERENCE_FRAMES.index(state.reference))
+        self.reference.currentIndexChanged.connect(
+            lambda _i: state.set_reference(self.reference.currentData(), self))
         self.reset.clicked.connect(self.reset_camera)
         self.cursor_time = state.time
+        self.drawn = None  # the FrameDrawing shown (tests read it)
         state.subscribe("time", self._on_time)
         state.subscribe("color", self._on_colour)
+        state.subscribe("reference", self._on_reference)
 
     def set_session(self, session) -> None:
         self.session = session
@@ -113,11 +153,12 @@ class View3D(QWidget):
             self.message.setText("simulating…" if session is not None else "")
             return
         model = frames.motion.model
-        self.scene.build(frames.points[0], surface_faces(model), len(frames.motion.sensor_names),
-                         context_surfaces(), clim=frames.clim, titles=scene_titles())
+        self.scene.build(frames.points[0], surface_faces(model), **scene_setup(session))
         self.scene.set_mode(self.state.color)
+        palate = getattr(session, "shown_palate", None)
         self.message.setText(f"{model.mesh.n_nodes} nodes, {frames.motion.q.shape[1]} modes, "
-                             f"sensors {', '.join(frames.motion.sensor_names)}")
+                             f"sensors {', '.join(frames.motion.sensor_names)}"
+                             + (f"; {palate.label}" if palate is not None else ""))
         self.show_time(self.state.time)
 
     def _on_time(self, event) -> None:
@@ -132,10 +173,14 @@ class View3D(QWidget):
         if i == self.frame:
             return
         self.frame = i
-        mode = self.state.color
-        scalars = frames.scalars[mode][i] if mode in frames.scalars else None
-        self.scene.update(frames.points[i], scalars, frames.sensor_points[i], frames.targets[i],
-                          frame_text(frames, i, self.session.productions), render=False)
+        reference = self.state.reference
+        drawn = draw_frame(self.session, i, reference, self.state.color)
+        self.drawn = drawn
+        self.scene.update(drawn.points, drawn.scalars, drawn.sensor_points, drawn.targets,
+                          frame_text(frames, i, self.session.productions, drawn.caption), render=False,
+                          context_offsets=drawn.context_offsets)
+        self.scene.set_view_labels(f" · {drawn.caption.split(':')[0]}")
+        self.described.emit(contact_line(self.session, i, reference))
         # One render per frame: the widget's paint renders the scene (pyvistaqt's paintGL
         # always renders), so asking for a repaint instead of render() avoids a second one.
         self.plotter.interactor.update()
@@ -146,6 +191,15 @@ class View3D(QWidget):
         if index != self.colour.currentIndex():
             self.colour.setCurrentIndex(index)
         self.scene.set_mode(event.value)
+        self.frame = -1
+        self.show_time(self.state.time)
+
+    def _on_reference(self, event) -> None:
+        index = self.reference.findData(event.value)
+        if index != self.reference.currentIndex():
+            self.reference.blockSignals(True)
+            self.reference.setCurrentIndex(index)
+            self.reference.blockSignals(False)
         self.frame = -1
         self.show_time(self.state.time)
 

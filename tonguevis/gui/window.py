@@ -7,8 +7,8 @@ import os
 from pathlib import Path
 
 from PySide6.QtCore import QSettings, Qt, Signal
-from PySide6.QtWidgets import (QFileDialog, QMainWindow, QProgressDialog, QSplitter, QTabWidget, QVBoxLayout,
-                               QWidget)
+from PySide6.QtWidgets import (QFileDialog, QLabel, QMainWindow, QProgressDialog, QSplitter, QTabWidget,
+                               QVBoxLayout, QWidget)
 
 from tonguevis.appstate import AppState
 from tonguevis.errors import TonguevisError
@@ -16,6 +16,8 @@ from tonguevis.gui.audio_panel import AudioPlot
 from tonguevis.gui.dialogs import SensorMapDialog, error_box
 from tonguevis.gui.menus import MenusMixin
 from tonguevis.gui.modal_tab import ModalTab
+from tonguevis.gui.palate_actions import NO_PALATE, PalateMixin
+from tonguevis.gui.palate_panel import PalatePanel
 from tonguevis.gui.playback import PlaybackController
 from tonguevis.gui.rest_dialog import RestMixin
 from tonguevis.gui.sensor_panel import SensorPanel
@@ -40,14 +42,15 @@ def register_tab_factory(title: str, factory) -> None:
     TAB_FACTORIES.append((title, factory))
 
 
-class MainWindow(MenusMixin, RestMixin, QMainWindow):
-    """The tonguevis window.  ``modes`` and ``mesh_path`` configure the simulation."""
+class MainWindow(MenusMixin, RestMixin, PalateMixin, QMainWindow):
+    """The tonguevis window.  ``modes``, ``mesh_path`` and ``palate`` (None: no contact; "generic";
+    a speaker's PalateSurface or palate file) configure the simulation."""
 
     session_changed = Signal(object)
     simulation_finished = Signal(bool)  # True on success
 
     def __init__(self, state: AppState | None = None, settings: QSettings | None = None, modes: int = 100,
-                 mesh_path: str | os.PathLike | None = None, warping: bool = True):
+                 mesh_path: str | os.PathLike | None = None, warping: bool = True, palate=None):
         super().__init__()
         self.setWindowTitle("tonguevis")
         self.resize(1500, 950)
@@ -56,6 +59,7 @@ class MainWindow(MenusMixin, RestMixin, QMainWindow):
         self.settings = settings or QSettings("tonguevis", "tonguevis")
         self.modes, self.mesh_path, self.warping = modes, mesh_path, warping
         self.landmarks = "speaker"  # sensor nodes: the speaker's layout ("rule": the paper's placement)
+        self.palate = palate
         self.session: Session | None = None
         self.model = None
         self.model_key = None
@@ -68,6 +72,12 @@ class MainWindow(MenusMixin, RestMixin, QMainWindow):
         self.playback = PlaybackController(self.state, self)
         self.playback.status.connect(lambda text: self.statusBar().showMessage(text))
         self.statusBar().showMessage("Open a recording (File ▸ Open, or drop a file here)")
+        self.frame_status = QLabel("")  # the views' frame of reference and the palate contact at the cursor
+        self.frame_status.setStyleSheet("QLabel { border-left: 1px solid #b0b0b0; padding-left: 6px; }")
+        self.frame_status.setToolTip("the 3D views' frame of reference (View ▸ Head frame / Jaw frame) and, at the "
+                                     "cursor, the palate's penetration and contact area")
+        self.statusBar().addPermanentWidget(self.frame_status)
+        self.view3d.described.connect(self.frame_status.setText)
         self._build_rest_status()
         for title, factory in TAB_FACTORIES:
             self.register_tab(title, factory(self.state, self))
@@ -77,9 +87,11 @@ class MainWindow(MenusMixin, RestMixin, QMainWindow):
         self.view3d = View3D(self.state, self)
         self.sensor_panel = SensorPanel(self.state, self)
         self.modal_tab = ModalTab(self.state, self)
+        self.palate_panel = PalatePanel(self.state, self)
         self.tabs = QTabWidget()
         self.tabs.addTab(self.sensor_panel, "Sensors")
         self.tabs.addTab(self.modal_tab, "Modal q(t)")
+        self.tabs.addTab(self.palate_panel, "Palate")
         self.audio = AudioPlot(self.state, self)
         self.transport = TransportBar(self.state, self)
         top = QSplitter(Qt.Orientation.Horizontal)
@@ -96,7 +108,7 @@ class MainWindow(MenusMixin, RestMixin, QMainWindow):
         layout.addWidget(vertical, 1)
         layout.addWidget(self.transport)
         self.setCentralWidget(central)
-        self.session_widgets = [self.view3d, self.sensor_panel, self.modal_tab]
+        self.session_widgets = [self.view3d, self.sensor_panel, self.modal_tab, self.palate_panel]
 
     def register_tab(self, title: str, widget: QWidget) -> int:
         """Append a tab beside Sensors and Modal q(t); returns its index."""
@@ -110,7 +122,7 @@ class MainWindow(MenusMixin, RestMixin, QMainWindow):
     def time_views(self) -> dict[str, object]:
         """Every view with a time cursor (name -> object with ``cursor_time``)."""
         return {"3d": self.view3d, "sensors": self.sensor_panel, "modal": self.modal_tab,
-                "audio": self.audio, "transport": self.transport}
+                "palate": self.palate_panel, "audio": self.audio, "transport": self.transport}
 
     # -- errors ---------------------------------------------------------------
     def show_error(self, title: str, message: str, path=None) -> None:
@@ -236,17 +248,20 @@ class MainWindow(MenusMixin, RestMixin, QMainWindow):
         self.session_changed.emit(self.session)
 
     # -- simulation in a worker thread --------------------------------------------
-    def _simulate(self, session: Session) -> None:
+    def _simulate(self, session: Session, palate=NO_PALATE) -> None:
+        """Simulate ``session`` in the worker, against ``palate`` (default: the window's)."""
         from tonguevis.gui.simulation import build_model, simulate_session
 
         self._cancel_worker()
         window = self
+        palate = self.palate if palate is NO_PALATE else palate
+        self._simulating_palate = palate
 
         def work(progress):
             if window.model is None:
                 window.model = build_model(window.mesh_path)
             return simulate_session(session, model=window.model, modes=window.modes, warping=window.warping,
-                                    landmarks=window.landmarks, progress=progress)
+                                    landmarks=window.landmarks, progress=progress, palate=palate)
 
         self.worker = Worker(work, self)
         dialog = QProgressDialog(f"Simulating {session.name}…", "Cancel", 0, 1000, self)
@@ -261,7 +276,8 @@ class MainWindow(MenusMixin, RestMixin, QMainWindow):
         self.worker.failed.connect(lambda message: self._on_sim_failed(session, message))
         self.worker.cancelled.connect(self._on_sim_cancelled)
         self.worker.finished.connect(dialog.reset)
-        self.statusBar().showMessage(f"simulating {session.name} with {self.modes} modes…")
+        against = "" if palate is None else f" against the {self._palate_name(palate)}"
+        self.statusBar().showMessage(f"simulating {session.name} with {self.modes} modes{against}…")
         self.worker.start()
 
     def _on_progress(self, done: int, total: int, message: str) -> None:
@@ -273,6 +289,7 @@ class MainWindow(MenusMixin, RestMixin, QMainWindow):
     def _on_simulated(self, session: Session) -> None:
         if session is not self.session:
             return  # a newer recording was opened meanwhile
+        self.palate = session.palate  # a palate chosen becomes the window's once it simulated
         start, end, period = session.time_range
         self.state.set_range(start, end, period, self)
         self.show_rest(session)
@@ -285,6 +302,11 @@ class MainWindow(MenusMixin, RestMixin, QMainWindow):
         self.simulation_finished.emit(True)
 
     def _on_sim_failed(self, session: Session, message: str) -> None:
+        palate = getattr(self, "_simulating_palate", None)
+        if palate is not None:
+            kept = "" if session.motion is None else " The views keep the previous simulation."
+            message += (f"\n\n(simulated against the {self._palate_name(palate)}: File ▸ No palate simulates "
+                        f"without contact.{kept})")
         self.show_error("Simulation failed", message, session.path)
         self.simulation_finished.emit(False)
 
@@ -332,6 +354,6 @@ class MainWindow(MenusMixin, RestMixin, QMainWindow):
         self.playback.shutdown()
         self._cancel_worker()
         self.view3d.close_view()
-        for plot in (self.audio, self.sensor_panel.plot, self.modal_tab.map):
+        for plot in (self.audio, self.sensor_panel.plot, self.modal_tab.map, self.palate_panel):
             plot.close_plot()
         super().closeEvent(event)

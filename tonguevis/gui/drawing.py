@@ -1,0 +1,240 @@
+"""What the 3D scene draws for one frame, in the head or the jaw frame, against which palate (no Qt).
+
+The tongue is simulated in the jaw frame; :class:`~tonguevis.gui.frames.MotionFrames`
+holds it so.  :func:`draw_frame` turns one frame into what the scene shows in
+the chosen frame of reference (:mod:`tonguevis.sim.reference`): in the head frame
+the tongue, its sensors and the jaw surface move by the jaw's translation and the
+palate stays; in the jaw frame the tongue and jaw stay and the palate moves by
+minus the translation.  The tongue-palate geometry, and so the contact colouring,
+is the same in both.  The window's 3D views and the video export share it.
+
+:class:`ShownPalate` is the palate the views draw and measure against, in the
+model frame: the speaker's, placed exactly as the simulation placed it
+(:func:`tonguevis.sim.simulate.placed_palate`), or the shipped generic one.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tonguevis.sim.reference import describe, jaw_moves
+
+log = logging.getLogger("tonguevis")
+
+#: Colour range of the "contact" mode: distance to the palate in mm (0 = touching).
+CONTACT_RANGE_MM = (0.0, 10.0)
+#: A node this close to the palate touches it (the contact area of ``motion.contact_area``).
+TOUCH_MM = 0.3
+#: Half-width of the band around the tongue's midline whose dorsal nodes make the midline profile.
+MIDLINE_BAND = 2e-3  # m
+#: Bins of the midline profile along the tongue, mm.
+MIDLINE_BIN_MM = 2.0
+
+
+@dataclass
+class ShownPalate:
+    """A palate the views draw and measure against, in the model frame.
+
+    surface : :class:`~tonguevis.palate.PalateSurface` (model frame) for distances.
+    points : (k, 3) float32 and faces : (f, 3) int, the mesh drawn.
+    label : what it is, for captions ("generic palate", "speaker's palate osn12.stl").
+    simulated : whether the motion was simulated against it (contact kept).
+    raised_mm : how far the placement raised it to lie above the sensors.
+    """
+
+    surface: object
+    points: np.ndarray
+    faces: np.ndarray
+    label: str
+    simulated: bool = False
+    raised_mm: float = 0.0
+    generic: bool = False
+
+    def clearance_mm(self, points: np.ndarray) -> np.ndarray:
+        """(k,) float32 distance (mm) of head-frame ``points`` (k, 3) below the palate; negative inside, NaN off it."""
+        gap, _ = self.surface.clearance(np.asarray(points, dtype=np.float64))
+        return (1e3 * gap).astype(np.float32)
+
+    def describe(self) -> str:
+        text = self.label + (" (contact kept in the simulation)" if self.simulated else " (drawn only: simulated "
+                                                                                          "without contact)")
+        if self.raised_mm > 0.05:
+            text += f", raised {self.raised_mm:.1f} mm above where the sensors went"
+        return text
+
+
+def speaker_palate(surface, label: str, simulated: bool = True, raised_mm: float = 0.0) -> ShownPalate:
+    """A placed palate (model frame) drawn as its own height field's triangles."""
+    points, faces = surface.triangles()
+    return ShownPalate(surface, np.asarray(points, dtype=np.float32), np.asarray(faces), label, simulated,
+                       float(raised_mm), bool(surface.metadata.get("generic", False)))
+
+
+def generic_shown(simulated: bool = False) -> ShownPalate | None:
+    """The shipped generic palate (model frame): its own mesh drawn, its height field measured; None if absent."""
+    from tonguevis.palate import generic_palate
+
+    from tonguevis.mesh.default import context_surface_path
+    from tonguevis.mesh.surfaces import read_surface
+
+    try:
+        surface = generic_palate()
+        points, faces = read_surface(context_surface_path("palate"))
+    except Exception as exc:  # context is optional: never block the app on it
+        log.warning("generic palate not shown: %s", exc)
+        return None
+    return ShownPalate(surface, np.asarray(points, dtype=np.float32), np.asarray(faces), "generic palate",
+                       simulated, 0.0, True)
+
+
+def palate_label(spec) -> str:
+    """A caption for what the user chose: "generic palate" or "speaker's palate NAME"."""
+    from pathlib import Path
+
+    from tonguevis.palate import PalateSurface
+
+    if spec is None or str(spec) == "generic":
+        return "generic palate"
+    if isinstance(spec, PalateSurface):
+        if spec.metadata.get("generic"):
+            return "generic palate"
+        sources = spec.metadata.get("file") or spec.metadata.get("source") or []
+        name = Path(sources[0] if isinstance(sources, list) and sources else str(sources)).name if sources else ""
+        return f"speaker's palate {name}".rstrip()
+    return f"speaker's palate {Path(spec).name}"
+
+
+class MidlineProfile:
+    """The tongue's dorsal midline: nodes within :data:`MIDLINE_BAND` of its mid-plane, by distance behind the tip.
+
+    ``position_mm`` (b,): centre of each :data:`MIDLINE_BIN_MM` bin, mm behind the tongue tip
+    at rest (along x); ``nodes`` the mesh nodes, ``bin_of`` each node's bin.
+    """
+
+    def __init__(self, model):
+        points = np.asarray(model.mesh.points, dtype=np.float64)
+        dorsal = np.asarray(getattr(model, "dorsal_nodes", np.arange(len(points))))
+        mid = float(np.median(points[:, 1]))
+        band = MIDLINE_BAND
+        nodes = dorsal[np.abs(points[dorsal, 1] - mid) < band]
+        while len(nodes) < 8 and band < 4 * MIDLINE_BAND:  # a coarse mesh: widen the band
+            band *= 1.5
+            nodes = dorsal[np.abs(points[dorsal, 1] - mid) < band]
+        near_mid = np.abs(points[:, 1] - mid) < band
+        tip = float(points[near_mid, 0].max()) if near_mid.any() else float(points[:, 0].max())
+        behind = 1e3 * (tip - points[nodes, 0])
+        order = np.argsort(behind, kind="stable")
+        self.nodes = nodes[order]
+        bins = np.floor(behind[order] / MIDLINE_BIN_MM).astype(np.int64)
+        self.bins, self.bin_of = np.unique(bins, return_inverse=True)
+        self.bin_of = self.bin_of.ravel()
+        self.position_mm = (self.bins + 0.5) * MIDLINE_BIN_MM
+        self.band_mm = 1e3 * band
+
+    def distances(self, palate: ShownPalate, head_points: np.ndarray) -> np.ndarray:
+        """(b,) mm: the smallest distance to the palate in each bin (NaN where no palate lies above)."""
+        gap = palate.clearance_mm(np.asarray(head_points)[self.nodes]).astype(np.float64)
+        out = np.full(len(self.bins), np.inf)
+        np.minimum.at(out, self.bin_of, np.where(np.isfinite(gap), gap, np.inf))
+        return np.where(np.isfinite(out), out, np.nan)
+
+
+@dataclass
+class FrameDrawing:
+    """One frame as the scene draws it (float32, metres, in ``reference``)."""
+
+    index: int
+    reference: str
+    points: np.ndarray
+    scalars: np.ndarray | None
+    sensor_points: np.ndarray
+    targets: np.ndarray
+    context_offsets: dict = field(default_factory=dict)
+    caption: str = ""
+
+
+def jaw_offset_at(motion, i: int) -> np.ndarray:
+    """(3,) float32 the jaw's translation at frame ``i`` (zeros without jaw motion)."""
+    if not jaw_moves(motion):
+        return np.zeros(3, dtype=np.float32)
+    return np.asarray(motion.jaw_offset[i], dtype=np.float32)
+
+
+def head_points(frames, i: int) -> np.ndarray:
+    """(n, 3) float32 the tongue's nodes at frame ``i`` in the head frame (where the palate is)."""
+    return frames.points[i] + jaw_offset_at(frames.motion, i)
+
+
+def draw_frame(session, i: int, reference: str = "head", mode: str = "displacement") -> FrameDrawing:
+    """Frame ``i`` of the session's motion in ``reference`` ("head" or "jaw"), coloured by ``mode``.
+
+    "contact" colours by the distance (mm) to the session's palate, measured in the
+    head frame (the same in both frames); the other modes come from ``session.frames``.
+    """
+    from tonguevis.sim.reference import check_reference
+
+    check_reference(reference)
+    frames, motion = session.frames, session.frames.motion
+    jaw = jaw_offset_at(motion, i)
+    tongue = jaw if reference == "head" else np.zeros(3, dtype=np.float32)
+    palate = getattr(session, "shown_palate", None)
+    if mode == "contact":
+        scalars = palate.clearance_mm(frames.points[i] + jaw) if palate is not None else None
+    else:
+        scalars = frames.scalars[mode][i] if mode in frames.scalars else None
+    offsets = {"jaw": tongue.astype(np.float64), "palate": (tongue - jaw).astype(np.float64)}
+    caption = describe(reference, jaw_moves(motion))
+    return FrameDrawing(i, reference, frames.points[i] + tongue, scalars, frames.sensor_points[i] + tongue,
+                        frames.targets[i] + tongue, offsets, caption)
+
+
+def contact_at(session, i: int) -> dict:
+    """What the status bar says about the palate at frame ``i``: {"penetration_mm", "contact_area_mm2"
+    (None when the motion was simulated without contact), "closest_mm" (the upper surface's closest
+    approach, negative inside; None where no palate lies above), "sensors_above" (the driving sensors
+    measured above the palate: there the sensor wins, and the tongue around it may be inside)}."""
+    motion = session.frames.motion
+    out = {"penetration_mm": None, "contact_area_mm2": None, "closest_mm": None, "sensors_above": []}
+    if getattr(motion, "penetration", None) is not None:
+        out["penetration_mm"] = float(1e3 * motion.penetration[i])
+    if getattr(motion, "contact_area", None) is not None:
+        out["contact_area_mm2"] = float(1e6 * motion.contact_area[i])
+    palate = getattr(session, "shown_palate", None)
+    if palate is not None:
+        frames = session.frames
+        nodes = _dorsal(session)
+        gap = palate.clearance_mm(head_points(frames, i)[nodes])
+        out["closest_mm"] = float(np.nanmin(gap)) if np.isfinite(gap).any() else None
+        sensors = palate.clearance_mm(frames.targets[i] + jaw_offset_at(motion, i))  # the measured positions
+        out["sensors_above"] = [name for name, g in zip(motion.sensor_names, sensors) if g < 0]
+    return out
+
+
+def contact_line(session, i: int, reference: str) -> str:
+    """One status-bar line: the frame of reference, the palate, penetration and contact area at frame ``i``."""
+    motion = session.frames.motion
+    parts = [describe(reference, jaw_moves(motion)).split(":")[0]]
+    palate = getattr(session, "shown_palate", None)
+    if palate is None:
+        return parts[0] + "; no palate"
+    figures = contact_at(session, i)
+    parts.append(palate.label)
+    if figures["penetration_mm"] is not None:
+        parts.append(f"penetration {figures['penetration_mm']:.2f} mm, contact area {figures['contact_area_mm2']:.0f} mm²")
+    else:
+        parts.append("no contact simulated")
+    if figures["closest_mm"] is not None:
+        parts.append(f"closest {figures['closest_mm']:.1f} mm")
+    if figures["sensors_above"]:
+        parts.append(f"{', '.join(figures['sensors_above'])} above the palate (sensors win)")
+    return " · ".join(parts)
+
+
+def _dorsal(session) -> np.ndarray:
+    """The model's upward-facing surface nodes (all nodes for a model that does not know them)."""
+    model = session.frames.motion.model
+    nodes = getattr(model, "dorsal_nodes", None)
+    return np.arange(model.mesh.n_nodes) if nodes is None else np.asarray(nodes)
