@@ -147,6 +147,13 @@ def test_frame_of_reference_is_head_by_default_and_checked():
     assert [(e.value, e.source) for e in events] == [("jaw", "menu")] and state.reference == "jaw"
 
 
+def test_the_commands_offer_the_apps_colourings():
+    from tonguevis.appstate import COLOR_MODES
+    from tonguevis.cli.view import COLOR_CHOICES
+
+    assert COLOR_CHOICES == COLOR_MODES
+
+
 def test_interval_at():
     intervals = [(0.0, 1.0), (1.5, 2.0)]
     assert interval_at(intervals, 1.7) == (1.5, 2.0)

@@ -156,9 +156,6 @@ def test_a_dropout_does_not_change_the_figures_much(base, tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="solver (tonguevis/sim): the frame where a handed-over sensor is released "
-                   "runs away and is recovered (previous shape kept, velocity reset), on the demo as on real "
-                   "/ka/ and /ta/; see docs/dropouts.md")
 def test_releasing_a_handed_over_sensor_flags_no_frame(base):
     from tonguevis.sim import TongueModel
     from tonguevis.workflows import simulate_recording

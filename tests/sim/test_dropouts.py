@@ -8,7 +8,7 @@ import pytest
 from tests.sim._models import bar_model, sensor_rows
 from tonguevis.analysis.quasistatic import linear_static
 from tonguevis.sim.constrained import compliant_targets, point_stiffness
-from tonguevis.sim.dropouts import blend_targets, bridge_short_gaps, handover
+from tonguevis.sim.dropouts import bridge_short_gaps, engagement, spring_compliance
 
 
 def test_compliant_targets_are_the_compliant_static_solution():
@@ -44,23 +44,45 @@ def test_short_gaps_are_bridged_long_ones_and_edges_are_not():
     assert np.isnan(out[50:70, 0]).all() and np.isnan(out[:3, 1]).all()
 
 
-def test_a_released_target_moves_onto_the_prediction_and_comes_back():
+def test_a_lost_sensors_spring_weakens_and_grows_back():
     valid = np.ones((60, 1), dtype=bool)
     valid[20:40] = False
-    trust, acting = handover(valid, rate=100.0, ramp_s=0.05)  # 5-frame ramps
-    t, a = trust[:, 0], acting[:, 0]
-    assert np.all(t[:20] == 1) and np.all(t[25:40] == 0) and np.all(t[45:] == 1)
-    assert np.all(np.diff(t[19:26]) <= 0) and np.all(a[20:25]) and not a[25:40].any()  # handed over, let go
-    assert np.all(np.diff(t[39:45]) > 0) and np.all(a[40:])  # back over 5 frames
-    measured = np.zeros((60, 1, 3))
-    measured[:, 0, 2] = np.arange(60) * 1e-4
-    measured[20:40] = np.nan
-    predicted = np.full((60, 1, 3), -1e-3)
-    out = blend_targets(measured, predicted, trust, acting)
-    np.testing.assert_allclose(out[20, 0, 2], t[20] * 19e-4 + (1 - t[20]) * -1e-3)  # last measurement held
-    assert np.isnan(out[25:40]).all()
-    np.testing.assert_allclose(out[40, 0, 2], t[40] * 40e-4 + (1 - t[40]) * -1e-3)
-    np.testing.assert_allclose(out[:20], measured[:20])
+    weight, source = engagement(valid, rate=100.0, ramp_s=0.05)  # 5-frame ramps
+    w = weight[:, 0]
+    assert np.all(w[:20] == 1) and np.all(w[25:40] == 0) and np.all(w[45:] == 1)
+    assert np.all(np.diff(w[19:26]) < 0) and np.all(np.diff(w[39:45]) > 0) and 0 < w[40] < w[44] < 1
+    assert np.all(source[20:25, 0] == 19) and np.all(source[40:, 0] == np.arange(40, 60))  # anchored at the last
+    comp = spring_compliance(weight, base=0.0, ramp_stiffness=10.0)
+    assert np.all(comp[:20] == 0) and np.isinf(comp[25:40]).all()
+    assert np.all(np.diff(comp[19:25, 0]) > 0) and np.all(np.diff(comp[40:46, 0]) < 0)
+
+
+def test_a_sensor_coming_back_moves_from_the_prediction_onto_its_measurement():
+    """The first frame back, the returning sensor's target sits near where the others put its node."""
+    from tonguevis.sim.simulate import drive_schedule
+
+    model = bar_model(sensors=("TT", "TD", "TL", "TR"))
+    nodes = [model.landmarks.sensors[s] for s in ("TT", "TD", "TL", "TR")]
+    lam, phi_s, _ = sensor_rows(model, nodes, 24)
+    t = np.arange(300) / 100.0
+    disp = np.zeros((300, 4, 3))
+    disp[:, 0, 2] = 0.01 * np.sin(np.pi * t) ** 2
+    disp[:, 2, 2] = 0.004 * np.sin(np.pi * t) ** 2  # TL: not where the others would put it
+    lost = disp.copy()
+    lost[100:180, 2] = np.nan  # back at 1.8 s, mid-motion
+    targets, _, _ = drive_schedule(lost, 100.0, lam, phi_s, 20.0)
+    springs = np.full((300, 4), 1.0 / (20.0 * point_stiffness(lam, phi_s)))
+    measured = compliant_targets(lam, phi_s, disp, springs)[180:191, 2]
+    springs[:, 2] = np.inf
+    predicted = compliant_targets(lam, phi_s, disp, springs)[180:191, 2]
+    assert np.linalg.norm(predicted[0] - measured[0]) > 1e-4  # a difference worth ramping over
+    # Back over 0.1 s: from (near) the prediction to the measurement, monotonically closer to it.
+    off = np.linalg.norm(targets[180:191, 2] - measured, axis=1)
+    assert off[0] > 0.5 * np.linalg.norm(predicted[0] - measured[0]) and off[-1] < 1e-12
+    assert np.all(np.diff(off) < 1e-12)
+    # Lost: from the measurement to the prediction, and the others' targets move smoothly (no step).
+    step = np.abs(np.diff(targets[95:115, [0, 1, 3]], axis=0)).max()
+    assert step < 3 * np.abs(np.diff(targets[80:95, [0, 1, 3]], axis=0)).max() + 1e-6
 
 
 @pytest.fixture(scope="module")

@@ -2,27 +2,29 @@
 
 A constraint that vanishes in one frame is an impulse: on a real /ka/, one
 tongue sensor lost for 1 s made the tongue change volume by 103 % when its
-multiplier simply disappeared (the nodes it held snapped by several radians
-in one frame).  So, per sensor:
+multiplier simply disappeared.  So, per sensor:
 
 * a gap of at most ``bridge_s`` (default 0.1 s, one ramp: shorter than it takes
   to hand a sensor over and back) is bridged by monotone cubic (PCHIP)
   interpolation of its displacement through the valid samples around it;
-* over a longer gap the model itself says where that sensor's node goes: the
-  position the other sensors give it (:func:`tonguevis.sim.constrained.compliant_targets`
-  leaves the missing sensor out and returns every node's displacement).  For
-  the first ``ramp_s`` of the gap the node's target moves from its last
-  measured position onto that prediction, then the constraint is released;
-  since the node is by then where the tongue takes it anyway, releasing it
-  takes almost no force away.  When the sensor comes back, its target moves
-  from the prediction onto the measurement over ``ramp_s``.  A sensor missing
-  at the start engages the same way.
+* a longer gap is handed over to the model in the *projection* of the targets
+  onto the tongue's deformations (:func:`tonguevis.sim.constrained.compliant_targets`),
+  where each sensor is a spring: over the first ``ramp_s`` of the gap the lost
+  sensor's spring, anchored at its last measurement, weakens to nothing
+  (weight w from 1 to 0), so every sensor's projected target, its own and the
+  others', moves smoothly from what the measurements said to what the other
+  sensors say; then it does not act.  When it comes back its spring grows
+  from nothing to full strength over ``ramp_s``, moving its target from where
+  the others put its node onto its measurement.  A sensor missing at the
+  start engages the same way.  The dynamic solve holds the acting sensor
+  nodes to the projected targets.
 
-(Fading the sensor's last force, or weakening it into a spring, was tried
-first: with the paper's hard constraints the last force is large, and the
-Newton solve of the first released frame ran away onto several-radian
-rotations on that same /ka/; a spring, at the first released frame, still sits
-on its target and pulls with nothing, which is the impulse again.)
+A spring of weight w has compliance C(w) = C₀ + (1 - w) / (w k_ramp) (m/N):
+C₀ at w = 1 (C₀ = 0 for the paper's hard constraints), infinite at w = 0.
+(Tried and dropped: weakening the spring in the dynamic solve, fading the
+sensor's last force, or blending held targets with a prediction outside the
+projection: each left a step in the force or in the other sensors' targets,
+an impulse that on the real /ka/ and /ta/ ran away or kicked the energy up.)
 """
 
 from __future__ import annotations
@@ -31,6 +33,9 @@ import numpy as np
 
 BRIDGE_S = 0.1
 RAMP_S = 0.1
+#: k_ramp in units of the tongue's point stiffness at the sensors (see
+#: :func:`tonguevis.sim.constrained.point_stiffness`): the spring at mid-ramp.
+RAMP_STIFFNESS = 20.0
 
 
 def bridge_short_gaps(displacement: np.ndarray, rate: float, bridge_s: float = BRIDGE_S) -> tuple[np.ndarray, int]:
@@ -59,53 +64,38 @@ def bridge_short_gaps(displacement: np.ndarray, rate: float, bridge_s: float = B
     return out, bridged
 
 
-def handover(valid: np.ndarray, rate: float, ramp_s: float = RAMP_S) -> tuple[np.ndarray, np.ndarray]:
-    """How much each sensor's target trusts its measurement, and whether it acts.
+def engagement(valid: np.ndarray, rate: float, ramp_s: float = RAMP_S) -> tuple[np.ndarray, np.ndarray]:
+    """Spring weights (F, S) in [0, 1] and, per frame and sensor, the frame whose measurement anchors it (F, S).
 
-    valid : (F, S) bool, the sensor measured in that frame.  Returns
-    ``trust`` (F, S) in [0, 1] (1: the measurement; 0: the model's prediction;
-    in between: a blend, with the last measured frame standing in during a
-    release) and ``acting`` (F, S) bool (measured, or within ``ramp_s`` after
-    the last measurement).
+    valid : (F, S) bool, the sensor measured in that frame.  w = 1 where
+    measured (ramping up from 0 over the first ``ramp_s`` back), falling from
+    1 to 0 over the first ``ramp_s`` of a gap (anchored at the last
+    measurement), 0 elsewhere in gaps.
     """
     valid = np.asarray(valid, dtype=bool)
     n_frames, n_sensors = valid.shape
     ramp = max(1, int(round(ramp_s * rate)))
     steps = np.arange(1, ramp + 1) / (ramp + 1)  # strictly inside (0, 1)
-    trust = valid.astype(np.float64)
-    acting = valid.copy()
+    weight = valid.astype(np.float64)
+    source = np.broadcast_to(np.arange(n_frames)[:, None], (n_frames, n_sensors)).copy()
     for s in range(n_sensors):
         for start, stop in _runs(~valid[:, s]):
-            if start > 0:  # release: onto the prediction, then let go
+            if start > 0:  # release: the spring at the last measurement weakens
                 k = min(ramp, stop - start)
-                trust[start:start + k, s] = 1.0 - steps[:k]
-                acting[start:start + k, s] = True
-            if stop < n_frames:  # back: from the prediction onto the measurement
+                weight[start:start + k, s] = 1.0 - steps[:k]
+                source[start:start + k, s] = start - 1
+            if stop < n_frames:  # back: the spring grows
                 k = min(ramp, n_frames - stop)
-                trust[stop:stop + k, s] = np.minimum(trust[stop:stop + k, s], steps[:k])
-    return trust, acting
+                weight[stop:stop + k, s] = np.minimum(weight[stop:stop + k, s], steps[:k])
+    return weight, source
 
 
-def blend_targets(measured: np.ndarray, predicted: np.ndarray, trust: np.ndarray, acting: np.ndarray) -> np.ndarray:
-    """(F, S, 3) targets: trust·measured + (1 - trust)·predicted where acting, NaN elsewhere.
-
-    During a release (no measurement) the last measured value stands in.
-    """
-    held = _hold_last(measured)
-    base = np.where(np.isfinite(measured), measured, held)
-    t = trust[:, :, None]
-    out = t * np.nan_to_num(base) + (1.0 - t) * predicted
-    out = np.where((t == 0) | np.isfinite(base), out, np.nan)
-    return np.where(acting[:, :, None], out, np.nan)
-
-
-def _hold_last(x: np.ndarray) -> np.ndarray:
-    """(F, S, 3) with every NaN sample replaced by the sensor's last finite one (NaN before the first)."""
-    finite = np.all(np.isfinite(x), axis=2)
-    idx = np.where(finite, np.arange(len(x))[:, None], -1)
-    idx = np.maximum.accumulate(idx, axis=0)
-    out = x[np.maximum(idx, 0), np.arange(x.shape[1])[None, :]]
-    return np.where((idx >= 0)[:, :, None], out, np.nan)
+def spring_compliance(weight: np.ndarray, base: float, ramp_stiffness: float) -> np.ndarray:
+    """(F, S) compliance in m/N from spring weights: C₀ + (1 - w)/(w k_ramp); inf where w = 0."""
+    w = np.asarray(weight, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        comp = base + (1.0 - w) / (w * ramp_stiffness)
+    return np.where(w > 0, comp, np.inf)
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:

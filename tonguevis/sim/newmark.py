@@ -17,6 +17,15 @@ frame that is not finite, or whose sensor nodes rotate past
 ``RUNAWAY_ROTATION`` (a branch no tongue takes), is *recovered*: it keeps the
 previous frame's shape and the velocity is reset (q̇ = q̈ = 0), so one bad
 frame cannot feed the next; such frames are flagged in ``recovered``.
+
+When a sensor stops acting, the velocity is re-estimated from the last two
+shapes, (q_n - q_{n-1})/h, and the acceleration set to zero.  The average
+acceleration rule holds positions to hard constraints exactly but lets the
+velocity and acceleration along the constrained directions carry an error
+that alternates in sign from frame to frame (and grows, for the
+acceleration): harmless while the constraint holds, an impulse the moment it
+lets go (on a real /ta/ the shape jumped to 1-2.5 rad rotations in the frame a
+lost sensor was released).
 """
 
 from __future__ import annotations
@@ -110,11 +119,16 @@ def integrate(
     q_full = (phi2 * a_inv) @ phi2.T  # Φ_s A⁻¹ Φ_sᵀ
     p_full = (ws2 * a_inv) @ phi2.T  # W_s A⁻¹ Φ_sᵀ
     every = max(1, n_frames // 100)
+    q_prev = np.zeros(m)
+    was_active = np.zeros(n_sensors, dtype=bool)
     for i in range(n_frames):
+        active = np.all(np.isfinite(targets[i]), axis=1) & np.isfinite(comp[i])
+        if i > 0 and np.any(was_active & ~active):
+            qd, qdd = (q - q_prev) / h, np.zeros(m)  # a sensor let go: see the module docstring
         q_pred = q + h * qd + bn * qdd
         qd_pred = qd + 0.5 * h * qdd
         b = -damp * qd_pred - lam * q_pred + ext[i]
-        active = np.all(np.isfinite(targets[i]), axis=1) & np.isfinite(comp[i])
+        q_prev, was_active = q, active
         if not active.any():
             qdd_k = a_inv * b
             converged[i] = True

@@ -24,8 +24,8 @@ _kernel = None
 _wp = None
 
 # Scratch vectors of length m per trial.
-_V_Q, _V_QD, _V_QDD, _V_QP, _V_QDP, _V_B, _V_TRIAL, _V_RSTAT, _V_TMP, _V_DQDD, _V_AUX = range(11)
-N_VECTORS = 11
+_V_Q, _V_QD, _V_QDD, _V_QP, _V_QDP, _V_B, _V_TRIAL, _V_RSTAT, _V_TMP, _V_DQDD, _V_AUX, _V_QPREV = range(12)
+N_VECTORS = 12
 # Scratch vectors of length 3S per trial.
 _W_C, _W_MULT, _W_DMULT, _W_RCON, _W_RCON2, _W_MULT2, _W_RHOW, _W_RHOP, _W_Y, _W_T1, _W_T2, _W_COMP = range(12)
 N_SMALLVEC = 12
@@ -258,7 +258,7 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                     out_rec: wp.array2d(dtype=int),
                     vecs: wp.array3d(dtype=f64), svec: wp.array3d(dtype=f64), small: wp.array4d(dtype=f64),
                     rotb: wp.array3d(dtype=wp.mat33d), dgb: wp.array3d(dtype=wp.mat33d),
-                    wb: wp.array3d(dtype=wp.vec3d), act: wp.array2d(dtype=int)):
+                    wb: wp.array3d(dtype=wp.vec3d), act: wp.array2d(dtype=int), wasact: wp.array2d(dtype=int)):
             t = wp.tid()
             m = lam.shape[0]
             n_frames = targets.shape[1]
@@ -268,6 +268,24 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                 vecs[t, _V_QD, j] = f64(0.0)
                 vecs[t, _V_QDD, j] = f64(0.0)
             for i in range(n_frames):
+                # A sensor that acted in the last frame and does not now: velocity from the last two
+                # shapes, acceleration zero (see newmark.py); then this frame's active flags.
+                released = int(0)
+                for s in range(n_sensors):
+                    now = int(1)
+                    for r in range(3):
+                        if wp.isnan(targets[t, i, 3 * s + r]):
+                            now = int(0)
+                    if not wp.isfinite(comp[t, i, s]):
+                        now = int(0)
+                    if i > 0 and wasact[t, s] == 1 and now == 0:
+                        released = int(1)
+                    wasact[t, s] = now
+                for j in range(m):
+                    if released == 1:
+                        vecs[t, _V_QD, j] = (vecs[t, _V_Q, j] - vecs[t, _V_QPREV, j]) / h
+                        vecs[t, _V_QDD, j] = f64(0.0)
+                    vecs[t, _V_QPREV, j] = vecs[t, _V_Q, j]
                 for j in range(m):
                     qp = vecs[t, _V_Q, j] + h * vecs[t, _V_QD, j] + bn * vecs[t, _V_QDD, j]
                     qdp = vecs[t, _V_QD, j] + f64(0.5) * h * vecs[t, _V_QDD, j]
@@ -556,6 +574,7 @@ def integrate_compiled(
             float(MAX_ROTATION_STEP), float(RUNAWAY_ROTATION),
             int(bool(settings.warping)),
             out_q, out_qd, out_qdd, out_res, out_conv, out_iter, out_rec, vecs, svec, small, rotb, dgb, wb, act,
+            wp.zeros((n_trials, n_sensors), dtype=wp.int32, device=device),
         ],
         device=device,
     )

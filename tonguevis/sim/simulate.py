@@ -14,8 +14,9 @@ from tonguevis.sim.model import TongueModel
 from tonguevis.sim.motion import Motion
 from tonguevis.errors import SimulationError
 from tonguevis.sim.constrained import RUNAWAY_ROTATION
+from tonguevis.sim.figures import frame_figures
 from tonguevis.sim.newmark import NewmarkSettings, integrate
-from tonguevis.sim.plausibility import ABSURD_AMPLIFICATION, ABSURD_VOLUME, plausibility_figures
+from tonguevis.sim.plausibility import ABSURD_AMPLIFICATION, ABSURD_VOLUME, plausibility_from_largest
 
 logger = logging.getLogger("tonguevis")
 
@@ -109,11 +110,14 @@ def simulate(
         result.q, corrected = _keep_below_palate(result.q, contact, schedule, basis, phi_s)
         schedule["corrected_frames"] = corrected
     report(progress, 2, 3, "reconstructing the mesh")
-    displacements = model.displacements(result.q, warping=warping, backend=backend)
-    volume_change = model.volume_change(displacements, backend=backend)
+    # Chunk by chunk: the full-mesh displacement of every frame is never held at once.
+    figures = frame_figures(model, result.q, warping, backend, None if contact is None else
+                            _contact_probe(contact, schedule, model), progress=_stage(progress, 2, 3))
+    volume_change = figures.volume_change
     energy = model.energy(result.q)
     misfit = _sensor_misfit(result.q, phi_s, w_s, prep.displacement, warping)
-    plausibility, absurd = plausibility_figures(displacements, prep.displacement, volume_change, misfit)
+    plausibility, absurd = plausibility_from_largest(figures.largest_displacement, prep.displacement, volume_change,
+                                                     misfit)
     times = recording.times
     file = recording.metadata.get("file")
     if not np.all(np.isfinite(result.q)) or len(absurd) > ABSURD_SHARE * len(times):
@@ -139,7 +143,8 @@ def simulate(
     released = schedule["released"]
     contact_figures, penetration, contact_area = {}, None, None
     if contact is not None:
-        penetration, contact_area, contact_figures = _contact_report(displacements, contact, schedule, model, times)
+        penetration, contact_area = figures.penetration, figures.contact_area
+        contact_figures = _contact_report(penetration, contact_area, contact, schedule, times)
     metadata = {
         "recording": dict(recording.metadata),
         "landmarks": landmarks,
@@ -203,26 +208,29 @@ def drive_schedule(displacement: np.ndarray, rate: float, eigenvalues: np.ndarra
     forces ("external", (F, m) modal) for the dynamic solve, "active" and "conflicts".
     """
     from tonguevis.sim.constrained import compliant_targets, point_stiffness
-    from tonguevis.sim.dropouts import blend_targets, bridge_short_gaps, handover
+    from tonguevis.sim.dropouts import RAMP_STIFFNESS, bridge_short_gaps, engagement, spring_compliance
 
     filled, bridged = bridge_short_gaps(displacement, rate)
     present = np.all(np.isfinite(filled), axis=2)
-    base = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * point_stiffness(eigenvalues, phi_s))
-    springs = np.where(present, base, np.inf)
+    k_ref = point_stiffness(eigenvalues, phi_s)
+    base = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * k_ref)
+    weight, source = engagement(present, rate)
+    anchored = filled[source, np.arange(filled.shape[1])[None, :]]  # a released sensor: its last measurement
+    springs = spring_compliance(weight, base, RAMP_STIFFNESS * k_ref)
     info = {"bridged": bridged, "released": ~present}
     if contact is None:
-        projected = compliant_targets(eigenvalues, phi_s, filled, springs)
+        projected = compliant_targets(eigenvalues, phi_s, anchored, springs)
     else:
         from tonguevis.sim.contact import solve_contact
 
-        solved = solve_contact(eigenvalues, contact["phi_nodes"], phi_s, filled, springs, contact["points"],
+        solved = solve_contact(eigenvalues, contact["phi_nodes"], phi_s, anchored, springs, contact["points"],
                                contact["sensor_nodes"], contact["candidates"], contact["palate"],
                                contact["jaw_offset"])
         projected = solved.pop("targets")
         info.update(solved)
-    trust, acting = handover(present, rate)
-    targets = blend_targets(np.where(present[:, :, None], projected, np.nan), projected, trust, acting)
-    compliance = np.where(np.all(np.isfinite(targets), axis=2), 0.0, np.inf)
+    acting = weight > 0
+    targets = np.where(acting[:, :, None], projected, np.nan)
+    compliance = np.where(acting, 0.0, np.inf)
     return targets, compliance, info
 
 
@@ -288,28 +296,19 @@ def _keep_below_palate(q, contact, schedule, basis, phi_s):
                           contact["jaw_offset"], allowed)
 
 
-def _contact_report(displacements, contact, schedule, model, times):
-    """Per frame: deepest penetration (m), contact area (m²); and the figures for metadata."""
-    from tonguevis.sim.contact import CONFLICT_RADIUS, penetration as deepest
+def _contact_probe(contact, schedule, model):
+    """What :func:`tonguevis.sim.figures.frame_figures` needs to measure contact, per chunk of frames."""
+    from tonguevis.sim.contact import CONFLICT_RADIUS
+    from tonguevis.sim.figures import ContactProbe
 
-    cand, pts, palate, offset = contact["candidates"], contact["points"], contact["palate"], contact["jaw_offset"]
+    cand, pts = contact["candidates"], contact["points"]
     near = np.linalg.norm(pts[cand][:, None] - pts[contact["sensor_nodes"]][None], axis=2) < CONFLICT_RADIUS
-    exclude = np.zeros((len(times), len(cand)), dtype=bool)
-    for f, s in schedule["conflicts"]:
-        exclude[f] |= near[:, s]
-    pen = deepest(displacements, pts, cand, palate, offset, exclude)
-    # Contact area: surface triangles whose three nodes are all within 0.3 mm of the palate.
-    gap = np.full((len(times), len(pts)), np.inf)
-    g, _ = palate.clearance((pts[cand][None] + displacements[:, cand] + offset[:, None]).reshape(-1, 3))
-    gap[:, cand] = np.where(np.isfinite(g), g, np.inf).reshape(len(times), -1)
-    faces = model.surface_faces
-    touching = np.all(gap[:, faces] < 3e-4, axis=2)  # (F, faces)
-    contact_area = np.zeros(len(times))
-    for f in np.flatnonzero(touching.any(axis=1)):  # only the frames in contact: a few of them
-        p = pts + displacements[f]
-        tri = faces[touching[f]]
-        a, b, c = p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]]
-        contact_area[f] = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
+    conflicts = np.array(schedule["conflicts"], dtype=np.int64).reshape(-1, 2)
+    return ContactProbe(pts, cand, contact["palate"], contact["jaw_offset"], model.surface_faces, conflicts, near)
+
+
+def _contact_report(pen, contact_area, contact, schedule, times):
+    """The contact figures for metadata, from the per-frame penetration (m) and contact area (m²)."""
     conflicts = sorted({s for _, s in schedule["conflicts"]})
     figures = {
         "penetration_max_mm": float(1e3 * pen.max()) if len(pen) else 0.0,
@@ -322,7 +321,7 @@ def _contact_report(displacements, contact, schedule, model, times):
         "palate": {k: v for k, v in contact["palate"].metadata.items() if k in ("rms_m", "source", "frame", "kept")},
         "palate_raised_mm": float(1e3 * contact.get("registration_shift_m", 0.0)),
     }
-    return pen, contact_area, figures
+    return figures
 
 
 def _register_palate(palate, prep, percentile: float = 1.0):
