@@ -340,3 +340,16 @@ def test_view_and_export_video_against_the_generic_palate_in_either_frame(tmp_pa
                   "--modes", "20", "--screenshot", str(shot), timeout=170)
     assert result.returncode == 0, result.stderr[-2000:]
     assert shot.stat().st_size > 50_000
+
+
+def test_fitting_a_palate_to_a_recording_without_a_probe_is_a_dialog(qtbot, window, tmp_path):
+    from tests.gui.conftest import DEMO
+
+    if not DEMO.exists():
+        pytest.skip(f"demo corpus not built: {DEMO}")
+    window.fit_palate([DEMO], tmp_path / "palate.stl")
+    qtbot.waitUntil(lambda: window.last_dialog is not None and window.last_dialog.isVisible(), timeout=60000)
+    text = window.last_dialog.text()
+    assert "no probe sensor 'PROBE'" in text and DEMO.name in text and "Palate fit" in window.last_dialog.windowTitle()
+    assert window.palate is None and not (tmp_path / "palate.stl").exists()
+    window.last_dialog.close()

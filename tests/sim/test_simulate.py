@@ -108,3 +108,21 @@ def test_nearest_frame_rounds_and_clips():
 
     times = np.array([0.0, 0.01, 0.02, 0.03])
     assert [nearest_frame(times, t) for t in (-1.0, 0.004, 0.006, 0.0149, 0.03, 5.0)] == [0, 0, 1, 1, 3, 3]
+
+
+def test_dropped_frames_come_back_on_the_uniform_clock_and_are_bridged(model):
+    """A recorder that drops frames: the simulation's step stays 1/rate, the lost frames are bridged."""
+    from dataclasses import replace
+
+    rec = _recording(model)
+    keep = np.ones(rec.n_samples, dtype=bool)
+    keep[[40, 41, 90]] = False  # three frames lost (two in a row), times jittered by up to 0.3 ms
+    jitter = np.random.default_rng(1).uniform(-3e-4, 3e-4, rec.n_samples)
+    lossy = replace(rec, times=(rec.times + jitter)[keep], sensors={k: v[keep] for k, v in rec.sensors.items()})
+    motion = simulate(lossy, model, modes=20, landmarks="rule")
+    assert motion.n_frames == rec.n_samples
+    np.testing.assert_allclose(np.diff(motion.times), 1.0 / rec.rate, rtol=1e-9)
+    bridged = motion.metadata["dropouts"]["bridged_gaps"]
+    assert bridged == 2 * len(motion.sensor_names) and motion.metadata["dropouts"]["released_frames"] == 0
+    full = simulate(rec, model, modes=20, landmarks="rule")
+    assert np.abs(motion.energy - full.energy).max() < 0.05 * full.energy.max()

@@ -113,6 +113,7 @@ def validate(
     from tonguevis.sim.simulate import DEFAULT_SENSOR_STIFFNESS, drive_schedule, simulate
 
     model = model or TongueModel.default()
+    recording = recording.on_uniform_grid()  # as simulate: dropped frames back as missing samples
     file = recording.metadata.get("file")
     working = working_tongue_sensors(recording)  # warns about a coil that never worked, once
     dead = [n for n in TONGUE_SENSORS if n in recording.sensors and n not in working]

@@ -203,14 +203,13 @@ def regrid_dropped_frames(rec):
     n_in = rec.n_samples
     if n_in < 2:
         return rec
-    idx = np.round((rec.times - rec.times[0]) * rec.rate).astype(np.int64)
-    if np.array_equal(idx, np.arange(n_in)):
+    # Frame numbers from the steps, not from the absolute times: a clock a little off the stated rate
+    # (jitter, a rate read to a few digits) drifts by whole periods over minutes, which rounding the
+    # absolute times would turn into collisions.  A step of k periods (rounded, at least 1) is k - 1 lost frames.
+    steps = np.maximum(1, np.round(np.diff(rec.times) * rec.rate).astype(np.int64))
+    if np.all(steps == 1):
         return rec
-    if np.any(np.diff(idx) < 1):
-        raise RecordingError(
-            "sample times are closer than one period at the stated rate; cannot place them on a uniform grid",
-            rec.metadata.get("file"),
-        )
+    idx = np.concatenate([[0], np.cumsum(steps)])
     n = int(idx[-1]) + 1
 
     def fill(a):

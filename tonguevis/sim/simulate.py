@@ -80,6 +80,8 @@ def simulate(
         raise SimulationError(f"sensor stiffness must be a positive number or None (hard), got {sensor_stiffness!r}",
                               recording.metadata.get("file"))
     model = model or TongueModel.default()
+    # Frames the recorder dropped come back as missing samples: every step is 1/rate apart.
+    recording = recording.on_uniform_grid()
     prep = prepare_targets(recording, model, landmarks, rest_interval, smooth_window)
     basis = model.basis(modes, progress=_stage(progress, 0, 3))
     w_full = model.rotation_matrix(basis)
