@@ -306,8 +306,10 @@ def test_killed_run_resumes(corpus, tmp_path):
               "    return simulate(task, *args)\n"
               "tasks._STEPS['simulate'] = slow\n"
               f"run(sys.argv[1], sys.argv[2], model=box_tongue(), modes={MODES}, landmarks='rule', segment_first=3)\n")
-    child = subprocess.Popen([sys.executable, "-c", script, str(corpus), str(out)], cwd=REPO, env=dict(os.environ),
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    log = tmp_path / "child.log"
+    with open(log, "w") as fh:
+        child = subprocess.Popen([sys.executable, "-c", script, str(corpus), str(out)], cwd=REPO,
+                                 env=dict(os.environ), stdout=fh, stderr=subprocess.STDOUT)
     first = out / "recordings" / "spk1_ta" / "manifest.json"
     deadline = time.monotonic() + 120
     try:
@@ -316,12 +318,15 @@ def test_killed_run_resumes(corpus, tmp_path):
                 break
             time.sleep(0.05)
     finally:
+        ended = child.poll()
         child.send_signal(signal.SIGKILL)
         child.wait()
+    assert ended is None, f"the batch ended on its own ({ended}): {log.read_text()[-2000:]}"
     assert first.is_file() and not (out / "energy.parquet").exists()
+    (first.parent / ".energy.parquet.x1y2.tmp.parquet").write_bytes(b"PAR1 cut short")  # as a kill mid-write leaves
     result = run(corpus, out, model=box_tongue(), modes=MODES, landmarks="rule", segment_first=3)
     assert result.ok and "spk1_ta.tsv" in result.up_to_date and len(result.up_to_date) + len(result.done) == 3
-    assert not list(out.rglob(".*.tmp*"))  # no temporary file left behind
+    assert not list(out.rglob(".*.tmp*"))  # a temporary file the kill left is removed
     fresh = tmp_path / "fresh"
     run(corpus, fresh, model=box_tongue(), modes=MODES, landmarks="rule", segment_first=3)
     assert_same_tables(fresh, out, ("simulation", "energy", "productions", "segmentation"))

@@ -105,6 +105,7 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
     corpus = load_corpus(files, table=labels)
     root, names = store.relative_files([e.path for e in corpus], paths)
     out.mkdir(parents=True, exist_ok=True)
+    store.clean_temporary(out_abs)
     folders = store.output_folders(names, out_abs)
 
     t0 = time.perf_counter()

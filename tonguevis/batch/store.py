@@ -70,8 +70,30 @@ def step_current(manifest: dict | None, step: str, key: str, folder: Path, csv_t
     return all((folder / name).is_file() for name in outputs)
 
 
+def clean_temporary(folder: Path) -> int:
+    """Remove the temporary files a killed run left in ``folder`` (``atomic_write``'s ``.NAME.*.tmp*``); returns how many.
+
+    Only the task of a recording writes in its folder, and only the client in ``DIR``: when they
+    are not running, such a file is a leftover.
+    """
+    removed = 0
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return 0
+    for entry in entries:
+        if entry.name.startswith(".") and ".tmp" in entry.name and entry.is_file():
+            try:
+                os.unlink(entry.path)
+                removed += 1
+            except OSError:
+                pass
+    return removed
+
+
 def steps_to_do(folder: Path, keys: dict[str, str], steps: Iterable[str], csv_too: bool) -> tuple[str, ...]:
-    """The steps of ``steps`` whose results in ``folder`` are missing or out of date."""
+    """The steps of ``steps`` whose results in ``folder`` are missing or out of date (and its leftovers removed)."""
+    clean_temporary(folder)
     manifest = read_manifest(folder)
     return tuple(s for s in steps if not step_current(manifest, s, keys[s], folder, csv_too))
 
