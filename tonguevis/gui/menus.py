@@ -33,7 +33,6 @@ class MenusMixin:
         file_menu.addSeparator()
         self._action(file_menu, "Export &screenshot (PNG)…", self.ask_export_screenshot)
         self._action(file_menu, "Export &video (MP4)…", self.ask_export_video)
-        self._action(file_menu, "Export motion for &ParaView (XDMF)…", self.ask_export_paraview)
         self._action(file_menu, "Export motion as VTK &series (one file per frame)…", self.ask_export_vtk)
         file_menu.addSeparator()
         self._action(file_menu, "&Quit", self.close, QKeySequence.StandardKey.Quit)
