@@ -2,8 +2,11 @@
 """Screenshots of the desktop app for the README and docs (real window, real simulation).
 
 Writes docs/images/app.png (the demo /ta/ recording in mid-syllable, coloured by
-displacement) and docs/images/app_energy.png (same frame, energy density, modal
-q(t) tab).  Needs a display: run under ``xvfb-run -a -s "-screen 0 1600x1000x24"``.
+displacement), docs/images/app_energy.png (same frame, energy density, modal
+q(t) tab) and docs/images/app_palate.png (speaker 3's synthetic /ta/ simulated
+against the shipped generic palate, in the head frame, coloured by the distance
+to the palate at the frame where the tongue comes closest to it, Palate tab).
+Needs a display: run under ``xvfb-run -a -s "-screen 0 1600x1000x24"``.
 """
 
 from __future__ import annotations
@@ -22,6 +25,9 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=REPO / "docs" / "images")
     parser.add_argument("--time", type=float, default=5.62, help="time shown, seconds (default: a /t/ release)")
     parser.add_argument("--modes", type=int, default=100)
+    parser.add_argument("--palate-recording", type=Path, default=REPO / "data" / "spk3_ta.tsv",
+                        help="recording shown against the generic palate (default: speaker 3's /ta/, whose tip "
+                             "reaches the alveolar ridge)")
     args = parser.parse_args()
 
     from PySide6.QtCore import QSettings
@@ -49,7 +55,26 @@ def main() -> int:
 
     def second() -> None:
         window.export_screenshot(args.out / "app_energy.png")
-        print(f"wrote {args.out / 'app.png'} and {args.out / 'app_energy.png'}")
+        window.simulation_finished.disconnect(finished)
+        window.simulation_finished.connect(against_palate)
+        window.palate = "generic"  # File ▸ Use the generic palate: contact on
+        window.open_recording(args.palate_recording)
+
+    def against_palate(ok: bool) -> None:
+        if not ok:
+            print("simulation failed:", window.statusBar().currentMessage(), file=sys.stderr)
+            app.quit()
+            return
+        window.state.set_reference("head")
+        window.state.set_color("contact")
+        window.tabs.setCurrentWidget(window.palate_panel)
+        window.state.set_time(float(closest_frame_time(window.session)))
+        QTimer.singleShot(1500, third)
+
+    def third() -> None:
+        window.export_screenshot(args.out / "app_palate.png")
+        print(f"wrote {args.out / 'app.png'}, {args.out / 'app_energy.png'} and {args.out / 'app_palate.png'}")
+        print(window.frame_status.text())
         status["code"] = 0
         app.quit()
 
@@ -66,6 +91,17 @@ def main() -> int:
     app.exec()
     window.close()
     return status["code"]
+
+
+def closest_frame_time(session) -> float:
+    """The time at which the tongue's upper surface comes closest to the palate (head frame)."""
+    import numpy as np
+
+    from tonguevis.gui.drawing import contact_at
+
+    closest = [contact_at(session, i)["closest_mm"] for i in range(session.frames.n_frames)]
+    closest = np.array([np.inf if c is None else c for c in closest])
+    return session.frames.times[int(np.argmin(closest))]
 
 
 if __name__ == "__main__":
