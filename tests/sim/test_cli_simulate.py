@@ -11,7 +11,7 @@ from tonguevis.sim import Motion
 
 
 def test_simulate_prints_the_figures_and_writes_motion_and_vtk(tmp_path, capsys):
-    code = main(["simulate", str(DATA_DIR / "spk2_ka.tsv"), "--modes", "30", "--quiet", "--out", str(tmp_path),
+    code = main(["simulate", str(DATA_DIR / "spk2_ka.tsv"), "--quiet", "--out", str(tmp_path),
                  "--sensor-stiffness", "hard"])
     out = capsys.readouterr().out
     assert code == 0, out
@@ -21,7 +21,7 @@ def test_simulate_prints_the_figures_and_writes_motion_and_vtk(tmp_path, capsys)
     residual_mm = float(out.split("max sensor residual: ")[1].split(" mm")[0])
     assert residual_mm < 0.01
     motion = Motion.load(tmp_path / "motion.npz")
-    assert motion.q.shape[1] == 30 and np.isfinite(motion.q).all()
+    assert motion.q.shape[1] == 100 and np.isfinite(motion.q).all()
     assert (tmp_path / "vtk" / "motion.pvd").exists()
 
 

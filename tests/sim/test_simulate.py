@@ -63,9 +63,9 @@ def test_missing_tongue_sensors_are_an_error_and_unknown_ones_are_ignored(model)
     rec = _recording(model)
     only_tip = rec.with_sensors({"TT": rec.sensors["TT"], "JAW": rec.sensors["JAW"]})
     with pytest.raises(SimulationError, match="too few tongue sensors"):
-        simulate(only_tip, model, modes=10, landmarks="rule")
+        simulate(only_tip, model, modes=20, landmarks="rule")
     with_tb = _recording(model, extra={"TB": rec.sensors["TD"] + 0.001})
-    motion = simulate(with_tb, model, modes=10, landmarks="rule")
+    motion = simulate(with_tb, model, modes=20, landmarks="rule")
     assert motion.metadata["ignored_sensors"] == ["TB"]
     assert "TB" not in motion.sensor_names
 
@@ -80,7 +80,7 @@ def test_compiled_and_reference_loops_give_the_same_motion(model):
 def test_motion_round_trips_through_npz_and_writes_a_vtk_series(model, tmp_path):
     import meshio
 
-    motion = simulate(_recording(model, seconds=3.0), model, modes=12, landmarks="rule")
+    motion = simulate(_recording(model, seconds=3.0), model, modes=20, landmarks="rule")
     motion.save(tmp_path / "m.npz")
     back = Motion.load(tmp_path / "m.npz")
     np.testing.assert_array_equal(back.q, motion.q)

@@ -87,16 +87,13 @@ def point_stiffness(eigenvalues: np.ndarray, phi_s: np.ndarray) -> float:
     return float(1.0 / np.mean(np.sum(phi2 * phi2 / lam, axis=1)))
 
 
-def compliant_targets(eigenvalues: np.ndarray, phi_s: np.ndarray, targets: np.ndarray,
-                      compliance: np.ndarray) -> np.ndarray:
-    """(F, S, 3) sensor-node displacements of the compliant static solution, frame by frame.
+def compliant_shapes(eigenvalues: np.ndarray, phi_s: np.ndarray, targets: np.ndarray,
+                     compliance: np.ndarray) -> np.ndarray:
+    """(F, m) compliant static solution of every frame: q = Λ⁻¹Φᵀ(Φ Λ⁻¹ Φᵀ + C)⁻¹ c.
 
-    Per frame, q̃ minimises ½q̃ᵀΛq̃ + Σ_s |Φ_s q̃ - c_s|² / (2 C_s) over the acting
-    sensors (finite target and compliance), i.e. q̃ = Λ⁻¹Φᵀ(Φ Λ⁻¹ Φᵀ + C)⁻¹ c,
-    and the result is Φ_s q̃ for every sensor: the measured targets projected
-    onto the deformations the tongue makes most easily.  A hard constraint
-    (C = 0) keeps its target.  targets : (F, S, 3) m; compliance : (F, S) m/N.
-    All frames in one batched solve.
+    Per frame q minimises ½qᵀΛq + Σ_s |Φ_s q - c_s|² / (2 C_s) over the acting
+    sensors (finite target and compliance); C = 0 holds a sensor exactly.
+    targets : (F, S, 3) m; compliance : (F, S) m/N.  All frames in one batched solve.
     """
     lam = np.asarray(eigenvalues, dtype=np.float64)
     n_frames, n_s, _ = targets.shape
@@ -111,7 +108,19 @@ def compliant_targets(eigenvalues: np.ndarray, phi_s: np.ndarray, targets: np.nd
     mats[:, idx, idx] += np.where(acting, np.where(np.isfinite(comp), comp, 0.0), 1.0)
     rhs = np.where(acting, c, 0.0)
     mult = np.linalg.solve(mats, rhs[:, :, None])[:, :, 0]  # zero on the sensors not acting
-    return (mult @ gram).reshape(n_frames, n_s, 3)
+    return (mult @ phi2) / lam
+
+
+def compliant_targets(eigenvalues: np.ndarray, phi_s: np.ndarray, targets: np.ndarray,
+                      compliance: np.ndarray) -> np.ndarray:
+    """(F, S, 3) sensor-node displacements Φ_s q̃ of the compliant static solution (:func:`compliant_shapes`).
+
+    The measured targets projected onto the deformations the tongue makes most
+    easily, for every sensor (a sensor not acting gets where the others put
+    its node).  A hard constraint (C = 0) keeps its target.
+    """
+    q = compliant_shapes(eigenvalues, phi_s, targets, compliance)
+    return np.einsum("scm,fm->fsc", phi_s, q)
 
 
 def _blocks(blocks: np.ndarray) -> np.ndarray:

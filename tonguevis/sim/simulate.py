@@ -22,6 +22,7 @@ logger = logging.getLogger("tonguevis")
 
 VOLUME_WARNING = 0.05  # relative volume change past which the motion is flagged as implausible
 ABSURD_SHARE = 0.05  # a run with more absurd frames than this is refused rather than returned
+RECOVERED_SHARE = 0.10  # ... or with more recovered frames than this: it is no longer the model's motion
 #: Default sensor spring, in units of the tongue's own point stiffness at the sensors
 #: (see :func:`tonguevis.sim.constrained.point_stiffness`); None holds the sensors exactly (the paper).
 DEFAULT_SENSOR_STIFFNESS = 20.0
@@ -120,19 +121,39 @@ def simulate(
     misfit = _sensor_misfit(result.q, phi_s, w_s, prep.displacement, warping)
     plausibility, absurd = plausibility_from_largest(figures.largest_displacement, prep.displacement, volume_change,
                                                      misfit)
+    if len(absurd):
+        # Frames no tongue could produce (volume, or a node far beyond every sensor): the static shape for
+        # the same targets instead, when that one is sane; flagged as recovered either way.
+        from tonguevis.sim.constrained import compliant_shapes
+
+        fixed = compliant_shapes(basis.eigenvalues, phi_s, targets[absurd], compliance[absurd])
+        sub = frame_figures(model, fixed, warping, backend)
+        sane = np.isfinite(sub.volume_change) & (np.abs(sub.volume_change) <= ABSURD_VOLUME)
+        frames = absurd[sane]
+        result.q[frames] = fixed[sane]
+        result.recovered[frames] = True
+        volume_change[frames] = sub.volume_change[sane]
+        figures.largest_displacement[frames] = sub.largest_displacement[sane]
+        misfit = _sensor_misfit(result.q, phi_s, w_s, prep.displacement, warping)
+        plausibility, absurd = plausibility_from_largest(figures.largest_displacement, prep.displacement,
+                                                         volume_change, misfit)
+        energy = model.energy(result.q)
     times = recording.times
     file = recording.metadata.get("file")
-    if not np.all(np.isfinite(result.q)) or len(absurd) > ABSURD_SHARE * len(times):
-        first = int(absurd[0]) if len(absurd) else int(np.flatnonzero(~np.all(np.isfinite(result.q), axis=1))[0])
+    n_recovered = int(result.recovered.sum())
+    if (not np.all(np.isfinite(result.q)) or len(absurd) > ABSURD_SHARE * len(times)
+            or n_recovered > RECOVERED_SHARE * len(times)):
+        bad_frames = np.union1d(absurd, np.flatnonzero(result.recovered | ~np.all(np.isfinite(result.q), axis=1)))
         raise SimulationError(
-            f"the model could not follow this recording plausibly: {len(absurd)} of {len(times)} frames "
-            f"change the volume by over {100 * ABSURD_VOLUME:.0f} % or move a node over {ABSURD_AMPLIFICATION:g}x "
-            f"as far as any sensor (first at t = {times[first]:.2f} s); try more modes (--modes) or the "
-            "speaker's sensor layout (--landmarks speaker)", file)
+            f"the model could not follow this recording plausibly: {len(absurd)} of {len(times)} frames change "
+            f"the volume by over {100 * ABSURD_VOLUME:.0f} % or move a node over {ABSURD_AMPLIFICATION:g}x as far as "
+            f"any sensor, {n_recovered} had to be recovered (first at t = {times[bad_frames[0]]:.2f} s); try more "
+            f"modes (--modes, now {modes}) or the speaker's sensor layout (--landmarks speaker)", file)
     bad = np.flatnonzero(~result.converged)
     recovered = np.flatnonzero(result.recovered)
     if len(recovered):
-        logger.warning("%d of %d frames ran away (non-finite, or a sensor node turned past %.1f rad) and kept the previous shape (first at t = %.2f s)",
+        logger.warning("%d of %d frames ran away (non-finite, a sensor node turned past %.1f rad, or a shape no "
+                       "tongue makes) and were recovered (first at t = %.2f s)",
                        len(recovered), len(times), RUNAWAY_ROTATION, times[recovered[0]])
     if len(absurd):
         logger.warning("%d frames are implausible (first at t = %.2f s)", len(absurd), times[absurd[0]])
