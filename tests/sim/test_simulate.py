@@ -126,3 +126,11 @@ def test_dropped_frames_come_back_on_the_uniform_clock_and_are_bridged(model):
     assert bridged == 2 * len(motion.sensor_names) and motion.metadata["dropouts"]["released_frames"] == 0
     full = simulate(rec, model, modes=20, landmarks="rule")
     assert np.abs(motion.energy - full.energy).max() < 0.05 * full.energy.max()
+
+
+def test_a_recording_in_the_devices_frame_is_warned_about(model, caplog):
+    """NDI Wave and Carstens files without axes come in the device's frame: the alignment guesses; say so."""
+    rec = _recording(model)
+    rec.metadata["frame"] = "device"
+    simulate(rec, model, modes=20, landmarks="rule")
+    assert "device's frame" in caplog.text and "-O axes=" in caplog.text
