@@ -12,7 +12,7 @@ from tonguevis.sim import Motion
 
 def test_simulate_prints_the_figures_and_writes_motion_and_vtk(tmp_path, capsys):
     code = main(["simulate", str(DATA_DIR / "spk2_ka.tsv"), "--quiet", "--out", str(tmp_path),
-                 "--sensor-stiffness", "hard"])
+                 "--sensor-stiffness", "hard", "--vtk-series"])  # the old series on request (--out: motion.npz)
     out = capsys.readouterr().out
     assert code == 0, out
     for what in ("max sensor residual", "max volume change", "energy peak", "drift at the end", "TT->node",

@@ -23,7 +23,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="keep the tongue below a palate and report penetration and contact: the speaker's "
                              "(a file from `tonguevis palate`) or 'generic' (the shipped one)")
     parser.add_argument("--out", type=Path, metavar="DIR",
-                        help="write motion.npz and a VTK series (motion.pvd + .vtu frames) for ParaView here")
+                        help="write motion.npz here: q(t), times, per-frame figures, metadata and the model (any "
+                             "frame is rebuilt from it: Motion.load); a few MB per minute of recording")
+    parser.add_argument("--paraview", action="store_true",
+                        help="with --out: also motion.xdmf + motion.h5 for ParaView, the mesh once and every "
+                             "frame's displacement (float32, head frame) in one file")
+    parser.add_argument("--surface-only", action="store_true",
+                        help="with --paraview: the tongue's surface triangles only (about 40 %% of the bytes)")
+    parser.add_argument("--frame-stride", type=int, default=1, metavar="N",
+                        help="ParaView/VTK exports: every N-th frame (default 1: all)")
+    parser.add_argument("--vtk-series", action="store_true",
+                        help="with --out: also the old vtk/ series, one .vtu file per frame (about 210 KB a frame: "
+                             "large for long recordings)")
 
 
 def _stiffness_text(meta: dict) -> str:
@@ -69,6 +80,12 @@ def summary(motion) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tonguevis.errors import TonguevisError
+
+    if args.out is None and (args.paraview or args.vtk_series):
+        raise TonguevisError("--paraview and --vtk-series write into the folder given by --out DIR")
+    if args.frame_stride < 1:
+        raise TonguevisError(f"--frame-stride must be at least 1, got {args.frame_stride}")
     recording = read_recording_args(args)
     model = load_model_args(args)
     motion = simulate_args(args, recording, model)
@@ -76,7 +93,14 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         motion.save(args.out / "motion.npz")
-        pvd = motion.to_vtk_series(args.out / "vtk")
-        lines.append(f"wrote {args.out / 'motion.npz'} and {pvd}")
+        written = [args.out / "motion.npz"]
+        if args.paraview:
+            from tonguevis.sim.xdmf import write_xdmf
+
+            written.append(write_xdmf(motion, args.out / "motion.xdmf", surface_only=args.surface_only,
+                                      stride=args.frame_stride))
+        if args.vtk_series:
+            written.append(motion.to_vtk_series(args.out / "vtk", frames=slice(None, None, args.frame_stride)))
+        lines.append("wrote " + ", ".join(str(p) for p in written))
     print("\n".join(lines))
     return 0 if not motion.metadata.get("unconverged_frames") else 1

@@ -1,0 +1,185 @@
+"""Long recordings: figures chunk by chunk, frames on demand, the ParaView export in one file.
+
+The chunked paths are checked against the plain whole-array computations they
+replace, on the demo /ta/ (short: the 30-minute case is only benchmarked,
+scripts/bench_long.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tonguevis.paths import DATA_DIR
+
+
+@pytest.fixture(scope="module")
+def demo():
+    """The demo /ta/ under the paper's hard constraints: it goes 2 mm into the generic palate."""
+    from tonguevis.io import read_recording
+    from tonguevis.preprocess.targets import prepare_targets
+    from tonguevis.sim import TongueModel, simulate
+
+    rec = read_recording(DATA_DIR / "spk1_ta.tsv")
+    model = TongueModel.default()
+    motion = simulate(rec, model, sensor_stiffness=None)
+    return model, motion, prepare_targets(rec, model)
+
+
+def _reference_contact(displacements, points, candidates, palate, offset, exclude, faces):
+    """The plain whole-array penetration and contact area (as simulate computed them before chunks)."""
+    from tonguevis.sim.contact import penetration
+
+    pen = penetration(displacements, points, candidates, palate, offset, exclude)
+    n_frames = len(displacements)
+    gap = np.full((n_frames, len(points)), np.inf)
+    g, _ = palate.clearance((points[candidates][None] + displacements[:, candidates] + offset[:, None]).reshape(-1, 3))
+    gap[:, candidates] = np.where(np.isfinite(g), g, np.inf).reshape(n_frames, -1)
+    touching = np.all(gap[:, faces] < 3e-4, axis=2)
+    p = points[None] + displacements
+    a, b, c = (p[:, faces[:, k]] for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=2)
+    return pen, np.sum(np.where(touching, area, 0.0), axis=1)
+
+
+def test_chunked_figures_equal_the_whole_array(demo):
+    from tonguevis.palate import generic_palate
+    from tonguevis.sim.figures import ContactProbe, frame_figures
+    from tonguevis.sim.plausibility import plausibility_figures, plausibility_from_largest
+
+    model, motion, prep = demo
+    full = motion.displacements()
+    candidates = np.asarray(model.dorsal_nodes)
+    rng = np.random.default_rng(3)
+    conflicts = np.column_stack([rng.integers(0, motion.n_frames, 40), rng.integers(0, len(motion.sensor_nodes), 40)])
+    near = rng.random((len(candidates), len(motion.sensor_nodes))) < 0.2
+    probe = ContactProbe(model.mesh.points, candidates, generic_palate(), prep.jaw_offset, model.surface_faces,
+                         conflicts, near)
+    chunked = frame_figures(model, motion.q, motion.warping, contact=probe, chunk=7)  # 7 does not divide F
+
+    assert np.allclose(chunked.volume_change, model.volume_change(full), rtol=0, atol=1e-13)
+    assert np.allclose(chunked.largest_displacement, np.linalg.norm(full, axis=2).max(axis=1), rtol=1e-13, atol=0)
+    exclude = np.zeros((motion.n_frames, len(candidates)), dtype=bool)
+    for f, s in conflicts:
+        exclude[f] |= near[:, s]
+    pen, area = _reference_contact(full, model.mesh.points, candidates, probe.palate, prep.jaw_offset, exclude,
+                                   model.surface_faces)
+    assert pen.max() > 1e-3 and (area > 0).sum() > 10  # the test has contact to compare
+    assert np.allclose(chunked.penetration, pen, rtol=0, atol=1e-13)
+    assert np.allclose(chunked.contact_area, area, rtol=1e-12, atol=1e-18)
+
+    measured = motion.targets - model.mesh.points[motion.sensor_nodes][None]
+    reference, absurd = plausibility_figures(full, measured, chunked.volume_change, motion.sensor_residual)
+    fast, fast_absurd = plausibility_from_largest(chunked.largest_displacement, measured, chunked.volume_change,
+                                                  motion.sensor_residual)
+    assert fast == pytest.approx(reference, rel=1e-12, nan_ok=True) and np.array_equal(absurd, fast_absurd)
+
+
+def test_simulate_reports_the_whole_array_figures(demo):
+    from tonguevis.sim.plausibility import plausibility_figures
+
+    model, motion, _ = demo
+    full = motion.displacements()
+    assert np.allclose(motion.volume_change, model.volume_change(full), rtol=0, atol=1e-13)
+    measured = motion.targets - model.mesh.points[motion.sensor_nodes][None]
+    reference, _ = plausibility_figures(full, measured, motion.volume_change, motion.sensor_residual)
+    assert motion.metadata["plausibility"] == pytest.approx(reference, rel=1e-12, nan_ok=True)
+
+
+def test_frames_on_demand_equal_the_whole_array(demo):
+    model, motion, _ = demo
+    full = motion.displacements()
+    assert np.array_equal(motion.displacement(123), motion.displacements(slice(123, 124))[0])
+    assert np.allclose(motion.displacement(123), full[123], rtol=0, atol=1e-15)
+    assert np.allclose(motion.displacements(slice(100, 400, 7)), full[100:400:7], rtol=0, atol=1e-15)
+    seen = []
+    for idx, chunk in motion.iter_displacements(chunk=100):
+        assert chunk.shape == (len(idx), model.mesh.n_nodes, 3) and len(idx) <= 100
+        assert np.allclose(chunk, full[idx], rtol=0, atol=1e-15)
+        seen.append(idx)
+    assert np.array_equal(np.concatenate(seen), np.arange(motion.n_frames))
+    surface = np.unique(model.surface_faces)
+    for idx, chunk in motion.iter_displacements(chunk=64, frames=slice(5, None, 3), nodes=surface, dtype=np.float32):
+        assert chunk.dtype == np.float32 and chunk.shape[1] == len(surface)
+        assert np.allclose(chunk, full[idx][:, surface], rtol=1e-5, atol=1e-9)
+    with pytest.raises(ValueError, match="chunk"):
+        next(motion.iter_displacements(chunk=0))
+
+
+def test_paraview_export_is_one_time_series_meshio_reads(demo, tmp_path):
+    import meshio
+
+    from tonguevis.sim.xdmf import write_xdmf
+
+    model, motion, _ = demo
+    short = _cut(motion, 0, 60)
+    path = write_xdmf(short, tmp_path / "motion.xdmf")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["motion.h5", "motion.xdmf"]  # no partial files left
+    jaw = np.zeros((short.n_frames, 3)) if short.jaw_offset is None else short.jaw_offset
+    with meshio.xdmf.TimeSeriesReader(path) as reader:
+        points, cells = reader.read_points_cells()
+        assert reader.num_steps == short.n_frames
+        assert np.allclose(points, model.mesh.points) and cells[0].type == "tetra"
+        assert np.array_equal(cells[0].data, model.mesh.tets)
+        for k in (0, 17, short.n_frames - 1):
+            t, point_data, _ = reader.read_data(k)
+            assert t == pytest.approx(short.times[k])
+            expected = short.displacement(k) + jaw[k]  # the head frame: the jaw carries the tongue
+            assert np.allclose(point_data["displacement"], expected, rtol=1e-6, atol=1e-9)
+
+
+def test_paraview_export_of_the_surface_every_third_frame(demo, tmp_path):
+    import h5py
+    import meshio
+
+    from tonguevis.sim.xdmf import write_xdmf
+
+    model, motion, _ = demo
+    short = _cut(motion, 100, 200)
+    surface = np.unique(model.surface_faces)
+    path = write_xdmf(short, tmp_path / "surface", surface_only=True, stride=3, frame="jaw", chunk=8,
+                      extra_fields=lambda idx: {"frame_number": np.repeat(idx[:, None], len(surface), axis=1)})
+    assert path.name == "surface.xdmf"
+    with meshio.xdmf.TimeSeriesReader(path) as reader:
+        points, cells = reader.read_points_cells()
+        assert reader.num_steps == len(range(0, short.n_frames, 3)) == 34
+        assert cells[0].type == "triangle" and np.array_equal(surface[cells[0].data], model.surface_faces)
+        assert np.allclose(points, model.mesh.points[surface])
+        t, point_data, _ = reader.read_data(5)
+        assert t == pytest.approx(short.times[15])
+        assert np.allclose(point_data["displacement"], short.displacement(15)[surface], rtol=1e-6, atol=1e-9)
+        assert np.all(point_data["frame_number"] == 15)
+    with h5py.File(path.with_suffix(".h5")) as h5:
+        assert np.array_equal(h5["frames"][()], np.arange(0, short.n_frames, 3))
+        assert "jaw frame" in h5.attrs["frame_of_reference"]
+
+
+def test_cli_writes_motion_npz_by_default_and_exports_on_request(tmp_path, capsys):
+    from tonguevis.cli import main
+    from tonguevis.sim import Motion
+
+    recording = str(DATA_DIR / "spk2_ka.tsv")
+    assert main(["simulate", recording, "--quiet", "--out", str(tmp_path / "a")]) == 0
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["motion.npz"]
+    motion = Motion.load(tmp_path / "a" / "motion.npz")
+    assert main(["simulate", recording, "--quiet", "--out", str(tmp_path / "b"), "--paraview",
+                 "--surface-only", "--frame-stride", "10", "--vtk-series"]) == 0
+    assert "motion.xdmf" in capsys.readouterr().out
+    import meshio
+
+    with meshio.xdmf.TimeSeriesReader(tmp_path / "b" / "motion.xdmf") as reader:
+        assert reader.num_steps == len(range(0, motion.n_frames, 10))
+    assert len(list((tmp_path / "b" / "vtk").glob("*.vtu"))) == len(range(0, motion.n_frames, 10))
+    assert main(["simulate", recording, "--quiet", "--paraview"]) == 2
+    assert "--out" in capsys.readouterr().err
+
+
+def _cut(motion, start, stop):
+    """The frames start..stop-1 of ``motion`` (a short motion for the export tests)."""
+    from dataclasses import replace
+
+    keep = slice(start, stop)
+    return replace(motion, times=motion.times[keep], q=motion.q[keep], targets=motion.targets[keep],
+                   sensor_residual=motion.sensor_residual[keep], energy=motion.energy[keep],
+                   volume_change=motion.volume_change[keep], converged=motion.converged[keep],
+                   jaw_offset=None if motion.jaw_offset is None else motion.jaw_offset[keep])
