@@ -48,6 +48,7 @@ log = logging.getLogger("tonguevis")
 STATUS_OK = 55
 STATUS_MISSING = 119
 NOMINAL_RATE = 100.0
+PARSE_ROWS = 5000  # data rows turned into numbers at a time (bounds the reader's Python objects)
 DEFAULT_AUDIO_RATE = 22050.0
 
 _SENSOR_ID = re.compile(r"^Sensor\s*(\d+)\s*Id$", re.IGNORECASE)
@@ -113,7 +114,9 @@ def read_ndi_wave(path, axes=None, rate: float | None = None) -> Recording:
     path = Path(path)
     text = decode_text(read_bytes(path), path)
     lines, ended = split_lines(text)
+    del text  # the lines hold it now
     numbered = [(i + 1, line) for i, line in enumerate(lines) if line.strip()]
+    del lines
     if not numbered:
         raise RecordingError("empty file", path)
     header_line, header_text = numbered[0]
@@ -126,7 +129,10 @@ def read_ndi_wave(path, axes=None, rate: float | None = None) -> Recording:
     body = numbered[1:]
     if not body:
         raise RecordingError("header only: no data rows", path)
-    rows, truncated = [], None
+    first_data_line = body[0][0]
+    # Rows become numbers PARSE_ROWS at a time: a 30-minute recording is 18 million cells, which
+    # as Python strings and floats all at once took 1.5 GB; the last two rows wait for the end checks.
+    tables, rows, parsed, truncated = [], [], 0, None
     for k, (line_no, line) in enumerate(body):
         fields = line.rstrip("\r\n").split("\t")
         if len(fields) > ncols and not any(f.strip() for f in fields[ncols:]):
@@ -137,18 +143,25 @@ def read_ndi_wave(path, axes=None, rate: float | None = None) -> Recording:
                 break
             raise RecordingError(f"line {line_no} has {len(fields)} fields, the header has {ncols}", path)
         rows.append(fields)
+        if len(rows) == PARSE_ROWS + 2:
+            tables.append(parse_number_table(rows[:-2], path, first_data_line + parsed))
+            parsed += len(rows) - 2
+            rows = rows[-2:]
     if truncated is None and not ended and rows:
         # An unterminated last line may be cut inside a number: keep it only if it is whole.
         previous = rows[-2] if len(rows) > 1 else None
         if not unterminated_row_complete(rows[-1], previous):
-            truncated = body[len(rows) - 1][0]
+            truncated = body[parsed + len(rows) - 1][0]
             rows.pop()
     if truncated is not None:
         log.warning("%s: dropped the incomplete last line %d (file truncated?)", path, truncated)
-    if not rows:
+    if not rows and not tables:
         raise RecordingError("no complete data row", path)
-    first_data_line = body[0][0]
-    table = parse_number_table(rows, path, first_data_line)
+    if rows:
+        tables.append(parse_number_table(rows, path, first_data_line + parsed))
+    del rows
+    table = tables[0] if len(tables) == 1 else np.concatenate(tables)
+    del tables
     times = table[:, 0]
     check_times(times, path, "AudioTime column", first_line=first_data_line)
     if rate is None:
