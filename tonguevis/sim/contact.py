@@ -159,7 +159,7 @@ def _cholesky(matrix: np.ndarray) -> np.ndarray:
 
 
 def correct_frames(eigenvalues, phi_nodes, phi_s, q, points, candidates, palate, jaw_offset, allowed=None,
-                   margin: float = MARGIN) -> tuple[np.ndarray, np.ndarray]:
+                   margin: float = MARGIN, compliance: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Dynamic shapes (F, m) moved out of the palate where they went in: (corrected q, frames corrected).
 
     The integrator does not see the palate (only the contact forces of the
@@ -167,7 +167,8 @@ def correct_frames(eigenvalues, phi_nodes, phi_s, q, points, candidates, palate,
     into it.  Each such frame is projected onto the nearest shape, in the
     elastic-energy metric, that keeps every sensor node where it is and every
     candidate node below the palate: the same QP as :func:`solve_contact`
-    with hard sensors at their dynamic positions.  allowed : (F, k) bool,
+    with the sensors at their dynamic positions, held by springs of ``compliance``
+    (m/N; 0 = exactly, the paper's constraint).  allowed : (F, k) bool,
     candidates that may get a constraint (False near a conflicting sensor).
     """
     lam = np.asarray(eigenvalues, dtype=np.float64)
@@ -185,7 +186,7 @@ def correct_frames(eigenvalues, phi_nodes, phi_s, q, points, candidates, palate,
     ones = np.ones(3 * n_s, dtype=bool)
     for f in frames:
         ok = np.ones(len(candidates), bool) if allowed is None else allowed[f]
-        out[f] = _active_set(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset[f], P @ q[f], np.zeros(3 * n_s),
+        out[f] = _active_set(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset[f], P @ q[f], np.full(3 * n_s, compliance),
                              ones, q[f], ok, margin)[0]
     return out, frames
 

@@ -105,12 +105,13 @@ def simulate(
         from tonguevis.sim.newmark_kernel import integrate_compiled
 
         result = integrate_compiled(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance,
-                                    external=schedule.get("external"))
+                                    external=schedule.get("external"), rates=False)  # q̇, q̈ unused: q alone
     else:
         result = integrate(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance,
                            external=schedule.get("external"), progress=_stage(progress, 1, 3))
     if contact is not None:
-        result.q, corrected = _keep_below_palate(result.q, contact, schedule, basis, phi_s)
+        base = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * k_ref)
+        result.q, corrected = _keep_below_palate(result.q, contact, schedule, basis, phi_s, base)
         schedule["corrected_frames"] = corrected
     report(progress, 2, 3, "reconstructing the mesh")
     # Chunk by chunk: the full-mesh displacement of every frame is never held at once.
@@ -306,7 +307,7 @@ def _contact_context(palate, prep, model, basis, recording) -> dict:
             "registration_shift_m": shift}
 
 
-def _keep_below_palate(q, contact, schedule, basis, phi_s):
+def _keep_below_palate(q, contact, schedule, basis, phi_s, compliance: float):
     """The dynamic shapes projected out of the palate where inertia carried them in (see contact.correct_frames)."""
     from tonguevis.sim.contact import CONFLICT_RADIUS, correct_frames
 
@@ -316,7 +317,7 @@ def _keep_below_palate(q, contact, schedule, basis, phi_s):
     for f, s in schedule["conflicts"]:
         allowed[f] &= ~near[:, s]
     return correct_frames(basis.eigenvalues, contact["phi_nodes"], phi_s, q, pts, cand, contact["palate"],
-                          contact["jaw_offset"], allowed)
+                          contact["jaw_offset"], allowed, compliance=compliance)
 
 
 def _contact_probe(contact, schedule, model):
