@@ -106,6 +106,30 @@ def test_frames_on_demand_equal_the_whole_array(demo):
         next(motion.iter_displacements(chunk=0))
 
 
+def test_compiled_integration_without_the_rates_gives_the_same_q(demo):
+    """simulate() keeps q alone (rates=False): q̇ and q̈ of every frame were two more arrays of q's size."""
+    from tonguevis.sim.newmark import NewmarkSettings
+    from tonguevis.sim.newmark_kernel import integrate_compiled
+    from tonguevis.sim.simulate import drive_schedule
+
+    model, motion, prep = demo
+    basis = model.basis(motion.q.shape[1])
+    dofs = (3 * prep.nodes[:, None] + np.arange(3)).ravel()
+    s = len(prep.nodes)
+    phi_s, w_s = basis.phi[dofs].reshape(s, 3, -1), model.rotation_matrix(basis)[dofs].reshape(s, 3, -1)
+    targets, compliance, _ = drive_schedule(prep.displacement[:400], 100.0, basis.eigenvalues, phi_s, None)
+    settings = NewmarkSettings(dt=0.01, alpha=model.material.alpha, beta=model.material.beta)
+    push = np.zeros((400, basis.phi.shape[1]))
+    push[150:160, 0] = 1e-3
+    for external in (None, push):
+        full = integrate_compiled(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance,
+                                  external=external)
+        lean = integrate_compiled(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance,
+                                  external=external, rates=False)
+        assert lean.qd is None and lean.qdd is None and full.qd.shape == full.q.shape
+        assert np.array_equal(lean.q, full.q) and np.array_equal(lean.converged, full.converged)
+
+
 def test_paraview_export_is_one_time_series_meshio_reads(demo, tmp_path):
     import meshio
 

@@ -64,7 +64,8 @@ class NewmarkSettings:
 
 @dataclass
 class IntegrationResult:
-    """q, q̇, q̈ (F, m); residual (F, S) |f(q) - c| in m; converged (F,); iterations (F,);
+    """q, q̇, q̈ (F, m) (q̇ and q̈ None when the compiled integrator was told not to keep them,
+    ``rates=False``); residual (F, S) |f(q) - c| in m; converged (F,); iterations (F,);
     recovered (F,) frames that took the linear fallback (see the module docstring)."""
 
     q: np.ndarray
