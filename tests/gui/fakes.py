@@ -58,9 +58,10 @@ class FakeModel:
     def displacement(self, q, warping=True):
         return (self.phi @ q).reshape(-1, 3)
 
-    def displacements(self, q, warping=True, dtype=np.float64):
+    def displacements(self, q, warping=True, dtype=np.float64, nodes=None):
         q = np.atleast_2d(q)
-        return np.einsum("dm,fm->fd", self.phi, q).reshape(len(q), -1, 3).astype(dtype)
+        u = np.einsum("dm,fm->fd", self.phi, q).reshape(len(q), -1, 3).astype(dtype)
+        return u if nodes is None else u[:, nodes]
 
 
 def fake_recording(duration: float = 2.0, rate: float = 100.0, audio_rate: int = 8000,

@@ -58,16 +58,47 @@ def test_motion_frames_match_the_motion(fake):
     from tonguevis.gui.frames import MotionFrames
 
     model, _, motion = fake
-    frames = MotionFrames(motion, batch=7)  # batches that do not divide the frame count
+    frames = MotionFrames(motion, block=7)  # blocks that do not divide the frame count
     u = model.displacements(motion.q)
-    assert np.allclose(frames.points, model.mesh.points + u, atol=1e-6)
-    assert np.allclose(frames.scalars["displacement"], 1e3 * np.linalg.norm(u, axis=2), rtol=1e-5, atol=1e-6)
+    drawn = frames.nodes
+    assert set(np.unique(model.surface_faces)) <= set(drawn) and set(motion.sensor_nodes) <= set(drawn)
     density = EnergyDensity(model.mesh.points, model.mesh.tets, 6912.0, 0.49)
-    assert np.allclose(frames.scalars["energy"], density.nodal(u), rtol=1e-4, atol=1e-6 * frames.clim["energy"][1])
-    assert np.allclose(frames.sensor_points, frames.points[:, motion.sensor_nodes])
-    assert frames.clim["displacement"][1] <= frames.scalars["displacement"].max()
+    energy = density.nodal(u)
+    for i in (0, 6, 7, 50, frames.n_frames - 1, 3):
+        assert np.allclose(frames.points[i][drawn], (model.mesh.points + u[i])[drawn], atol=1e-6)
+        assert np.allclose(frames.scalars["displacement"][i][drawn], 1e3 * np.linalg.norm(u[i], axis=1)[drawn],
+                           rtol=1e-5, atol=1e-6)
+        assert np.allclose(frames.scalars["energy"][i][drawn], energy[i][drawn], rtol=1e-4,
+                           atol=1e-6 * frames.clim["energy"][1])
+        assert np.allclose(frames.sensor_points[i], frames.points[i][motion.sensor_nodes])
+    inside = np.setdiff1d(np.arange(model.mesh.n_nodes), drawn)
+    assert len(inside) and np.allclose(frames.points[5][inside], model.mesh.points[inside])  # not drawn: at rest
+    assert np.allclose(frames.points[2:9:3], frames.points[[2, 5, 8]])
+    assert frames.points[:, motion.sensor_nodes].shape == (frames.n_frames, len(motion.sensor_nodes), 3)
+    assert frames.clim["displacement"][1] <= 1e3 * np.linalg.norm(u, axis=2).max()
     assert frames.frame_at(motion.times[5] + 0.004) == 5
     assert frames.frame_at(-10) == 0 and frames.frame_at(1e9) == frames.n_frames - 1
+    whole = frames.whole_mesh()
+    assert np.allclose(whole.points[50], model.mesh.points + u[50], atol=1e-6)
+    assert np.allclose(whole.scalars["energy"][50], energy[50], rtol=1e-4, atol=1e-6 * frames.clim["energy"][1])
+
+
+def test_motion_frames_cache_stays_bounded_and_colours_come_from_a_sample(fake):
+    from tonguevis.gui.frames import MotionFrames
+
+    model, _, motion = fake
+    frames = MotionFrames(motion, block=8, cache_frames=32, colour_frames=20)
+    assert frames.cached_frames == 0  # nothing precomputed
+    for i in range(frames.n_frames):  # play every frame through, then seek around
+        frames.points[i], frames.scalars["energy"][i]
+        assert frames.cached_frames <= 32
+    for i in np.random.default_rng(0).integers(0, frames.n_frames, 50):
+        frames.scalars["displacement"][int(i)]
+        assert frames.cached_frames <= 32
+    sample = np.unique(np.round(np.linspace(0, frames.n_frames - 1, 20)).astype(int))
+    u = model.displacements(motion.q[sample])[:, frames.nodes]
+    expected = np.percentile(1e3 * np.linalg.norm(u, axis=2), 99.5)
+    assert frames.clim["displacement"] == (0.0, pytest.approx(expected, rel=1e-5))
 
 
 def test_vertex_normals_point_out_of_a_box():

@@ -158,6 +158,7 @@ def export_vtk_series(session, folder, progress: ProgressCallback | None = None,
     frames = session.frames
     if frames is None:
         raise ExportError("nothing to export: the recording has not been simulated", session.path)
+    frames = frames.whole_mesh()  # every node: the view's frames compute the surface only
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     mesh = frames.motion.model.mesh
