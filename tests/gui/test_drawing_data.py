@@ -138,6 +138,21 @@ def test_waveform_envelope_matches_a_loop():
         assert times[b] == pytest.approx(2.0 + (b + 0.5) * per / 1000.0)
 
 
+def test_spectrogram_of_long_sound_is_scipys_columns_spread_over_it():
+    from scipy.signal import spectrogram
+
+    from tonguevis.gui.audio_panel import bounded_spectrogram, window_power
+
+    samples = np.random.default_rng(4).standard_normal(16000 * 3)
+    f, t, power = spectrogram(samples, fs=16000, nperseg=256, noverlap=128)
+    assert np.allclose(window_power(samples, np.arange(len(t)) * 128, 16000, 256), power, rtol=1e-9)
+    f2, t2, p2 = bounded_spectrogram(samples, 16000, 256, columns=len(t))  # short: scipy's own
+    assert np.array_equal(p2, power) and np.array_equal(t2, t)
+    f3, t3, p3 = bounded_spectrogram(samples, 16000, 256, columns=50)  # long: 50 columns spread evenly
+    assert p3.shape == (len(f), 50) and np.allclose(f3, f)
+    assert t3[0] == pytest.approx(t[0]) and t3[-1] == pytest.approx((len(samples) - 128) / 16000)
+
+
 def test_video_frame_times():
     from tonguevis.gui.video import frame_times
 

@@ -12,6 +12,8 @@ from tonguevis.gui.timeplot import TimePlot
 #: Waveform drawn as a min/max envelope over this many bins (fast at any length).
 ENVELOPE_BINS = 3000
 SPECTROGRAM_MAX_HZ = 8000.0
+#: Most spectrogram columns computed (a long recording's are spread evenly over it).
+SPECTROGRAM_COLUMNS = 4000
 #: Height of one label tier's row relative to the waveform's axes.
 TIER_ROW_RATIO = 0.3
 #: Minimum heights (px) of the plot without tiers and with them (base + per tier), so the
@@ -27,6 +29,31 @@ def envelope(samples: np.ndarray, rate: float, offset: float, bins: int = ENVELO
     blocks = samples[:usable].reshape(-1, per_bin)
     times = offset + (np.arange(len(blocks)) + 0.5) * per_bin / rate
     return times, blocks.min(axis=1), blocks.max(axis=1)
+
+
+def bounded_spectrogram(samples: np.ndarray, rate: float, nperseg: int, columns: int = SPECTROGRAM_COLUMNS):
+    """(frequencies (k,), times (c,), power (k, c)): scipy's spectrogram with half-overlapping windows,
+    or, when that would make more than ``columns`` of them (a long recording: 30 minutes of 16 kHz
+    sound is 225,000 windows and a GB of temporaries), ``columns`` windows spread evenly over the sound."""
+    step = nperseg - nperseg // 2
+    if (len(samples) - nperseg) // step + 1 <= columns or len(samples) < nperseg:
+        return spectrogram(samples, fs=rate, nperseg=nperseg, noverlap=nperseg // 2)
+    starts = np.round(np.linspace(0, len(samples) - nperseg, columns)).astype(np.int64)
+    return np.fft.rfftfreq(nperseg, 1.0 / rate), (starts + nperseg / 2) / rate, window_power(samples, starts, rate,
+                                                                                           nperseg)
+
+
+def window_power(samples: np.ndarray, starts: np.ndarray, rate: float, nperseg: int) -> np.ndarray:
+    """(k, c) power spectral density of the windows starting at ``starts``, scaled as scipy's
+    spectrogram scales its own (Tukey window, constant detrend, one-sided density)."""
+    from scipy.signal import get_window
+
+    window = get_window(("tukey", 0.25), nperseg)  # scipy.signal.spectrogram's default
+    segments = np.asarray(samples[starts[:, None] + np.arange(nperseg)], dtype=np.float64)
+    segments = (segments - segments.mean(axis=1, keepdims=True)) * window
+    power = np.abs(np.fft.rfft(segments, axis=1)) ** 2 / (rate * (window ** 2).sum())
+    power[:, 1:-1 if nperseg % 2 == 0 else None] *= 2
+    return power.T
 
 
 class AudioPlot(TimePlot):
@@ -81,7 +108,7 @@ class AudioPlot(TimePlot):
             self.wave_ax.set_ylim(-peak * 1.05, peak * 1.05)
             # Spectrogram: 25 ms windows; cheap even for minutes of 44.1 kHz audio.
             nperseg = int(2 ** np.floor(np.log2(0.025 * audio.rate)))  # ≤ 25 ms: formants and bursts show
-            f, st, power = spectrogram(samples, fs=audio.rate, nperseg=nperseg, noverlap=nperseg // 2)
+            f, st, power = bounded_spectrogram(samples, audio.rate, nperseg)
             keep = f <= min(SPECTROGRAM_MAX_HZ, audio.rate / 2)
             db = 10 * np.log10(power[keep] + 1e-12)
             top = float(np.max(db))
@@ -89,9 +116,12 @@ class AudioPlot(TimePlot):
                                 extent=(audio.offset + st[0], audio.offset + st[-1], f[keep][0] / 1e3,
                                         f[keep][-1] / 1e3), interpolation="nearest")
             self.spec_ax.set_ylabel("frequency\n(kHz)", fontsize=8)
-        for start, end in productions:
-            for ax in (self.wave_ax, self.spec_ax):
-                ax.axvline(start, color="#2980b9", lw=0.6, ls="--")
+        starts = [start for start, _end in productions]
+        for ax in (self.wave_ax, self.spec_ax) if starts else ():  # one artist per axes, however many productions
+            from matplotlib.collections import LineCollection
+
+            ax.add_collection(LineCollection([[(t, 0.0), (t, 1.0)] for t in starts], colors="#2980b9", linewidths=0.6,
+                                             linestyles="--", transform=ax.get_xaxis_transform()), autolim=False)
         bottom = self.spec_ax
         if self.tiers_ax is not None:
             self._tier_texts = draw_tiers(self.tiers_ax, labels, self._time_range)

@@ -15,6 +15,8 @@ from tonguevis.gui.timeplot import FACE, TimePlot
 #: Frames and modes drawn in the 3D surface (it is a picture, not a table).
 SURFACE_MAX_FRAMES = 300
 SURFACE_MAX_MODES = 20
+#: Columns of the map below it (a long recording's frames averaged in blocks; a short one's all shown).
+MAP_MAX_FRAMES = 4000
 COLORMAP = "RdBu_r"
 
 
@@ -78,8 +80,8 @@ class ModalTab(QWidget):
             self.surface_canvas.draw_idle()
             return
         scale = 1e3  # q in mm·kg^½ reads better than m·kg^½
-        times, q = decimate(np.asarray(motion.times), np.asarray(motion.q) * scale,
-                            SURFACE_MAX_FRAMES, SURFACE_MAX_MODES)
+        times, q = decimate(np.asarray(motion.times), np.asarray(motion.q), SURFACE_MAX_FRAMES, SURFACE_MAX_MODES)
+        q = q * scale
         modes = np.arange(1, q.shape[1] + 1)
         T, M = np.meshgrid(times, modes, indexing="ij")
         # A few short spikes would flatten everything else: clip at the 97th percentile of |q|.
@@ -95,4 +97,5 @@ class ModalTab(QWidget):
         self.ax3d.set_title(f"modal displacement q(t), first {q.shape[1]} of {motion.q.shape[1]} modes "
                             f"(clipped at ±{limit:.2g})", fontsize=9)
         self.surface_canvas.draw_idle()
-        self.map.show_q(np.asarray(motion.times), np.asarray(motion.q) * scale)
+        times, q = decimate(np.asarray(motion.times), np.asarray(motion.q), MAP_MAX_FRAMES, motion.q.shape[1])
+        self.map.show_q(times, q * scale)

@@ -53,9 +53,7 @@ class SensorPlot(TimePlot):
             ax.set_ylabel(f"{AXIS_NAMES[k]}\n{unit}", fontsize=8)
             ax.tick_params(labelsize=7)
             ax.grid(True, lw=0.3, alpha=0.5)
-            for j, (start, end) in enumerate(productions):
-                ax.axvspan(start, end, color="#3498db" if j % 2 else "#95a5a6", alpha=0.12, lw=0)
-                ax.axvline(start, color="#7f8c8d", lw=0.6, ls="--")
+            _shade_productions(ax, productions)
             for name, xyz in signals.items():
                 (line,) = ax.plot(times, xyz[:, k], lw=0.9, color=colours[name], label=name)
                 self.lines.setdefault(name, []).append(line)
@@ -77,6 +75,23 @@ class SensorPlot(TimePlot):
                 line.set_alpha(1.0 if selected in (None, name) else 0.45)
         if draw:
             self.draw_idle()
+
+
+def _shade_productions(ax, productions) -> None:
+    """Shade each production (alternating colours) and dash its start: two artists per axes
+    whatever their number (one per production made a 30-minute recording take minutes to draw)."""
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    if not len(productions):
+        return
+    spans = np.asarray(productions, dtype=np.float64).reshape(-1, 2)
+    band = ax.get_xaxis_transform()  # x in seconds, y from the bottom (0) to the top (1) of the axes
+    boxes = [[(a, 0.0), (a, 1.0), (b, 1.0), (b, 0.0)] for a, b in spans]
+    colours = ["#3498db" if j % 2 else "#95a5a6" for j in range(len(spans))]
+    ax.add_collection(PolyCollection(boxes, facecolors=colours, alpha=0.12, linewidths=0, transform=band),
+                      autolim=False)
+    ax.add_collection(LineCollection([[(a, 0.0), (a, 1.0)] for a in spans[:, 0]], colors="#7f8c8d", linewidths=0.6,
+                                     linestyles="--", transform=band), autolim=False)
 
 
 class SensorPanel(QWidget):
