@@ -134,4 +134,50 @@ def ask_vtk(window) -> None:
                           f"saved {folder}/motion.pvd in the {frame} frame (README.txt there says so)", folder)
 
 
-__all__ = ["TonguevisError", "ask_video", "ask_vtk", "atomic_save_image", "grab_window"]
+class ParaViewDialog(QDialog):
+    """Options of the ParaView export: the surface only, every n-th frame."""
+
+    def __init__(self, n_frames: int, parent=None):
+        from PySide6.QtWidgets import QCheckBox, QSpinBox
+
+        super().__init__(parent)
+        self.setWindowTitle("ParaView export (XDMF + HDF5)")
+        self.surface = QCheckBox("surface triangles only (about 40 % of the bytes)")
+        self.stride = QSpinBox()
+        self.stride.setRange(1, max(1, n_frames))
+        self.stride.setPrefix("every ")
+        self.stride.setSuffix(" frame(s)")
+        form = QFormLayout(self)
+        form.addRow(self.surface)
+        form.addRow("frames", self.stride)
+        buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Ok | QDialogButtonBox.StandardButton.Cancel)
+        buttons.accepted.connect(self.accept)
+        buttons.rejected.connect(self.reject)
+        form.addRow(buttons)
+
+
+def ask_paraview(window) -> None:
+    """File ▸ Export motion for ParaView: one .xdmf + .h5 (the mesh once, displacement and energy
+    density per frame), in the frame of reference the views show."""
+    from tonguevis.gui.paraview_export import export_paraview
+
+    session = window.session
+    if session is None or session.motion is None:
+        window.show_error("Nothing to export", "open a recording and let its simulation finish first")
+        return
+    options = ParaViewDialog(session.motion.n_frames, window)
+    if options.exec() != QDialog.DialogCode.Accepted:
+        return
+    path, _ = QFileDialog.getSaveFileName(window, "Save the motion for ParaView", f"{Path(session.name).stem}.xdmf",
+                                          "XDMF (*.xdmf)")
+    if not path:
+        return
+    frame = getattr(window.state, "reference", "head")
+    surface, stride = options.surface.isChecked(), options.stride.value()
+    run_with_progress(window, "ParaView export",
+                      lambda progress: export_paraview(session, path, frame=frame, surface_only=surface,
+                                                       stride=stride, progress=progress),
+                      f"saved {path} and its .h5 ({frame} frame)", path)
+
+
+__all__ = ["TonguevisError", "ask_paraview", "ask_video", "ask_vtk", "atomic_save_image", "grab_window"]

@@ -33,6 +33,7 @@ class MenusMixin:
         file_menu.addSeparator()
         self._action(file_menu, "Export &screenshot (PNG)…", self.ask_export_screenshot)
         self._action(file_menu, "Export &video (MP4)…", self.ask_export_video)
+        self._action(file_menu, "Export motion for &ParaView (XDMF)…", self.ask_export_paraview)
         self._action(file_menu, "Export motion as VTK &series (one file per frame)…", self.ask_export_vtk)
         file_menu.addSeparator()
         self._action(file_menu, "&Quit", self.close, QKeySequence.StandardKey.Quit)
@@ -67,6 +68,11 @@ class MenusMixin:
         self._action(play, "Step &forward", lambda: self.state.step(1, self), "Right")
         self._action(play, "Step &back", lambda: self.state.step(-1, self), "Left")
         self._action(play, "&Loop current production", self.transport.loop.toggle, "L")
+
+    def ask_export_paraview(self) -> None:
+        from tonguevis.gui.export import ask_paraview
+
+        ask_paraview(self)
 
     def _action(self, menu, text: str, slot, shortcut=None) -> QAction:
         action = QAction(text, self)
