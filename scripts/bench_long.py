@@ -12,7 +12,8 @@ process so that its peak resident memory (``ru_maxrss``) is its own:
 - ``simulate_npz``: ``tonguevis simulate FILE --out DIR`` (what ``--out`` writes
   by default in the version measured), with the bytes and files written;
 - ``simulate_paraview``: the ParaView export (``--out DIR --paraview`` where it
-  exists; before it, ``--out`` itself wrote the per-frame ``.vtu`` series);
+  exists, and ``simulate_paraview_surface`` with ``--surface-only``; before it,
+  ``--out`` itself wrote the per-frame ``.vtu`` series);
 - ``view``: the app headless (Xvfb): create the window, open the recording,
   wait for the first tongue frame drawn; then 200 steps of playback and 50
   random seeks, each drawn, as milliseconds per frame.
@@ -330,6 +331,7 @@ def main(argv=None) -> int:
             if "simulate_paraview" in wanted:
                 if paraview:
                     exports.append(("simulate_paraview", ["--paraview"]))
+                    exports.append(("simulate_paraview_surface", ["--paraview", "--surface-only"]))
                 elif minutes <= args.vtk_series_max_minutes:
                     exports.append(("simulate_paraview", []))
                 else:
