@@ -134,3 +134,16 @@ def test_nan_aware_savgol_property(data, mask_seed, half, order, deriv):
     np.testing.assert_array_equal(np.isnan(ours), np.isnan(ref))
     scale = (np.nanmax(np.abs(y)) if np.isfinite(y).any() else 1.0) + 1.0
     np.testing.assert_allclose(ours, ref, atol=1e-6 * scale / 0.01**deriv, rtol=1e-6)
+
+
+def test_savitzky_golay_of_a_long_recording_in_blocks_is_the_same_to_the_bit(monkeypatch):
+    """A long recording is fitted in blocks with half a window of overlap: the same values, gaps and ends included."""
+    import tonguevis.preprocess._localpoly as lp
+
+    rng = np.random.default_rng(0)
+    x = np.cumsum(rng.normal(size=(5000, 4, 3)), axis=0)
+    x[rng.random(x.shape[:2]) < 0.02] = np.nan
+    x[100:140] = np.nan
+    whole = lp.local_polynomial(x, 21, 3, 2)
+    monkeypatch.setattr(lp, "BLOCK_SAMPLES", 700)  # 700 does not divide 5000
+    assert np.array_equal(lp.local_polynomial(x, 21, 3, 2), whole, equal_nan=True)

@@ -42,7 +42,8 @@ def _reference_contact(displacements, points, candidates, palate, offset, exclud
     return pen, np.sum(np.where(touching, area, 0.0), axis=1)
 
 
-def test_chunked_figures_equal_the_whole_array(demo):
+@pytest.mark.parametrize("workers", [1, 3])  # one thread, and chunks taken by several
+def test_chunked_figures_equal_the_whole_array(demo, workers):
     from tonguevis.palate import generic_palate
     from tonguevis.sim.figures import ContactProbe, frame_figures
     from tonguevis.sim.plausibility import plausibility_figures, plausibility_from_largest
@@ -55,7 +56,8 @@ def test_chunked_figures_equal_the_whole_array(demo):
     near = rng.random((len(candidates), len(motion.sensor_nodes))) < 0.2
     probe = ContactProbe(model.mesh.points, candidates, generic_palate(), prep.jaw_offset, model.surface_faces,
                          conflicts, near)
-    chunked = frame_figures(model, motion.q, motion.warping, contact=probe, chunk=7)  # 7 does not divide F
+    chunked = frame_figures(model, motion.q, motion.warping, contact=probe, chunk=7,
+                            workers=workers)  # 7 does not divide F
 
     assert np.allclose(chunked.volume_change, model.volume_change(full), rtol=0, atol=1e-13)
     assert np.allclose(chunked.largest_displacement, np.linalg.norm(full, axis=2).max(axis=1), rtol=1e-13, atol=0)
@@ -128,6 +130,26 @@ def test_compiled_integration_without_the_rates_gives_the_same_q(demo):
                                   external=external, rates=False)
         assert lean.qd is None and lean.qdd is None and full.qd.shape == full.q.shape
         assert np.array_equal(lean.q, full.q) and np.array_equal(lean.converged, full.converged)
+
+
+def test_static_projection_in_batches_of_frames_equals_one_batch(demo, monkeypatch):
+    import tonguevis.sim.constrained as constrained
+
+    model, motion, prep = demo
+    basis = model.basis(motion.q.shape[1])
+    dofs = (3 * prep.nodes[:, None] + np.arange(3)).ravel()
+    phi_s = basis.phi[dofs].reshape(len(prep.nodes), 3, -1)
+    targets = prep.displacement.copy()
+    targets[300:340, 1] = np.nan  # a sensor missing for a while
+    springs = np.full(targets.shape[:2], 1e-3)
+    springs[500:520, 0] = np.inf  # one not acting
+    one = [constrained.compliant_shapes(basis.eigenvalues, phi_s, targets, springs),
+           constrained.compliant_targets(basis.eigenvalues, phi_s, targets, springs)]
+    monkeypatch.setattr(constrained, "FRAMES_PER_SOLVE", 97)
+    many = [constrained.compliant_shapes(basis.eigenvalues, phi_s, targets, springs),
+            constrained.compliant_targets(basis.eigenvalues, phi_s, targets, springs)]
+    for a, b in zip(one, many):
+        assert np.allclose(a, b, rtol=1e-12, atol=1e-15) and np.isfinite(a).all()  # rounding of the products
 
 
 def test_paraview_export_is_one_time_series_meshio_reads(demo, tmp_path):

@@ -218,7 +218,8 @@ def _drive_trials(basis, phi_s, w_s, trials, compliance, warping, dt, material, 
     settings = NewmarkSettings(dt=dt, alpha=material.alpha, beta=material.beta, tolerance=tolerance, warping=warping)
     from tonguevis.sim.newmark_kernel import integrate_compiled
 
-    results = integrate_compiled(basis.eigenvalues, phi_s, w_s, trials, settings, compliance=compliance)
+    results = integrate_compiled(basis.eigenvalues, phi_s, w_s, trials, settings, compliance=compliance,
+                                 rates=False)  # q alone: each trial's q̇ and q̈ would be two more (F, m) arrays
     return [(r.q, r.converged) for r in results]
 
 

@@ -87,28 +87,24 @@ def point_stiffness(eigenvalues: np.ndarray, phi_s: np.ndarray) -> float:
     return float(1.0 / np.mean(np.sum(phi2 * phi2 / lam, axis=1)))
 
 
+#: Frames solved in one batch: the (frames, 3S, 3S) systems of a 30-minute recording at once took 0.7 GB.
+FRAMES_PER_SOLVE = 8192
+
+
 def compliant_shapes(eigenvalues: np.ndarray, phi_s: np.ndarray, targets: np.ndarray,
                      compliance: np.ndarray) -> np.ndarray:
     """(F, m) compliant static solution of every frame: q = Λ⁻¹Φᵀ(Φ Λ⁻¹ Φᵀ + C)⁻¹ c.
 
     Per frame q minimises ½qᵀΛq + Σ_s |Φ_s q - c_s|² / (2 C_s) over the acting
     sensors (finite target and compliance); C = 0 holds a sensor exactly.
-    targets : (F, S, 3) m; compliance : (F, S) m/N.  All frames in one batched solve.
+    targets : (F, S, 3) m; compliance : (F, S) m/N.  Batched solves of
+    :data:`FRAMES_PER_SOLVE` frames.
     """
     lam = np.asarray(eigenvalues, dtype=np.float64)
-    n_frames, n_s, _ = targets.shape
-    phi2 = phi_s.reshape(3 * n_s, len(lam))
-    gram = (phi2 / lam) @ phi2.T  # (3S, 3S)
-    comp = np.repeat(np.asarray(compliance, dtype=np.float64), 3, axis=1)  # (F, 3S)
-    c = targets.reshape(n_frames, 3 * n_s)
-    acting = np.isfinite(comp) & np.isfinite(c)
-    acting = np.repeat(np.all(acting.reshape(n_frames, n_s, 3), axis=2), 3, axis=1)
-    mats = np.where(acting[:, :, None] & acting[:, None, :], gram[None], 0.0)
-    idx = np.arange(3 * n_s)
-    mats[:, idx, idx] += np.where(acting, np.where(np.isfinite(comp), comp, 0.0), 1.0)
-    rhs = np.where(acting, c, 0.0)
-    mult = np.linalg.solve(mats, rhs[:, :, None])[:, :, 0]  # zero on the sensors not acting
-    return (mult @ phi2) / lam
+    out = np.empty((targets.shape[0], len(lam)))
+    for frames, mult, phi2 in _compliant_multipliers(lam, phi_s, targets, compliance):
+        out[frames] = (mult @ phi2) / lam
+    return out
 
 
 def compliant_targets(eigenvalues: np.ndarray, phi_s: np.ndarray, targets: np.ndarray,
@@ -119,8 +115,30 @@ def compliant_targets(eigenvalues: np.ndarray, phi_s: np.ndarray, targets: np.nd
     easily, for every sensor (a sensor not acting gets where the others put
     its node).  A hard constraint (C = 0) keeps its target.
     """
-    q = compliant_shapes(eigenvalues, phi_s, targets, compliance)
-    return np.einsum("scm,fm->fsc", phi_s, q)
+    lam = np.asarray(eigenvalues, dtype=np.float64)
+    out = np.empty(targets.shape)
+    for frames, mult, phi2 in _compliant_multipliers(lam, phi_s, targets, compliance):
+        out[frames] = np.einsum("scm,fm->fsc", phi_s, (mult @ phi2) / lam)
+    return out
+
+
+def _compliant_multipliers(lam, phi_s, targets, compliance):
+    """Per batch of frames: (frames slice, multipliers (f, 3S), Φ_s as (3S, m)); zero on the sensors not acting."""
+    n_frames, n_s, _ = targets.shape
+    phi2 = phi_s.reshape(3 * n_s, len(lam))
+    gram = (phi2 / lam) @ phi2.T  # (3S, 3S)
+    idx = np.arange(3 * n_s)
+    compliance = np.broadcast_to(np.asarray(compliance, dtype=np.float64), (n_frames, n_s))
+    for start in range(0, n_frames, FRAMES_PER_SOLVE):
+        frames = slice(start, min(start + FRAMES_PER_SOLVE, n_frames))
+        comp = np.repeat(compliance[frames], 3, axis=1)  # (f, 3S)
+        c = targets[frames].reshape(-1, 3 * n_s)
+        acting = np.isfinite(comp) & np.isfinite(c)
+        acting = np.repeat(np.all(acting.reshape(len(c), n_s, 3), axis=2), 3, axis=1)
+        mats = np.where(acting[:, :, None] & acting[:, None, :], gram[None], 0.0)
+        mats[:, idx, idx] += np.where(acting, np.where(np.isfinite(comp), comp, 0.0), 1.0)
+        rhs = np.where(acting, c, 0.0)
+        yield frames, np.linalg.solve(mats, rhs[:, :, None])[:, :, 0], phi2
 
 
 def _blocks(blocks: np.ndarray) -> np.ndarray:

@@ -375,10 +375,14 @@ def _sensor_misfit(q, phi_s, w_s, measured, warping):
     """(F, S) distance (m) of each sensor node from its measured displacement (NaN where not measured)."""
     from tonguevis.sim.rotation import rotate_accumulated
 
-    d = np.einsum("scm,fm->fsc", phi_s, q)
-    if warping:
-        d = rotate_accumulated(np.einsum("scm,fm->fsc", w_s, q), d)
-    return np.linalg.norm(d - measured, axis=2)
+    out = np.empty(measured.shape[:2])
+    for start in range(0, len(q), 16384):  # in blocks: the rotation's temporaries of every frame at once were 0.2 GB
+        block = slice(start, start + 16384)
+        d = np.einsum("scm,fm->fsc", phi_s, q[block])
+        if warping:
+            d = rotate_accumulated(np.einsum("scm,fm->fsc", w_s, q[block]), d)
+        out[block] = np.linalg.norm(d - measured[block], axis=2)
+    return out
 
 
 def _stage(progress: ProgressCallback | None, stage: int, stages: int) -> ProgressCallback | None:
