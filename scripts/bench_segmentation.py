@@ -101,7 +101,7 @@ def render_bar(path: Path) -> None:
     sys.path.insert(0, str(REPO))
     from tests.analysis.segmentation_support import bar_mesh, bent_bar_displacement, tet_containing_x
     from tonguevis.analysis.segmentation import SegmentationTarget, segment
-    from tonguevis.analysis.segmentation.render import render_png
+    from tonguevis.render.segmentation import render_png
     from tonguevis.mesh.tetmesh import TetMesh
 
     points, tets = bar_mesh(24, 2, 2, length=0.12)
@@ -190,7 +190,7 @@ def main(argv=None) -> int:
         for line in where(model, result):
             print(f"  {name}: {line}")
     if args.png:
-        from tonguevis.analysis.segmentation.render import render_png
+        from tonguevis.render.segmentation import render_png
 
         render_png([rigid, constraint], args.png, titles=[f"spk1 /ta/, {target.description}"] * 2)
         print(f"wrote {args.png}")
@@ -212,7 +212,7 @@ def main(argv=None) -> int:
                     print(f"    {line}")
         figures["survey"] = survey
         if args.survey_png:
-            from tonguevis.analysis.segmentation.render import render_grid
+            from tonguevis.render.segmentation import render_grid
 
             render_grid([r for _, r in rows], args.survey_png, titles=[n for n, _ in rows])
             print(f"wrote {args.survey_png}")

@@ -85,7 +85,7 @@ def fig14_vowel(curves, out: Path) -> None:
     from matplotlib.figure import Figure
 
     from tonguevis.analysis.energy import summarize
-    from tonguevis.analysis.energy_plot import plot_energy_curves, save_figure
+    from tonguevis.render.energy import plot_energy_curves, save_figure
 
     fig = Figure(figsize=(13, 8), layout="constrained")
     axes = fig.subplots(2, 2).ravel()
@@ -105,7 +105,7 @@ def fig14_vowel(curves, out: Path) -> None:
 def fig13(result, out: Path) -> None:
     from matplotlib.figure import Figure
 
-    from tonguevis.analysis.energy_plot import plot_mds_paths, save_figure
+    from tonguevis.render.energy import plot_mds_paths, save_figure
     from tonguevis.analysis.mds import frame_dissimilarities, smacof
 
     blocks, labels, energies, times = [], [], [], []
@@ -146,7 +146,7 @@ def fig14(result, out: Path) -> None:
     from matplotlib.figure import Figure
 
     from tonguevis.analysis.energy import summarize
-    from tonguevis.analysis.energy_plot import plot_energy_curves, save_figure
+    from tonguevis.render.energy import plot_energy_curves, save_figure
 
     nine = []
     for speaker, syllable in (("spk1", "la"), ("spk1", "ka"), ("spk2", "ka")):
@@ -176,7 +176,7 @@ def fig14(result, out: Path) -> None:
 
 def morph_figure(result, out: Path) -> None:
     from tonguevis.analysis.morph import morph_between
-    from tonguevis.analysis.morph_render import render_png
+    from tonguevis.render.morph import render_png
 
     def peak(name):
         curve = max((c for c in result.curves if c.recording == name and c.train == 3), key=lambda c: c.energy.max())

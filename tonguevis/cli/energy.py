@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
         write_summary_csv(summaries, by, args.summary)
         print(f"wrote {args.summary}")
     if args.png is not None:
-        from tonguevis.analysis.energy_plot import save_energy_png
+        from tonguevis.render.energy import save_energy_png
 
         save_energy_png(result.curves, args.png, by, title="Elastic energy per production")
         print(f"wrote {args.png}")

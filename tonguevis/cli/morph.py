@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
 
     from tonguevis._progress import tqdm_progress
     from tonguevis.analysis.morph import MorphError, morph_between
-    from tonguevis.analysis.morph_render import render_mp4, render_png
+    from tonguevis.render.morph import render_mp4, render_png
     from tonguevis.cli._common import rest_line
 
     suffix = args.out.suffix.lower()

@@ -181,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
         result.save(args.save)
         lines.append(f"wrote {args.save}")
     if args.png is not None:
-        from tonguevis.analysis.segmentation.render import render_png
+        from tonguevis.render.segmentation import render_png
 
         render_png(result, args.png, titles=[f"{args.file.name}: {target.description}"])
         lines.append(f"wrote {args.png}")

@@ -21,7 +21,7 @@ from matplotlib.figure import Figure
 from PySide6 import QtCore, QtWidgets
 
 from tonguevis.analysis.energy import EnergyCurve
-from tonguevis.analysis.energy_plot import plot_energy_curves
+from tonguevis.render.energy import plot_energy_curves
 
 UNIT_SCALE = 1e3  # the axis shows mJ
 

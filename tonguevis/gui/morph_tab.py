@@ -15,7 +15,7 @@ import numpy as np
 from PySide6 import QtCore, QtWidgets
 
 from tonguevis.analysis.morph import Morph, morph_between
-from tonguevis.analysis.morph_render import COLORMAP, bar_args, morph_bounds, morph_surface, place_camera
+from tonguevis.render.morph import COLORMAP, bar_args, morph_bounds, morph_surface, place_camera
 from tonguevis.errors import TonguevisError
 
 SLIDER_STEPS = 200

@@ -5,7 +5,7 @@ approximation surface is the boundary of the *split* mesh (every partition has
 its own node copies) at the approximated shape, so rigid pieces show their
 gaps and overlaps, while constraint modes, which keep the target on interface
 nodes, close them.  Both carry per-face ``colour`` (partition, the palette of
-:mod:`tonguevis.analysis.segmentation.render`), ``partition`` and
+:mod:`tonguevis.render.segmentation`), ``partition`` and
 ``error_mm`` (sqrt of the tet's e_E, mm) taken from the tet behind the face,
 and ``tet`` (that tet's id), which is how a clicked face becomes a seed.
 """
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tonguevis.analysis.segmentation.render import _grid, _partition_colours
+from tonguevis.render.segmentation import _grid, _partition_colours
 from tonguevis.errors import TonguevisError
 
 ERROR_FIELD = "error_mm"

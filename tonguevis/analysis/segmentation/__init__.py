@@ -14,7 +14,7 @@ and the segmentation keeps the growth that fits best.  Entry point:
 Errors use the volume-lumped norm (see :mod:`.target`); the "relative global
 error" that autoseeding compares with its threshold (the paper's "5 percent
 e_G") is ‖ũ − u‖² / ‖u‖², i.e. e_G divided by the e_G of the zero
-approximation.  No Qt here; :mod:`.render` draws off screen with pyvista.
+approximation.  No Qt and no plotting here; :mod:`tonguevis.render.segmentation` draws off screen with pyvista.
 """
 
 from tonguevis.analysis.segmentation.api import MODES, make_fitter, segment
