@@ -109,6 +109,11 @@ class TongueModel:
         return float(signed_tet_volumes(self.mesh.points, self.mesh.tets).sum())
 
     @cached_property
+    def surface_nodes(self) -> np.ndarray:
+        """(k,) the nodes on the surface, sorted (what the views draw)."""
+        return np.unique(self.surface_faces)
+
+    @cached_property
     def surface_faces(self) -> np.ndarray:
         """(f, 3) outward boundary triangles."""
         return self.mesh.boundary_faces()
@@ -210,8 +215,12 @@ class TongueModel:
         """(n, 3) displacement in m for one modal vector ``q`` (m,)."""
         return self.displacements(np.asarray(q)[None, :], warping=warping)[0]
 
-    def volume_change(self, displacements: np.ndarray, backend: str = "warp") -> np.ndarray:
+    def volume_change(self, displacements: np.ndarray, backend: str = "warp",
+                      nodes: np.ndarray | None = None) -> np.ndarray:
         """(F,) relative volume change (V - V_rest)/V_rest for (F, n, 3) displacements.
+
+        ``nodes``: the displacements are those of these nodes only, (F, k, 3), which must hold
+        every surface node (e.g. :attr:`surface_nodes`); the volume is the same.
 
         The volume of a closed tet mesh is the flux of x/3 through its
         boundary, V = ⅙ Σ_faces p0 · (p1 × p2), which touches only the surface
@@ -219,10 +228,17 @@ class TongueModel:
         against the tet sum.  ``backend="warp"`` runs it as a warp-lang kernel, ``"numpy"`` in NumPy.
         """
         d = np.asarray(displacements)
-        faces = self.surface_faces
+        faces, points = self.surface_faces, self.mesh.points
+        if nodes is not None:
+            nodes = np.asarray(nodes, dtype=np.int64)
+            local = np.full(self.mesh.n_nodes, -1, dtype=np.int64)
+            local[nodes] = np.arange(len(nodes))
+            faces, points = local[faces], points[nodes]
+            if (faces < 0).any():
+                raise ValueError("volume_change: nodes must include every surface node")
         out = np.empty(len(d))
         for start in range(0, len(d), CHUNK_FRAMES):
-            pts = self.mesh.points[None] + d[start : start + CHUNK_FRAMES]
+            pts = points[None] + d[start : start + CHUNK_FRAMES]
             if check_backend(backend) == "warp":
                 from tonguevis.sim.kernels import enclosed_volumes
 

@@ -20,7 +20,8 @@ MOVED_M = 1e-3  # per-frame amplification only where some sensor moved this far 
 def plausibility_figures(displacements, sensor_displacement, volume_change, residual):
     """Summary figures of a motion and the frames no tongue could produce.
 
-    displacements : (F, n, 3) node displacements; sensor_displacement : (F, S, 3)
+    displacements : (F, n, 3) displacements of the nodes counted (a simulation counts the
+        surface's: :func:`tonguevis.sim.figures.frame_figures`); sensor_displacement : (F, S, 3)
     measured sensor displacements (NaN = missing); volume_change (F,);
     residual (F, S) sensor misfit, metres.  The whole array is the plain
     reference; a long motion gives :func:`plausibility_from_largest` the
@@ -61,7 +62,7 @@ def plausibility_line(metadata: dict) -> str:
     if not p:
         return "plausibility: not recorded in this motion"
     flagged = len(metadata.get("recovered_frames", [])) + len(metadata.get("implausible_frames", []))
-    text = (f"far-field amplification {p['amplification']:.2f} (largest node {p['largest_node_displacement_mm']:.1f} mm"
+    text = (f"far-field amplification {p['amplification']:.2f} (largest surface node {p['largest_node_displacement_mm']:.1f} mm"
             f" / largest sensor {p['largest_sensor_displacement_mm']:.1f} mm), max volume change "
             f"{p['volume_change_max_percent']:.2f} %, sensor misfit {p['sensor_misfit_rms_mm']:.2f} mm RMS "
             f"(max {p['sensor_misfit_max_mm']:.2f} mm)")

@@ -61,7 +61,7 @@ def simulate(
     frames no tongue could produce (volume change over 25 %, a node moving 10x
     the furthest sensor) are flagged, and a run with more than 5 % of them is
     refused with SimulationError.  ``metadata["plausibility"]`` holds the
-    far-field amplification (largest node displacement over the largest sensor
+    far-field amplification (largest surface node displacement over the largest sensor
     displacement), volume change and sensor misfit.
 
     palate : None, a :class:`~tonguevis.palate.PalateSurface` or a palate file
