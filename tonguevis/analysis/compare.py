@@ -109,3 +109,98 @@ def _nearest(times: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Index of the sorted ``times`` nearest each of ``t`` (clipped)."""
     i = np.clip(np.searchsorted(times, t), 1, len(times) - 1)
     return np.where(np.abs(times[i - 1] - t) <= np.abs(times[i] - t), i - 1, i)
+
+
+def production_time_map(productions_a, productions_b) -> tuple[np.ndarray, np.ndarray]:
+    """Knots of the piecewise-linear map from A's clock to B's that lines productions up.
+
+    The k-th production of A (start, end) is mapped onto the k-th of B, so within a
+    production normalised time is kept (as :func:`match_frames` pairs frames); between
+    two productions time is stretched the same way, so the map is continuous and
+    increasing.  Returns (knots_a, knots_b), (K,) seconds, strictly increasing (a knot
+    that would break the order, e.g. overlapping productions, is left out).
+    """
+    pairs = []
+    for a, b in zip(list(productions_a or []), list(productions_b or [])):
+        if a.end > a.start and b.end > b.start:
+            pairs += [(float(a.start), float(b.start)), (float(a.end), float(b.end))]
+    knots_a, knots_b = [], []
+    for ta, tb in pairs:
+        if not knots_a or (ta > knots_a[-1] and tb > knots_b[-1]):
+            knots_a.append(ta)
+            knots_b.append(tb)
+    if len(knots_a) < 2:
+        raise TonguevisError("lining recordings up by production needs a production in both "
+                             f"(found {len(list(productions_a or []))} and {len(list(productions_b or []))}); "
+                             "compare on absolute time instead")
+    return np.asarray(knots_a), np.asarray(knots_b)
+
+
+@dataclass
+class Comparison:
+    """Two simulated recordings compared: which moment of B goes with each moment of A,
+    and how far apart the two tongues are there.
+
+    motion_a, motion_b : the two Motions (any models; a per-node difference needs the same mesh).
+    mode : "production" (productions lined up by normalised time, see
+        :func:`production_time_map`; before A's first and after its last production B
+        runs at A's pace from the nearest knot) or "absolute" (the same time on both clocks).
+    productions_a, productions_b : objects with ``start``/``end`` seconds (production mode).
+    """
+
+    motion_a: object
+    motion_b: object
+    mode: str = "production"
+    productions_a: object = None
+    productions_b: object = None
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("production", "absolute"):
+            raise TonguevisError(f"compare mode must be 'production' or 'absolute', got {self.mode!r}")
+        self._knots = (production_time_map(self.productions_a, self.productions_b)
+                       if self.mode == "production" else None)
+
+    @property
+    def same_mesh(self) -> bool:
+        """True when both motions are on one tongue mesh (so a per-node difference means something)."""
+        a, b = self.motion_a.model.mesh, self.motion_b.model.mesh
+        return a.n_nodes == b.n_nodes and bool(np.allclose(a.points, b.points))
+
+    def time_b(self, t_a) -> np.ndarray | float:
+        """The time on B's clock (seconds, inside B's motion) shown with time ``t_a`` of A (scalar or array)."""
+        t = np.asarray(t_a, dtype=np.float64)
+        if self._knots is None:
+            out = t.copy()
+        else:
+            ka, kb = self._knots
+            out = np.interp(t, ka, kb)
+            out = np.where(t < ka[0], kb[0] + (t - ka[0]), out)
+            out = np.where(t > ka[-1], kb[-1] + (t - ka[-1]), out)
+        times = self.motion_b.times
+        out = np.clip(out, times[0], times[-1])
+        return float(out) if out.ndim == 0 else out
+
+    def frame_b(self, t_a: float) -> int:
+        """B's frame shown with time ``t_a`` of A."""
+        times = self.motion_b.times
+        return int(_nearest(times, np.atleast_1d(self.time_b(t_a)))[0])
+
+    def phase(self, t_a: float) -> tuple[int, float] | None:
+        """(production number, 1-based; normalised time in it) of A's time ``t_a``, or None outside them
+        (and in absolute mode)."""
+        if self._knots is None:
+            return None
+        for k, p in enumerate(list(self.productions_a or []), start=1):
+            if p.start <= t_a <= p.end and p.end > p.start:
+                return k, float((t_a - p.start) / (p.end - p.start))
+        return None
+
+    def difference(self, frame_a: int, frame_b: int, nodes: np.ndarray | None = None) -> np.ndarray:
+        """(k,) distance in metres between node i of A at ``frame_a`` and node i of B at ``frame_b``
+        (``nodes``: the node ids, default every node), both in the model frame."""
+        if not self.same_mesh:
+            raise TonguevisError("the two recordings are on different tongue meshes: a per-node difference needs "
+                                 "the same model for both")
+        ua = self.motion_a.displacements(np.array([frame_a]), nodes=nodes)[0]
+        ub = self.motion_b.displacements(np.array([frame_b]), nodes=nodes)[0]
+        return np.linalg.norm(ua - ub, axis=1)
