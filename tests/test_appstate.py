@@ -160,6 +160,98 @@ def test_interval_at():
     assert interval_at(intervals, 1.2) is None
 
 
+
+# -- the app model: sessions, motions, morph ends, the tongue model, status ------------------------------
+
+class _Session:
+    """A stand-in for gui.session.Session: the model only holds and hands it on."""
+
+    def __init__(self, name):
+        self.name, self.motion = name, None
+
+
+def test_sessions_open_in_roles_and_the_primary_one_is_the_session():
+    from tonguevis.appstate import SESSION_ROLES
+
+    assert SESSION_ROLES == ("primary", "compare")
+    state = AppState()
+    events = recorder(state, "session")
+    a, b = _Session("a"), _Session("b")
+    state.set_session(a, source="window")
+    state.set_session(b, role="compare")
+    assert state.session is a and state.session_of("compare") is b
+    assert state.sessions == {"primary": a, "compare": b}
+    assert [(e.key, e.value.name, e.source) for e in events] == [("primary", "a", "window"), ("compare", "b", None)]
+    state.set_session(None, role="compare")  # closed
+    state.set_session(None, role="compare")  # already closed: no event
+    assert state.sessions == {"primary": a} and events[-1].key == "compare" and events[-1].value is None
+    assert len(events) == 3
+    with pytest.raises(ValueError, match="primary, compare"):
+        state.set_session(a, role="third")
+
+
+def test_a_motion_event_only_for_a_session_still_open():
+    state = AppState()
+    events = recorder(state, "motion")
+    old, new = _Session("old"), _Session("new")
+    state.set_session(old)
+    state.set_session(new)  # a newer recording opened while the old one simulated
+    assert state.set_motion(old) is None  # the old one's results arrive late: nobody hears them
+    assert state.set_motion(new, source="job") == "primary"
+    assert [(e.key, e.value, e.source) for e in events] == [("primary", new, "job")]
+
+
+def test_follow_session_hears_opening_and_motion_of_its_role_only():
+    state = AppState()
+    primary, compare = [], []
+    stop = state.follow_session(primary.append)
+    state.follow_session(compare.append, role="compare")
+    a, b = _Session("a"), _Session("b")
+    state.set_session(a)
+    state.set_session(b, role="compare")
+    state.set_motion(a)
+    assert primary == [a, a] and compare == [b]
+    stop()
+    state.set_session(b)
+    assert primary == [a, a]
+
+
+def test_motions_are_added_by_name_and_sent_whole():
+    state = AppState()
+    events = recorder(state, "motions")
+    state.add_motions({"spk1_ta": "m1"})
+    state.add_motions({})  # nothing new: no event
+    state.add_motions({"spk2_ka": "m2", "spk1_ta": "m1b"})
+    assert [e.value for e in events] == [{"spk1_ta": "m1"}, {"spk1_ta": "m1b", "spk2_ka": "m2"}]
+    events[-1].value.clear()  # a listener cannot change the model by changing what it got
+    assert state.motions == {"spk1_ta": "m1b", "spk2_ka": "m2"}
+
+
+def test_morph_ends_keyed_by_end_and_checked():
+    state = AppState()
+    events = recorder(state, "morph_ends")
+    assert state.morph_ends == {"source": None, "target": None}
+    state.set_morph_end("target", "spk1_la", 5.04, source="energy")
+    assert state.morph_ends == {"source": None, "target": ("spk1_la", 5.04)}
+    assert [(e.key, e.value, e.source) for e in events] == [("target", ("spk1_la", 5.04), "energy")]
+    with pytest.raises(ValueError, match="source, target"):
+        state.set_morph_end("middle", "spk1_la", 1.0)
+    with pytest.raises(ValueError, match="finite"):
+        state.set_morph_end("source", "spk1_la", float("nan"))
+
+
+def test_tongue_model_and_status():
+    state = AppState()
+    events = recorder(state, "tongue_model", "status")
+    assert state.tongue_model is None and state.mesh_path is None
+    state.set_tongue_model("model", mesh_path="tongue.vtu")
+    state.set_status("simulating")
+    state.set_status("simulating")  # repeated: sent again (the bar may show another message meanwhile)
+    assert state.tongue_model == "model" and state.mesh_path == "tongue.vtu" and state.status == "simulating"
+    assert [(e.name, e.value) for e in events] == [("tongue_model", "model"), ("status", "simulating"),
+                                                  ("status", "simulating")]
+
+
 #: Top-level packages of Qt and its Python bindings that no core module may import.
 QT_PACKAGES = ("PySide6", "PySide2", "PyQt5", "PyQt6", "pyvistaqt", "qtpy")
 

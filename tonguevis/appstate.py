@@ -1,28 +1,41 @@
-"""The application state every view of the desktop app shares, without Qt.
+"""The application model every view of the desktop app shares, without Qt.
 
-One :class:`AppState` holds what the user is looking at: the current time,
-whether playback runs and at which speed, the loop range, the selected sensor
-and the colouring of the surface.  Views *subscribe* to its events and *write
-back* through its setters; none of them talks to another directly (the
-evented-model pattern of napari and MNE's ``ui_events``).  A plot that is
-clicked calls :meth:`AppState.set_time`; every other view hears a ``"time"``
-event and moves its cursor.
+One :class:`AppState` holds what the app has open and what the user is looking
+at: the open recordings (*sessions*: a primary one and room for a second one to
+compare with), the motions the analyses can use, the morph's two ends, the tongue
+model the simulations share, the status line, and the view state (the current
+time, playback and its speed, the loop range, the selected sensor, the colouring
+and the frame of reference).  Views *subscribe* to its events and *write back*
+through its setters; none of them talks to another or to the window directly (the
+evented-model pattern of napari and MNE's ``ui_events``).  A plot that is clicked
+calls :meth:`AppState.set_time`; every other view hears a ``"time"`` event and
+moves its cursor.  The Energy tab's "Morph source" button calls
+:meth:`AppState.set_morph_end`; the Morph tab hears ``"morph_ends"``.
 
 Nothing here imports Qt, so the state (and code steering it, such as a
-script or a test) runs headless.
+script or a test) runs headless.  Every setter is called on the GUI thread: a
+worker hands its results back and the GUI thread writes them here.
 
-Events (``event.name``; ``event.value`` is the new value):
+Events (``event.name``; ``event.value`` is the new value; ``event.key`` says which
+of several slots changed, where there are several):
 
-``time``       current time in seconds (float)
-``playing``    playback on/off (bool)
-``speed``      playback speed factor in [MIN_SPEED, MAX_SPEED] (float)
-``loop``       loop range ``(start_s, end_s)`` or None
-``range``      the time span ``(start_s, end_s)`` and frame period changed
-``selection``  selected sensor name or None
-``color``      surface colouring: one of :data:`COLOR_MODES`
-``reference``  frame of reference of the 3D views: one of :data:`REFERENCE_FRAMES` ("head":
-               tongue and jaw carried by the jaw's motion, palate fixed; "jaw": the jaw's
-               motion removed, where the tongue is simulated)
+``time``          current time in seconds (float)
+``playing``       playback on/off (bool)
+``speed``         playback speed factor in [MIN_SPEED, MAX_SPEED] (float)
+``loop``          loop range ``(start_s, end_s)`` or None
+``range``         the time span ``(start_s, end_s)`` and frame period changed
+``selection``     selected sensor name or None
+``color``         surface colouring: one of :data:`COLOR_MODES`
+``reference``     frame of reference of the 3D views: one of :data:`REFERENCE_FRAMES` ("head":
+                  tongue and jaw carried by the jaw's motion, palate fixed; "jaw": the jaw's
+                  motion removed, where the tongue is simulated)
+``session``       a recording was opened (or closed: None) in slot ``key``, one of
+                  :data:`SESSION_ROLES` ("primary": the one the views show; "compare": a second one)
+``motion``        the session in slot ``key`` has its simulated motion now (value: the session)
+``motions``       the motions the analyses can use changed (value: {name: Motion})
+``morph_ends``    the morph's ``key`` end (one of :data:`MORPH_ENDS`) is ``(recording name, time_s)``
+``tongue_model``  the tongue model every simulation uses (value: the model or None: built on need)
+``status``        a line for the status bar (str); sent every time, even when the text repeats
 """
 
 from __future__ import annotations
@@ -40,24 +53,32 @@ MAX_SPEED = 1.0
 COLOR_MODES = ("displacement", "energy", "contact", "plain")
 #: Frames of reference of the 3D views (the same as tonguevis.sim.reference.REFERENCE_FRAMES).
 REFERENCE_FRAMES = ("head", "jaw")
-EVENT_NAMES = ("time", "playing", "speed", "loop", "range", "selection", "color", "reference")
+#: Slots of the open recordings: the primary one the views show, a second one to compare with.
+SESSION_ROLES = ("primary", "compare")
+#: The morph's ends: t = 0 and t = 1.
+MORPH_ENDS = ("source", "target")
+EVENT_NAMES = ("time", "playing", "speed", "loop", "range", "selection", "color", "reference",
+               "session", "motion", "motions", "morph_ends", "tongue_model", "status")
 
 
 @dataclass(frozen=True)
 class Event:
-    """A change of the state: ``name`` (see module doc), new ``value``, and the
-    ``source`` object that caused it (a view can ignore its own echoes)."""
+    """A change of the state: ``name`` (see module doc), new ``value``, the
+    ``source`` object that caused it (a view can ignore its own echoes), and the
+    ``key`` of the slot that changed (a session role, a morph end; else None)."""
 
     name: str
     value: Any
     source: Any = None
+    key: str | None = None
 
 
 Callback = Callable[[Event], None]
 
 
 class AppState:
-    """Current time, playback, loop range, selection; observers get :class:`Event`s.
+    """Open sessions, motions, morph ends, status; current time, playback, loop range,
+    selection; observers get :class:`Event`s.
 
     Times are seconds on the recording's clock.  ``start``/``end`` bound the
     time (the simulated motion's first and last frame); ``frame_period`` is
@@ -76,6 +97,12 @@ class AppState:
         self._selection: str | None = None
         self._color = COLOR_MODES[0]
         self._reference = REFERENCE_FRAMES[0]
+        self._sessions: dict[str, Any] = {}
+        self._motions: dict[str, Any] = {}
+        self._morph_ends: dict[str, tuple[str, float] | None] = {end: None for end in MORPH_ENDS}
+        self._tongue_model: Any = None
+        self._mesh_path: Any = None
+        self._status = ""
 
     # -- observers ---------------------------------------------------------
     def subscribe(self, name: str, callback: Callback) -> Callable[[], None]:
@@ -90,8 +117,8 @@ class AppState:
 
         return unsubscribe
 
-    def _emit(self, name: str, value: Any, source: Any) -> None:
-        event = Event(name, value, source)
+    def _emit(self, name: str, value: Any, source: Any, key: str | None = None) -> None:
+        event = Event(name, value, source, key)
         # Copy: an observer may unsubscribe while we iterate.
         for callback in list(self._observers[name]):
             callback(event)
@@ -222,6 +249,124 @@ class AppState:
             return
         self._reference = frame
         self._emit("reference", frame, source)
+
+
+    # -- sessions: the open recordings ---------------------------------------
+    @staticmethod
+    def _check_role(role: str) -> None:
+        if role not in SESSION_ROLES:
+            raise ValueError(f"unknown session role {role!r}; choose one of {', '.join(SESSION_ROLES)}")
+
+    @property
+    def sessions(self) -> dict[str, Any]:
+        """{role: session} of the open recordings (a copy; roles without one left out)."""
+        return dict(self._sessions)
+
+    @property
+    def session(self) -> Any:
+        """The primary session (the recording the views show), or None."""
+        return self._sessions.get("primary")
+
+    def session_of(self, role: str) -> Any:
+        self._check_role(role)
+        return self._sessions.get(role)
+
+    def role_of(self, session: Any) -> str | None:
+        """The role ``session`` (the object itself) is open in, or None."""
+        return next((role for role, open_ in self._sessions.items() if open_ is session), None)
+
+    def set_session(self, session: Any, role: str = "primary", source: Any = None) -> None:
+        """Open ``session`` in ``role`` (None closes the role): a ``session`` event keyed by the role.
+
+        Setting the same object again sends the event again (the views start over with it)."""
+        self._check_role(role)
+        if session is None:
+            if self._sessions.pop(role, None) is None:
+                return
+        else:
+            self._sessions[role] = session
+        self._emit("session", session, source, role)
+
+    def set_motion(self, session: Any, source: Any = None) -> str | None:
+        """``session`` has its simulated motion now (set on it by the GUI thread): a ``motion`` event
+        keyed by its role.  A session no longer open (a newer one replaced it) is ignored: returns
+        its role, or None when it was not open."""
+        role = self.role_of(session)
+        if role is not None:
+            self._emit("motion", session, source, role)
+        return role
+
+    def follow_session(self, callback: Callable[[Any], None], role: str = "primary") -> Callable[[], None]:
+        """Call ``callback(session)`` when a session opens in ``role`` and when its motion is ready
+        (every view showing a session needs both); returns an unsubscribe function."""
+        self._check_role(role)
+
+        def relay(event: Event) -> None:
+            if event.key == role:
+                callback(event.value)
+
+        stops = [self.subscribe("session", relay), self.subscribe("motion", relay)]
+
+        def unsubscribe() -> None:
+            for stop in stops:
+                stop()
+
+        return unsubscribe
+
+    # -- motions the analyses can use ------------------------------------------
+    @property
+    def motions(self) -> dict[str, Any]:
+        """{recording name: Motion} of every motion simulated in this run of the app (a copy)."""
+        return dict(self._motions)
+
+    def add_motions(self, motions: dict[str, Any], source: Any = None) -> None:
+        """Add (or replace by name) motions; one ``motions`` event with all of them."""
+        if not motions:
+            return
+        self._motions.update(motions)
+        self._emit("motions", dict(self._motions), source)
+
+    # -- the morph's ends ------------------------------------------------------
+    @property
+    def morph_ends(self) -> dict[str, tuple[str, float] | None]:
+        """{"source": (recording, time_s) or None, "target": ...}."""
+        return dict(self._morph_ends)
+
+    def set_morph_end(self, end: str, recording: str, time: float, source: Any = None) -> None:
+        """Make frame ``time`` (s) of ``recording`` the morph's ``end`` ("source": t = 0, "target": t = 1)."""
+        if end not in MORPH_ENDS:
+            raise ValueError(f"unknown morph end {end!r}; choose one of {', '.join(MORPH_ENDS)}")
+        if not math.isfinite(time):
+            raise ValueError(f"the morph's {end} time must be finite, got {time}")
+        value = (str(recording), float(time))
+        self._morph_ends[end] = value
+        self._emit("morph_ends", value, source, end)
+
+    # -- the tongue model every simulation shares --------------------------------
+    @property
+    def tongue_model(self) -> Any:
+        """The TongueModel the simulations use, or None until one is built (then handed back here)."""
+        return self._tongue_model
+
+    @property
+    def mesh_path(self) -> Any:
+        """The mesh the model is built on (None: the shipped tongue)."""
+        return self._mesh_path
+
+    def set_tongue_model(self, model: Any, mesh_path: Any = None, source: Any = None) -> None:
+        """Use ``model`` (built on ``mesh_path``; None: the shipped mesh) for every simulation from now on."""
+        self._tongue_model, self._mesh_path = model, mesh_path
+        self._emit("tongue_model", model, source)
+
+    # -- status ------------------------------------------------------------------
+    @property
+    def status(self) -> str:
+        return self._status
+
+    def set_status(self, text: str, source: Any = None) -> None:
+        """A line for the status bar (sent even when it repeats: the bar may show something else now)."""
+        self._status = str(text)
+        self._emit("status", self._status, source)
 
 
 def interval_at(intervals: list[tuple[float, float]], t: float) -> tuple[float, float] | None:
