@@ -1,20 +1,39 @@
 #!/usr/bin/env python
-"""Playback frame rate of the desktop app under Xvfb (or any display), and the
-simulation's share of each frame.
+"""Playback frame rate of the desktop app under Xvfb (or any display), and where each frame's time goes.
 
-Opens the real window on a demo recording, simulates it, then plays for a few
-seconds and counts frames drawn (3D render of the four views + plot cursors).
-Prints frames per second, the mean time per frame split into: copying the
-precomputed frame into the render buffers, VTK render, and the rest (Qt,
-plot cursors); and what computing a frame from q on demand would cost
-(``model.displacements`` of one frame, the per-frame simulation work).
+Opens the real window (with the Energy, Morph and Segmentation tabs, as
+``tonguevis view`` does) on a demo recording, simulates it, lets the plots
+settle, then plays for a few seconds and counts the frames drawn.  Per frame:
 
-Run: xvfb-run -a -s "-screen 0 1600x1000x24" python scripts/bench_playback.py [--seconds 5] [--modes 100]
+- ``render_ms``: the VTK render of the four views (the render window's
+  Render, wall time), and ``views_ms`` the share of each view (its renderer's
+  Render); ``render_cpu_ms`` the CPU the process spent in it (every thread:
+  Mesa's llvmpipe renders with several);
+- ``update_ms``: writing the frame's points, scalars and normals in place;
+- ``other_ms``: the rest of the frame (Qt events, the plots' cursors, the
+  status line, the transport bar); ``plot_draws``: full matplotlib redraws
+  during playback (there should be none);
+- ``cpu_ms``: the process's CPU time per frame, the figure that does not
+  depend on how loaded the machine is (``fps_cpu_bound`` = 1000 / cpu_ms when
+  the frame's work fits one core's worth of waiting);
+- ``lag_ms``: how far the frame shown trails the playback clock when it is
+  painted (mean, max): playback drops frames instead of delaying them, so
+  this stays about one frame and does not grow.
+
+The machine's load average is written with every figure: on a shared,
+loaded machine the wall-clock figures (fps, render_ms) are slower than on an
+idle one, and the CPU figures and the shares are what to compare.
+
+Run: xvfb-run -a -s "-screen 0 1600x1000x24" python scripts/bench_playback.py [--seconds 5] [--json OUT]
+     [--no-context] [--screenshot PNG] [--profile]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -41,6 +60,158 @@ def load_model(name: str):
     return block_model(), "block test model", "rule"
 
 
+def commit() -> str:
+    try:
+        out = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+        dirty = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True).stdout.strip()
+        return out.stdout.strip() + ("+dirty" if dirty else "")
+    except OSError:
+        return "unknown"
+
+
+def gl_renderer(render_window) -> str:
+    try:
+        info = render_window.ReportCapabilities()
+    except Exception:  # noqa: BLE001 (diagnostic only)
+        return "unknown"
+    for line in info.splitlines():
+        if "OpenGL renderer string" in line:
+            return line.split(":", 1)[1].strip()
+    return "unknown"
+
+
+def x_server_pid() -> int | None:
+    """The process of the X server on $DISPLAY (Xvfb), if it runs on this machine."""
+    display = os.environ.get("DISPLAY", "")
+    number = display.split(":")[-1].split(".")[0] if ":" in display else ""
+    if not number:
+        return None
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            words = (entry / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if words and Path(words[0].decode(errors="replace")).name.startswith(("Xvfb", "Xorg", "X")) \
+                and f":{number}".encode() in words:
+            return int(entry.name)
+    return None
+
+
+def cpu_seconds(pid: int | None) -> float:
+    """User + system CPU seconds of process ``pid`` (0 when unknown)."""
+    if pid is None:
+        return 0.0
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return 0.0
+
+
+class Timings:
+    """Wall and CPU time of the renders (per view too), the buffer updates and the plots' redraws."""
+
+    def __init__(self, window, finish_views: bool = False):
+        from tonguevis.gui.scene import TongueScene
+
+        self.window = window
+        self.finish_views = finish_views
+        self.reset()
+        scene = window.view3d.scene
+        original = TongueScene.update
+        timings = self
+
+        def timed_update(this, *a, **k):
+            t = time.perf_counter()
+            original(this, *a, **k)
+            timings.update += time.perf_counter() - t
+            timings.updates += 1
+
+        scene.update = timed_update.__get__(scene)
+        render_window = self.render_window = window.view3d.plotter.render_window
+        render_window.AddObserver("StartEvent", self._render_start)
+        render_window.AddObserver("EndEvent", self._render_end)
+        self.view_names = ["main", "top", "front", "lateral"]
+        for k, renderer in enumerate(window.view3d.plotter.renderers):
+            renderer.AddObserver("StartEvent", lambda *_a, k=k: self._view_start(k))
+            renderer.AddObserver("EndEvent", lambda *_a, k=k: self._view_end(k))
+        for plot in self.plots():
+            plot.mpl_connect("draw_event", self._plot_drawn)
+
+    def plots(self):
+        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
+
+        return self.window.findChildren(FigureCanvasQTAgg)
+
+    def reset(self) -> None:
+        self.update = self.render = self.render_cpu = 0.0
+        self.updates = self.renders = self.plot_draws = 0
+        self.views = np.zeros(4)
+        self.lags: list[float] = []
+        self._t = self._c = 0.0
+        self._v = np.zeros(4)
+
+    def _render_start(self, *_):
+        self._t, self._c = time.perf_counter(), time.process_time()
+
+    def _render_end(self, *_):
+        self.render += time.perf_counter() - self._t
+        self.render_cpu += time.process_time() - self._c
+        self.renders += 1
+        playback = self.window.playback
+        if self.window.state.playing and playback.clock is not None:
+            self.lags.append(playback.clock.time() - self.window.view3d.cursor_time)
+
+    def _view_start(self, k: int) -> None:
+        if self.finish_views:
+            self.render_window.WaitForCompletion()
+        self._v[k] = time.perf_counter()
+
+    def _view_end(self, k: int) -> None:
+        # Mesa's llvmpipe rasterises when the commands are flushed (at the swap): without a
+        # glFinish here a view's time is only the submission of its commands.
+        if self.finish_views:
+            self.render_window.WaitForCompletion()
+        self.views[k] += time.perf_counter() - self._v[k]
+
+    def _plot_drawn(self, _event) -> None:
+        self.plot_draws += 1
+
+
+def install_event_timer() -> dict:
+    """Make the QApplication one whose notify() times every event (by type and receiver class)."""
+    from PySide6.QtWidgets import QApplication
+
+    times: dict = {}
+    nested: list[float] = []  # time of the events nested in each event being handled
+
+    class TimingApplication(QApplication):
+        recording = False
+
+        def notify(self, receiver, event):  # noqa: D102
+            if not TimingApplication.recording:
+                return super().notify(receiver, event)
+            kind = event.type()
+            key = (getattr(kind, "name", str(kind)), type(receiver).__name__)
+            nested.append(0.0)
+            t = time.perf_counter()
+            out = super().notify(receiver, event)
+            spent = time.perf_counter() - t
+            inner = nested.pop()
+            if nested:
+                nested[-1] += spent
+            total, own, count = times.get(key, (0.0, 0.0, 0))
+            times[key] = (total + spent, own + spent - inner, count + 1)
+            return out
+
+    TimingApplication(sys.argv[:1])
+    times["_class"] = TimingApplication
+    return times
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--recording", type=Path, default=REPO / "data" / "spk1_ta.tsv")
@@ -49,19 +220,24 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=5.0, help="playback time measured")
     parser.add_argument("--profile", action="store_true", help="print where playback spends its time")
     parser.add_argument("--no-context", action="store_true", help="without the transparent jaw and palate")
+    parser.add_argument("--no-tabs", action="store_true", help="without the Energy, Morph and Segmentation tabs")
+    parser.add_argument("--finish-views", action="store_true",
+                        help="finish each view's drawing before the next (glFinish) so views_ms is each view's "
+                             "whole cost (otherwise the rasterising is counted at the swap, outside the views)")
+    parser.add_argument("--json", type=Path, help="write the figures to this JSON file")
+    parser.add_argument("--screenshot", type=Path, help="save the window after playback (PNG)")
+    parser.add_argument("--events", action="store_true", help="print the Qt events that take the time (by type and "
+                                                                   "receiver; nested events are counted in their parents too)")
     args = parser.parse_args()
 
-    from PySide6.QtCore import QSettings
+    from PySide6.QtCore import QEventLoop, QSettings, QTimer
+
+    event_times = install_event_timer() if args.events else None
 
     from tonguevis.gui.app import application
-    from tonguevis.gui.scene import TongueScene
     from tonguevis.gui.window import MainWindow
 
     application()  # the QApplication must exist before any widget
-    if args.no_context:
-        import tonguevis.gui.view3d as view3d
-
-        view3d.context_surfaces = lambda: {}
     try:
         model, label, landmarks = load_model(args.model)
     except Exception as exc:  # e.g. meshes/ not built yet
@@ -70,9 +246,12 @@ def main() -> int:
     window = MainWindow(settings=QSettings(str(Path("/tmp") / "tonguevis-bench.ini"), QSettings.Format.IniFormat),
                         modes=args.modes)
     window.model, window.landmarks = model, landmarks
+    if not args.no_tabs:
+        from tonguevis.gui.tabs import add_feature_tabs
+
+        add_feature_tabs(window)
     window.resize(1500, 950)
     window.show()
-    from PySide6.QtCore import QEventLoop, QTimer
 
     # Wait in local event loops: app.quit() would close pyvistaqt's plotter (aboutToQuit),
     # and a busy processEvents() loop leaks references to None in PySide6.
@@ -83,6 +262,10 @@ def main() -> int:
         done["ok"] = ok
         loop.quit()
 
+    def wait(seconds: float) -> None:
+        QTimer.singleShot(int(1000 * seconds), loop.quit)
+        loop.exec()
+
     window.simulation_finished.connect(finished)
     t0 = time.perf_counter()
     window.open_recording(args.recording)
@@ -91,37 +274,26 @@ def main() -> int:
     if not done.get("ok"):
         print("simulation failed:", window.statusBar().currentMessage())
         return 1
+    if args.no_context:
+        window.view3d.set_context_visible(False)
     session = window.session
     frames = session.frames
-
-    # Time the VTK renders (observers on the render window) and the buffer updates.
-    scene = window.view3d.scene
-    timings = {"update": 0.0, "render": 0.0, "count": 0, "renders": 0, "_t": 0.0}
-    original_update = TongueScene.update
-
-    def timed_update(self, *a, **k):
-        t = time.perf_counter()
-        original_update(self, *a, **k)
-        timings["update"] += time.perf_counter() - t
-        timings["count"] += 1
-
-    def render_start(*_):
-        timings["_t"] = time.perf_counter()
-
-    def render_end(*_):
-        timings["render"] += time.perf_counter() - timings["_t"]
-        timings["renders"] += 1
-
-    scene.update = timed_update.__get__(scene)
-    render_window = window.view3d.plotter.render_window
-    render_window.AddObserver("StartEvent", render_start)
-    render_window.AddObserver("EndEvent", render_end)
     state = window.state
     state.set_time(state.start + 5.0)
+    wait(1.5)  # the plots' first draws (draw_idle after the simulation) are not playback's
+
+    timings = Timings(window, finish_views=args.finish_views)
+    load_before = os.getloadavg()
     start_frame = window.view3d.renders
-    t0 = time.perf_counter()
-    timings.update(render=0.0, renders=0, update=0.0, count=0)
+    ticks0 = window.playback.ticks
+    xpid = x_server_pid()
+    t0, c0, x0 = time.perf_counter(), time.process_time(), cpu_seconds(xpid)
+    timings.reset()
+    if event_times is not None:
+        event_times.pop("_class").recording = True
     state.set_playing(True)
+    if os.environ.get("TONGUEVIS_BENCH_ANNOUNCE"):  # for an external profiler (perf record -p PID)
+        print(f"playback starts, pid {os.getpid()}", flush=True)
     profiler = None
     if args.profile:
         import cProfile
@@ -129,39 +301,83 @@ def main() -> int:
         profiler = cProfile.Profile()
         profiler.enable()
     QTimer.singleShot(int(1000 * args.seconds), loop.quit)
-    state.subscribe("playing", lambda e: None if e.value else loop.quit())
+    unsubscribe = state.subscribe("playing", lambda e: None if e.value else loop.quit())
     loop.exec()
+    unsubscribe()
+    if event_times is not None:
+        top = sorted(event_times.items(), key=lambda kv: -kv[1][1])[:20]
+        per = 1e3 / max(window.view3d.renders - start_frame, 1)
+        print("Qt events during playback (ms per drawn frame: own time, with nested events; count):")
+        for (kind, receiver), (total, own, count) in top:
+            print(f"  {kind:<28} {receiver:<32} {per * own:8.2f} ms {per * total:8.2f} ms  {count}")
     if profiler is not None:
         profiler.disable()
         import pstats
 
-        pstats.Stats(profiler).sort_stats("tottime").print_stats(15)
+        pstats.Stats(profiler).sort_stats("cumulative").print_stats(30)
+    wall, cpu, x_cpu = time.perf_counter() - t0, time.process_time() - c0, cpu_seconds(xpid) - x0
     state.set_playing(False)
-    wall = time.perf_counter() - t0
+    load_after = os.getloadavg()
     drawn = window.view3d.renders - start_frame
+    ticks = window.playback.ticks - ticks0
 
-    # The simulation's per-frame cost if frames were computed on demand.
-    q = session.motion.q
-    picks = np.linspace(0, len(q) - 1, 50).astype(int)
-    model.displacements(q[picks[:1]], warping=True, dtype=np.float32)
-    t = time.perf_counter()
-    for i in picks:
-        model.displacements(q[i : i + 1], warping=True, dtype=np.float32)
-    on_demand = (time.perf_counter() - t) / len(picks)
-
-    n = max(timings["count"], 1)
-    frame_ms = 1e3 * wall / max(drawn, 1)
-    print(f"model: {label}, {model.mesh.n_nodes} nodes, {model.mesh.n_tets} tets, {args.modes} modes")
-    print(f"recording: {args.recording.name}, {frames.n_frames} frames; open + simulate + precompute: {prep:.2f} s")
-    print(f"clock: {window.statusBar().currentMessage()}")
-    print(f"playback: {drawn} frames drawn in {wall:.2f} s = {drawn / wall:.1f} frames/s ({frame_ms:.1f} ms per frame)")
-    print(f"  per frame: buffer update (copy precomputed points/scalars + normals) {1e3 * timings['update'] / n:.2f} ms, "
-          f"VTK render of the four views {1e3 * timings['render'] / max(timings['renders'], 1):.1f} ms "
-          f"({timings['renders'] / n:.2f} renders per frame), "
-          f"rest (Qt events, plot cursors) {frame_ms - 1e3 * (timings['update'] + timings['render']) / n:.1f} ms")
-    print(f"  simulation share: precomputed, so {100 * timings['update'] / max(wall, 1e-9) * drawn / n:.1f} % of the frame "
-          f"time is the per-frame copy; computing a frame from q on demand would cost {1e3 * on_demand:.2f} ms "
-          f"({100 * 1e3 * on_demand / frame_ms:.1f} % of a frame)")
+    n = max(drawn, 1)
+    frame_ms = 1e3 * wall / n
+    render_ms = 1e3 * timings.render / n
+    update_ms = 1e3 * timings.update / n
+    views_ms = dict(zip(timings.view_names, np.round(1e3 * timings.views / n, 2).tolist()))
+    lags = 1e3 * np.asarray(timings.lags) if timings.lags else np.zeros(1)
+    results = {
+        "fps": drawn / wall,
+        "frame_ms": frame_ms,
+        "render_ms": render_ms,
+        "render_cpu_ms": 1e3 * timings.render_cpu / n,
+        "views_ms": views_ms,
+        "views_finished": args.finish_views,
+        "swap_ms": render_ms - float(sum(views_ms.values())),
+        "update_ms": update_ms,
+        "other_ms": frame_ms - render_ms - update_ms,
+        "cpu_ms": 1e3 * cpu / n,
+        "x_server_cpu_ms": 1e3 * x_cpu / n if xpid is not None else None,
+        "fps_cpu_bound": 1000.0 / max(1e3 * cpu / n, 1e-9),
+        "renders_per_frame": timings.renders / n,
+        "plot_draws": timings.plot_draws,
+        "lag_ms": {"mean": float(lags.mean()), "max": float(lags.max())},
+        "frames_drawn": drawn,
+        "clock_ticks": ticks,
+        "seconds": wall,
+        "context_shown": not args.no_context,
+        "tabs": not args.no_tabs,
+        "load_average": {"before": list(load_before), "after": list(load_after)},
+        "cpus": os.cpu_count(),
+        "gl_renderer": gl_renderer(window.view3d.plotter.render_window),
+        "view_pixels": [window.view3d.plotter.interactor.width(), window.view3d.plotter.interactor.height()],
+        "model": f"{label}, {model.mesh.n_nodes} nodes, {model.mesh.n_tets} tets, {args.modes} modes",
+        "recording": f"{args.recording.name}, {frames.n_frames} frames",
+        "clock": window.statusBar().currentMessage(),
+        "commit": commit(),
+    }
+    print(f"model: {results['model']}")
+    print(f"recording: {results['recording']}; open + simulate + precompute: {prep:.2f} s")
+    print(f"clock: {results['clock']}; GL: {results['gl_renderer']}; 3D widget {results['view_pixels']} px")
+    print(f"load average {load_before[0]:.2f} before, {load_after[0]:.2f} after, on {os.cpu_count()} CPUs")
+    print(f"playback: {drawn} frames drawn in {wall:.2f} s = {drawn / wall:.1f} frames/s ({frame_ms:.1f} ms per frame"
+          f", {ticks} clock ticks), jaw and palate {'hidden' if args.no_context else 'shown'}")
+    print(f"  per frame: VTK render {render_ms:.1f} ms ({results['render_cpu_ms']:.1f} ms CPU; "
+          + ", ".join(f"{k} {v:.1f}" for k, v in views_ms.items())
+          + f", outside the views (blit, swap{'' if args.finish_views else ', rasterising'}) {results['swap_ms']:.1f}"
+          + f"; {results['renders_per_frame']:.2f} renders per frame), buffer update {update_ms:.2f} ms, "
+            f"other (Qt, cursors, labels) {results['other_ms']:.1f} ms")
+    print(f"  CPU per frame {results['cpu_ms']:.1f} ms (all threads) -> {results['fps_cpu_bound']:.1f} frames/s "
+          f"if the process had the CPU it uses; the X server {results['x_server_cpu_ms'] or 0:.1f} ms CPU per frame; "
+          f"full plot redraws during playback: {timings.plot_draws}")
+    print(f"  shown frame behind the clock: mean {results['lag_ms']['mean']:.1f} ms, max {results['lag_ms']['max']:.1f} ms")
+    if args.screenshot is not None:
+        window.export_screenshot(os.fspath(args.screenshot))
+        print(f"wrote {args.screenshot}")
+    if args.json is not None:
+        args.json.write_text(json.dumps(results, indent=2) + "\n")
+        print(f"wrote {args.json}")
     window.close()
     return 0
 
