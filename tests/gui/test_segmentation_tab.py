@@ -17,9 +17,10 @@ pytestmark = [pytest.mark.gui, pytest.mark.timeout(120)]
 def _add_tab(window):
     from tonguevis.gui.segmentation_tab import SegmentationTab
 
-    window.segmentation_tab = SegmentationTab(window.state)
-    window.register_tab("Segmentation", window.segmentation_tab)
-    return window.segmentation_tab
+    tab = SegmentationTab(window.state)  # it follows the window's app model itself
+    window.register_tab("Segmentation", tab)
+    assert window.segmentation_tab is tab
+    return tab
 
 
 @pytest.fixture

@@ -105,7 +105,7 @@ def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=No
         from PySide6.QtCore import QTimer
 
         if not ok:
-            message = window.statusBar().currentMessage()
+            message = window.state.status
             print(f"tonguevis view: no screenshot, the simulation did not finish: {message}", file=sys.stderr)
             app.exit(2)
             return

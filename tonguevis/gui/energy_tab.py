@@ -6,9 +6,15 @@ Lists on the left choose the recordings, speakers and syllables shown.
 Hovering a curve names its production; clicking a point selects that frame:
 the tab emits :attr:`EnergyTab.frameSelected` (recording name, time in s on the
 recording's clock) and, when the clicked recording is the one the app shows
-(``current_recording``), moves the shared :class:`~tonguevis.appstate.AppState`
-there so the 3D views follow.  The picked frame can be sent to the Morph tab
-as its source or target (:attr:`EnergyTab.morphEndPicked`).
+(``current_recording``, by default the app model's primary session), moves the
+shared :class:`~tonguevis.appstate.AppState` there so the 3D views follow.  The
+picked frame can be sent to the Morph tab as its source or target: through the
+app model (``state.set_morph_end``), and as :attr:`EnergyTab.morphEndPicked`.
+
+With an app model the tab adds the curves of every recording the app simulates
+(its ``motion`` events) and writes the motions of its curves back
+(``state.add_motions``), where the Morph tab finds them.  "Add recordings…"
+simulates more through the job runner, with a progress bar and Cancel.
 """
 
 from __future__ import annotations
@@ -20,8 +26,12 @@ from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
 from matplotlib.figure import Figure
 from PySide6 import QtCore, QtWidgets
 
+import logging
+
 from tonguevis.analysis.energy import EnergyCurve
 from tonguevis.render.energy import plot_energy_curves
+
+log = logging.getLogger("tonguevis")
 
 UNIT_SCALE = 1e3  # the axis shows mJ
 
@@ -29,8 +39,10 @@ UNIT_SCALE = 1e3  # the axis shows mJ
 class EnergyTab(QtWidgets.QWidget):
     """Energy curves of many productions; ``set_curves`` fills it.
 
-    state : the shared AppState (optional); current_recording : callable
-    returning the name of the recording the 3D views show (optional).
+    state : the app model (optional); current_recording : callable returning the name
+    of the recording the 3D views show (default: the stem of the model's primary session).
+    model_provider : callable making the tongue model for "Add recordings…" (called in the
+    job's thread; default: the app model's, else the shipped one built by the job).
     """
 
     frameSelected = QtCore.Signal(str, float)
@@ -41,11 +53,11 @@ class EnergyTab(QtWidgets.QWidget):
                  model_provider: Callable[[], object] | None = None, simulate_options: dict | None = None):
         super().__init__(parent)
         self.state = state
-        self.current_recording = current_recording or (lambda: None)
+        self.current_recording = current_recording or self._shown_recording
         self.model_provider = model_provider
         self.simulate_options = dict(simulate_options or {})
         self.motions: dict = {}
-        self._worker: _CorpusWorker | None = None
+        self.job = None
         self.curves: list[EnergyCurve] = []
         self.lines: list = []  # matplotlib Line2D per shown curve
         self.shown: list[EnergyCurve] = []
@@ -84,10 +96,15 @@ class EnergyTab(QtWidgets.QWidget):
         self.add_button.clicked.connect(self._ask_paths)
         self.progress = QtWidgets.QProgressBar()
         self.progress.setVisible(False)
+        self.cancel_button = QtWidgets.QPushButton("Cancel")
+        self.cancel_button.setToolTip("stop adding recordings (those simulated so far are dropped)")
+        self.cancel_button.setVisible(False)
+        self.cancel_button.clicked.connect(self.cancel)
 
         side = QtWidgets.QVBoxLayout()
         side.addWidget(self.add_button)
         side.addWidget(self.progress)
+        side.addWidget(self.cancel_button)
         for title, widget in (("Recordings", self.recordings), ("Speakers", self.speakers),
                               ("Syllables", self.syllables)):
             side.addWidget(QtWidgets.QLabel(title))
@@ -116,6 +133,21 @@ class EnergyTab(QtWidgets.QWidget):
         layout.addWidget(side_widget)
         layout.addLayout(main, 1)
         self.redraw()
+        self._unsubscribe = state.subscribe("motion", self._on_simulated) if state is not None else None
+
+    def _shown_recording(self) -> str | None:
+        session = None if self.state is None else self.state.session
+        return None if session is None or session.path is None else session.path.stem
+
+    def _on_simulated(self, event) -> None:
+        """A recording of the app was simulated: add its production curves."""
+        session = event.value
+        if session.motion is None or session.production_table is None:
+            return
+        try:
+            self.add_motion(session.name, session.motion, session.production_table)
+        except Exception as exc:  # the main views must not suffer from a tab's problem
+            log.warning("energy curves of %s not added: %s", session.name, exc)
 
     def _list(self, title: str) -> QtWidgets.QListWidget:
         widget = QtWidgets.QListWidget()
@@ -147,6 +179,8 @@ class EnergyTab(QtWidgets.QWidget):
         self.set_curves([c for c in self.curves if c.recording not in names] + list(curves))
         if motions:
             self.motions.update(motions)
+            if self.state is not None:
+                self.state.add_motions(motions, source=self)
             self.motionsLoaded.emit(dict(self.motions))
 
     def add_motion(self, name: str, motion, productions) -> None:
@@ -170,43 +204,67 @@ class EnergyTab(QtWidgets.QWidget):
             self.load_paths(files)
 
     def load_paths(self, paths) -> None:
-        """Simulate the recordings (files or folders) in a worker thread, then add their curves."""
-        from tonguevis.analysis.corpus import load_corpus
+        """Simulate the recordings (files or folders) through the job runner, then add their curves."""
+        from tonguevis.analysis.corpus import corpus_energy_curves, load_corpus
         from tonguevis.errors import TonguevisError
+        from tonguevis.gui.worker import run_job
 
-        if self._worker is not None and self._worker.isRunning():
+        if self.job is not None and self.job.isRunning():
             return
         try:
             corpus = load_corpus(paths)
         except (TonguevisError, OSError) as exc:
             self.hover_label.setText(f"Cannot add: {exc}")
             return
-        self._worker = _CorpusWorker(corpus, self.model_provider, self.simulate_options, self)
-        self._worker.progressed.connect(self._on_progress)
-        self._worker.done.connect(self._on_loaded)
-        self._worker.failed.connect(lambda message: self._finish(f"Cannot add: {message}"))
+        # Read on the GUI thread; a model the job has to build is handed back, not assigned there.
+        model = None if self.state is None else self.state.tongue_model
+        mesh_path = None if self.state is None else self.state.mesh_path
+        provider, options = self.model_provider, dict(self.simulate_options)
+
+        def work(progress):
+            from tonguevis.gui.simulation import build_model
+
+            used = model
+            if used is None:
+                used = provider() if provider is not None else build_model(mesh_path)
+            return corpus_energy_curves(corpus, model=used, progress=progress, **options), used
+
         self.add_button.setEnabled(False)
         self.progress.setVisible(True)
-        self._worker.start()
+        self.cancel_button.setVisible(True)
+        self.job = run_job(self, "Add recordings", work, lambda done: self._on_loaded(*done, mesh_path), dialog=False,
+                           on_failed=lambda message: self._finish(f"Cannot add: {message}"),
+                           on_cancelled=lambda: self._finish("Adding recordings cancelled."))
+        self.job.progressed.connect(self._on_progress)
+
+    def cancel(self) -> None:
+        if self.job is not None:
+            self.job.cancel()
 
     def _on_progress(self, done: int, total: int, message: str) -> None:
         self.progress.setRange(0, max(total, 1))
         self.progress.setValue(done)
         self.progress.setFormat(message)
 
-    def _on_loaded(self, result) -> None:
+    def _on_loaded(self, result, model, mesh_path) -> None:
+        if (self.state is not None and self.model_provider is None and self.state.tongue_model is None
+                and self.state.mesh_path == mesh_path):
+            self.state.set_tongue_model(model, mesh_path, self)  # built by the job: the app's from now on
         self.add_curves(result.curves, result.motions)
         self._finish(f"Added {len(result.curves)} production curves from {len(result.motions)} recording(s).")
 
     def _finish(self, message: str) -> None:
         self.add_button.setEnabled(True)
         self.progress.setVisible(False)
+        self.cancel_button.setVisible(False)
         self.hover_label.setText(message)
 
     def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
-        if self._worker is not None:
-            self._worker.cancel = True
-            self._worker.wait(60_000)
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+        if self.job is not None:
+            self.job.stop(60_000)
         super().closeEvent(event)
 
     def ticked(self, widget: QtWidgets.QListWidget) -> set[str]:
@@ -300,38 +358,7 @@ class EnergyTab(QtWidgets.QWidget):
     def _send_morph_end(self, which: str) -> None:
         if self.picked:
             curve, k = self.picked
+            if self.state is not None:
+                self.state.set_morph_end(which, curve.recording, float(curve.times[k]), source=self)
             self.morphEndPicked.emit(which, curve.recording, float(curve.times[k]))
 
-
-class _CorpusWorker(QtCore.QThread):
-    """Simulates a corpus off the GUI thread; ``cancel`` stops it between progress reports."""
-
-    progressed = QtCore.Signal(int, int, str)
-    done = QtCore.Signal(object)
-    failed = QtCore.Signal(str)
-
-    def __init__(self, corpus, model_provider, options, parent=None):
-        super().__init__(parent)
-        self.corpus, self.model_provider, self.options = corpus, model_provider, options
-        self.cancel = False
-
-    def _progress(self, done: int, total: int, message: str = "") -> None:
-        from tonguevis.errors import Cancelled
-
-        if self.cancel:
-            raise Cancelled("closed")
-        self.progressed.emit(done, total, message)
-
-    def run(self) -> None:
-        from tonguevis.analysis.corpus import corpus_energy_curves
-        from tonguevis.errors import Cancelled, TonguevisError
-
-        try:
-            model = self.model_provider() if self.model_provider else None
-            result = corpus_energy_curves(self.corpus, model=model, progress=self._progress, **self.options)
-        except Cancelled:
-            return
-        except (TonguevisError, OSError) as exc:
-            self.failed.emit(str(exc))
-            return
-        self.done.emit(result)

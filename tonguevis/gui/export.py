@@ -1,4 +1,7 @@
-"""Window exports: whole-window PNG, and the dialogs of the MP4 and VTK exports."""
+"""Window exports: whole-window PNG, and the dialogs of the MP4, VTK and ParaView exports.
+
+The exports run through the job runner (:func:`tonguevis.gui.worker.run_job`); each ``ask_*``
+returns the job it started (None when the user cancelled a dialog) for the window to keep."""
 
 from __future__ import annotations
 
@@ -7,8 +10,7 @@ from pathlib import Path
 
 from PySide6.QtCore import QPoint, Qt
 from PySide6.QtGui import QImage, QPainter
-from PySide6.QtWidgets import (QComboBox, QDialog, QDialogButtonBox, QDoubleSpinBox, QFileDialog, QFormLayout,
-                               QProgressDialog)
+from PySide6.QtWidgets import QComboBox, QDialog, QDialogButtonBox, QDoubleSpinBox, QFileDialog, QFormLayout
 
 from tonguevis.appstate import interval_at
 from tonguevis.errors import TonguevisError
@@ -77,28 +79,22 @@ class RangeDialog(QDialog):
         form.addRow(buttons)
 
 
-def run_with_progress(window, title: str, function, done_message: str, path, on_success=None) -> None:
-    """Run ``function(progress=...)`` in a worker with a progress dialog; errors -> dialog;
-    ``on_success(result)`` (on the GUI thread) when it finished."""
-    from tonguevis.gui.worker import Worker
+def run_with_progress(window, title: str, function, done_message: str, path, on_success=None):
+    """Run ``function(progress=...)`` through the job runner (progress dialog, Cancel, errors as a
+    dialog naming ``path``); ``done_message`` goes to the status line and ``on_success(result)`` is
+    called on the GUI thread when it finished.  Returns the :class:`~tonguevis.gui.worker.Job`."""
+    from tonguevis.gui.worker import run_job
 
-    worker = Worker(function, window)
-    dialog = QProgressDialog(title, "Cancel", 0, 1000, window)
-    dialog.setWindowModality(Qt.WindowModality.WindowModal)
-    dialog.setMinimumDuration(200)
-    dialog.canceled.connect(worker.cancel)
-    worker.progressed.connect(lambda d, t, m: (dialog.setMaximum(max(t, 1)), dialog.setValue(min(d, t))))
-    worker.succeeded.connect(lambda _r: window.statusBar().showMessage(done_message))
-    if on_success is not None:
-        worker.succeeded.connect(on_success)
-    worker.failed.connect(lambda message: window.show_error(f"{title} failed", message, path))
-    worker.cancelled.connect(lambda: window.statusBar().showMessage(f"{title}: cancelled"))
-    worker.finished.connect(dialog.reset)
-    window.export_worker = worker
-    worker.start()
+    def done(result) -> None:
+        window.state.set_status(done_message, window)
+        if on_success is not None:
+            on_success(result)
+
+    return run_job(window, title, function, done, path=path, min_duration_ms=200,
+                   status=lambda text: window.state.set_status(text, window))
 
 
-def ask_video(window) -> None:
+def ask_video(window):
     from tonguevis.gui.video import export_video
 
     session = window.session
@@ -113,13 +109,13 @@ def ask_video(window) -> None:
         return
     start, end, mode = ranges.start.value(), ranges.end.value(), window.state.color
     frame = ranges.frame.currentData()
-    run_with_progress(window, "Video export",
+    return run_with_progress(window, "Video export",
                       lambda progress: export_video(session, path, start, end, mode=mode, progress=progress,
                                                     frame=frame),
                       f"saved {path} ({frame} frame)", path)
 
 
-def ask_vtk(window) -> None:
+def ask_vtk(window):
     from tonguevis.gui.video import export_vtk_series
 
     session = window.session
@@ -129,7 +125,7 @@ def ask_vtk(window) -> None:
     frame = window.state.reference  # what the views show (View ▸ Head frame / Jaw frame)
     folder = QFileDialog.getExistingDirectory(window, f"Folder for the VTK series ({frame} frame, as the views)")
     if folder:
-        run_with_progress(window, "VTK export",
+        return run_with_progress(window, "VTK export",
                           lambda progress: export_vtk_series(session, folder, progress=progress, frame=frame),
                           f"saved {folder}/motion.pvd in the {frame} frame (README.txt there says so)", folder)
 
@@ -156,9 +152,9 @@ class ParaViewDialog(QDialog):
         form.addRow(buttons)
 
 
-def ask_paraview(window) -> None:
+def ask_paraview(window):
     """File ▸ Export motion for ParaView: one .xdmf + .h5 (the mesh once, displacement and energy
-    density per frame), in the frame of reference the views show."""
+    density per frame), in the frame of reference the views show.  Returns the export's job, or None."""
     from tonguevis.gui.paraview_export import export_paraview
 
     session = window.session
@@ -174,7 +170,7 @@ def ask_paraview(window) -> None:
         return
     frame = getattr(window.state, "reference", "head")
     surface, stride = options.surface.isChecked(), options.stride.value()
-    run_with_progress(window, "ParaView export",
+    return run_with_progress(window, "ParaView export",
                       lambda progress: export_paraview(session, path, frame=frame, surface_only=surface,
                                                        stride=stride, progress=progress),
                       f"saved {path} and its .h5 ({frame} frame)", path)

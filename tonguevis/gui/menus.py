@@ -72,7 +72,7 @@ class MenusMixin:
     def ask_export_paraview(self) -> None:
         from tonguevis.gui.export import ask_paraview
 
-        ask_paraview(self)
+        self.export_job = ask_paraview(self) or self.export_job
 
     def _action(self, menu, text: str, slot, shortcut=None) -> QAction:
         action = QAction(text, self)

@@ -7,6 +7,9 @@ target**, warped in direct form.  Elements are coloured by the percentile
 (empirical CDF) of their source–target difference, eq. (14): blue = the two
 shapes agree there, red = they differ most.  The main view and the three small
 views (top, front, lateral) share the same dataset, updated in place.
+
+With an app model the tab follows its ``motions`` (the recordings the ends can come
+from) and its ``morph_ends`` (an end picked elsewhere, e.g. in the Energy tab).
 """
 
 from __future__ import annotations
@@ -24,7 +27,8 @@ PLAY_INTERVAL_MS = 33
 
 
 class MorphTab(QtWidgets.QWidget):
-    """Morph between frames of the motions given to :meth:`set_motions` (name -> Motion)."""
+    """Morph between frames of the motions given to :meth:`set_motions` (name -> Motion), or of the
+    app model's ``motions`` when it has one."""
 
     blendChanged = QtCore.Signal(float)
 
@@ -100,6 +104,12 @@ class MorphTab(QtWidgets.QWidget):
         layout.addWidget(self.legend_label)
         layout.addWidget(self.status)
         self._update_label()
+        self._subscriptions = []
+        if state is not None:
+            self._subscriptions = [state.subscribe("motions", lambda event: self.set_motions(event.value)),
+                                   state.subscribe("morph_ends", lambda event: self.set_end(event.key, *event.value))]
+            if state.motions:
+                self.set_motions(state.motions)
 
     # ------------------------------------------------------------------ inputs
     def set_motions(self, motions: dict) -> None:
@@ -230,6 +240,9 @@ class MorphTab(QtWidgets.QWidget):
         self.set_blend(t)
 
     def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
+        for unsubscribe in self._subscriptions:
+            unsubscribe()
+        self._subscriptions = []
         self.timer.stop()
         if hasattr(self.plotter, "close"):
             self.plotter.close()

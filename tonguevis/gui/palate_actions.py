@@ -35,7 +35,7 @@ def read_palate(path):
 
 
 class PalateMixin:
-    """Needs the window's ``palate``, ``session``, ``_simulate``, ``show_error``, ``statusBar``."""
+    """Needs the window's ``palate``, ``session``, ``state``, ``_simulate``, ``show_error``."""
 
     def ask_load_palate(self) -> None:
         path, _ = QFileDialog.getOpenFileName(self, "Load the speaker's palate (from tonguevis palate)",
@@ -64,7 +64,7 @@ class PalateMixin:
         window's palate when that succeeds (at once when no recording is open)."""
         if self.session is None:
             self.palate = palate
-            self.statusBar().showMessage(f"palate for the next recording: {self._palate_name(palate)}")
+            self.state.set_status(f"palate for the next recording: {self._palate_name(palate)}", self)
             return
         self._simulate(self.session, palate=palate)
 
@@ -104,7 +104,7 @@ class PalateMixin:
         return name if ok else None
 
     def fit_palate(self, traces, out, probe: str = "PROBE", sensors=None) -> None:
-        """Fit a palate to ``traces`` in a worker (progress, cancel), save it at ``out`` and simulate with it."""
+        """Fit a palate to ``traces`` in a job (progress, cancel), save it at ``out`` and simulate with it."""
         from tonguevis.gui.export import run_with_progress
         from tonguevis.palate import palate_from_traces
 
@@ -122,9 +122,10 @@ class PalateMixin:
 
         def fitted(surface) -> None:
             meta = surface.metadata
-            self.statusBar().showMessage(
+            self.state.set_status(
                 f"palate fitted to {meta['kept']} of {meta['points']} trace points (RMS {1e3 * meta['rms_m']:.2f} mm), "
-                f"saved as {out}")
+                f"saved as {out}", self)
             self.use_palate(surface)
 
-        run_with_progress(self, "Palate fit", work, f"palate saved as {out}", traces[0], on_success=fitted)
+        self.export_job = run_with_progress(self, "Palate fit", work, f"palate saved as {out}", traces[0],
+                                            on_success=fitted)

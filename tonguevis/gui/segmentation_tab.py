@@ -4,8 +4,8 @@ Choose the target (the frame under the cursor, the peak-energy frame of the
 production under the cursor, or that whole production weighted by energy),
 the mode, and the seeds (automatic, until the relative global error falls
 under a threshold or a partition count is reached; or picked by clicking the
-left view), then Run: the job runs in a worker thread behind a progress dialog
-with Cancel.  Left: the target shape; right: the approximation, drawn from the
+left view), then Run: the job runs through the app's job runner, behind a progress
+dialog with Cancel.  The tab follows the app model's primary session and time.  Left: the target shape; right: the approximation, drawn from the
 approximated displacement of each partition's own node copies, so rigid
 pieces show gaps at their interfaces and constraint modes close them.  Both
 are coloured by partition, or by the local error sqrt(e_E) in mm.
@@ -26,10 +26,10 @@ log = logging.getLogger("tonguevis")
 
 
 class SegmentationTab(QtWidgets.QWidget):
-    """Segment the session's simulated motion; ``set_session`` is called by the window."""
+    """Segment the simulated motion of the app model's primary session (``set_session`` for scripts)."""
 
     segmented = QtCore.Signal(object)  # the SegmentationResult shown
-    finished = QtCore.Signal(str)  # "ok", "failed" or "cancelled", once the worker thread has ended
+    finished = QtCore.Signal(str)  # "ok", "failed" or "cancelled", once the job's thread has ended
 
     def __init__(self, state=None, parent=None):
         super().__init__(parent)
@@ -37,13 +37,11 @@ class SegmentationTab(QtWidgets.QWidget):
         self.session = None
         self.result = None
         self.seeds: list[int] = []
-        self.worker = None
-        self.progress_dialog = None
+        self.worker = None  # the running segmentation's Job
         self.last_dialog = None
         self.plotter = None
         self.surfaces: dict = {}
         self._pick_observer = None
-        self._outcome = "failed"
         self._running_motion = self._segmented_motion = None
 
         self.target_box = QtWidgets.QComboBox()
@@ -128,14 +126,18 @@ class SegmentationTab(QtWidgets.QWidget):
         layout.addWidget(self.status)
         self.seeding_box.currentIndexChanged.connect(lambda _i: self._update_seeding())
         self._update_seeding()
-        self._unsubscribe = state.subscribe("time", self._on_time) if state is not None else None
+        self._subscriptions = []
+        if state is not None:
+            self._subscriptions = [state.subscribe("time", self._on_time), state.follow_session(self.set_session)]
+            if state.session is not None:
+                self.set_session(state.session)
         app = QtWidgets.QApplication.instance()
         if app is not None:
             app.aboutToQuit.connect(self.stop_worker)
 
     # ------------------------------------------------------------------ inputs
     def set_session(self, session) -> None:
-        """The window's session (called when a recording opens and when its simulation ends)."""
+        """The session shown (the app model calls it when a recording opens and when its simulation ends)."""
         motion = None if session is None else session.motion
         if motion is not self._segmented_motion:  # another recording, or re-simulated
             self.result, self._segmented_motion = None, None
@@ -172,7 +174,6 @@ class SegmentationTab(QtWidgets.QWidget):
         if self._pick_observer is not None:
             plotter.iren.remove_observer(self._pick_observer)
             self._pick_observer = None
-        self._outcome = "failed"
         if on:
             self._pick_observer = plotter.iren.add_observer("LeftButtonPressEvent", self._on_click)
 
@@ -262,12 +263,13 @@ class SegmentationTab(QtWidgets.QWidget):
         plotter.render()
 
     # ------------------------------------------------------------------ running
-    def show_error(self, title: str, message: str) -> None:
+    def show_error(self, title: str, message: str, path=None):
         from tonguevis.gui.dialogs import error_box
 
         log.warning("%s: %s", title, message)
         self.status.setText(f"{title}: {message}")
-        self.last_dialog = error_box(self, title, message)
+        self.last_dialog = error_box(self, title, message, path)
+        return self.last_dialog
 
     def current_time(self) -> float:
         return float(self.state.time) if self.state is not None else 0.0
@@ -298,7 +300,7 @@ class SegmentationTab(QtWidgets.QWidget):
         return function
 
     def run(self) -> None:
-        from tonguevis.gui.worker import Worker
+        from tonguevis.gui.worker import run_job
 
         if self.worker is not None and self.worker.isRunning():
             return
@@ -308,38 +310,18 @@ class SegmentationTab(QtWidgets.QWidget):
             self.show_error("Cannot segment", str(exc))
             self.finished.emit("failed")
             return
-        self.worker = Worker(function, self)
-        dialog = QtWidgets.QProgressDialog("Segmenting…", "Cancel", 0, 1000, self)
-        dialog.setWindowTitle("tonguevis: segmentation")
-        dialog.setWindowModality(QtCore.Qt.WindowModality.WindowModal)
-        dialog.setMinimumDuration(300)
-        dialog.setValue(0)
-        dialog.canceled.connect(self.worker.cancel)
-        self.progress_dialog = dialog
-        self.worker.progressed.connect(self._on_progress)
-        self.worker.succeeded.connect(self._on_done)
-        self.worker.failed.connect(self._on_failed)
-        self.worker.cancelled.connect(self._on_cancelled)
-        self.worker.finished.connect(dialog.reset)
-        self.worker.finished.connect(self._on_thread_finished)
-        self._outcome = "failed"
         self.run_button.setEnabled(False)
         self.status.setText("segmenting…")
-        self.worker.start()
+        self.worker = run_job(self, "Segmentation", function, self._on_done, label="Segmenting…",
+                              on_failed=lambda _message: self.run_button.setEnabled(True),
+                              on_cancelled=self._on_cancelled, on_ended=self.finished.emit)
 
     def cancel(self) -> None:
         if self.worker is not None:
             self.worker.cancel()
 
-    def _on_progress(self, done: int, total: int, message: str) -> None:
-        if self.progress_dialog is not None:
-            self.progress_dialog.setMaximum(max(total, 1))
-            self.progress_dialog.setValue(min(done, total))
-            self.progress_dialog.setLabelText(message)
-
     def _on_done(self, result) -> None:
         self.run_button.setEnabled(True)
-        self._outcome = "ok"
         current = None if self.session is None else self.session.motion
         if self._running_motion is not current:
             self.status.setText("segmentation of a motion no longer shown: discarded")
@@ -347,18 +329,9 @@ class SegmentationTab(QtWidgets.QWidget):
         self._segmented_motion = current
         self.show_result(result)
 
-    def _on_failed(self, message: str) -> None:
-        self.run_button.setEnabled(True)
-        self.show_error("Segmentation failed", message)
-
     def _on_cancelled(self) -> None:
         self.run_button.setEnabled(True)
-        self._outcome = "cancelled"
         self.status.setText("segmentation cancelled")
-
-    def _on_thread_finished(self) -> None:
-        # Emitted once the thread has ended, so a listener may close the tab at once.
-        self.finished.emit(self._outcome)
 
     def show_result(self, result) -> None:
         """Show a SegmentationResult: both views, the partition table, the status line."""
@@ -375,14 +348,13 @@ class SegmentationTab(QtWidgets.QWidget):
 
     def stop_worker(self) -> None:
         """Cancel a running segmentation and wait for its thread (before quitting)."""
-        if self.worker is not None and self.worker.isRunning():
-            self.worker.cancel()
-            self.worker.wait(30000)
+        if self.worker is not None:
+            self.worker.stop()
 
     def closeEvent(self, event) -> None:
-        if self._unsubscribe is not None:
-            self._unsubscribe()
-            self._unsubscribe = None
+        for unsubscribe in self._subscriptions:
+            unsubscribe()
+        self._subscriptions = []
         self.stop_worker()
         if self.plotter is not None:
             self.plotter.close()

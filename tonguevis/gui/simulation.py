@@ -1,10 +1,18 @@
-"""Build the tongue model and simulate a session (no Qt; the worker thread runs this)."""
+"""Build the tongue model and simulate a session (no Qt; the job runner's thread runs this).
+
+:func:`simulate_motion` only *returns* what it made (a :class:`Simulated`): the model
+it built or was given, the motion, its drawing frames and the palate shown.  The GUI
+thread then sets them on the session (:meth:`Simulated.apply`); nothing shared is
+assigned from the worker thread.
+"""
 
 from __future__ import annotations
 
 import logging
 import os
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from tonguevis._progress import ProgressCallback
 from tonguevis.gui.frames import MotionFrames
@@ -39,8 +47,26 @@ def staged(progress: ProgressCallback | None, stage: int, stages: int, name: str
     return callback
 
 
-def simulate_session(
-    session: Session,
+@dataclass
+class Simulated:
+    """What one simulation made: the ``model`` it ran on, the ``motion``, its drawing ``frames``, the
+    ``palate`` it was simulated against (None: no contact) and the ``shown_palate`` the views draw."""
+
+    model: Any
+    motion: Any
+    frames: Any
+    palate: Any = None
+    shown_palate: Any = None
+
+    def apply(self, session: Session) -> Session:
+        """Set the results on ``session`` (on the thread that owns it: the GUI thread in the app)."""
+        session.set_motion(self.motion, self.frames, self.palate, self.shown_palate)
+        return session
+
+
+def simulate_motion(
+    recording,
+    given_rest: tuple[float, float] | None = None,
     model=None,
     mesh_path: str | os.PathLike | None = None,
     modes: int = 100,
@@ -48,17 +74,15 @@ def simulate_session(
     landmarks: str = "speaker",
     progress: ProgressCallback | None = None,
     palate=None,
-) -> Session:
-    """Simulate ``session.recording`` and return the session with ``motion``, ``frames`` and ``rest``.
+) -> Simulated:
+    """Simulate ``recording`` on ``model`` (None: built from ``mesh_path``); returns a :class:`Simulated`.
 
     ``palate`` (a PalateSurface, a palate file or "generic"; None: no contact): the tongue is kept
-    below it, and ``session.shown_palate`` is it placed in the model frame as the simulation
-    placed it (without one, the generic palate, drawn only).
-
-    The rest is ``session.given_rest`` when the user gave one, else found as every
-    front end finds it (:func:`tonguevis.workflows.simulate_recording`); ``session.rest``
-    says which.  ``landmarks``: sensor nodes snapped to the speaker's layout ('speaker') or the
-    paper's placement rule ('rule').  ``progress(done, total, message)`` may raise :class:`tonguevis.errors.Cancelled`.
+    below it; the :attr:`Simulated.shown_palate` is it placed in the model frame as the simulation
+    placed it (without one, the generic palate, drawn only).  The rest is ``given_rest`` when the
+    user gave one, else found as every front end finds it (:func:`tonguevis.workflows.simulate_recording`).
+    ``landmarks``: sensor nodes snapped to the speaker's layout ('speaker') or the paper's placement
+    rule ('rule').  ``progress(done, total, message)`` may raise :class:`tonguevis.errors.Cancelled`.
     """
     from tonguevis.workflows import simulate_recording
 
@@ -67,12 +91,19 @@ def simulate_session(
     if model is None:
         model = build_model(mesh_path)
     options = {} if palate is None else {"palate": palate}
-    motion = simulate_recording(session.recording, model, modes=modes, warping=warping, landmarks=landmarks,
-                                rest=session.given_rest, progress=staged(progress, 0, 2, "simulating"), **options)
-    shown = shown_palate(session.recording, motion, model, palate)
+    motion = simulate_recording(recording, model, modes=modes, warping=warping, landmarks=landmarks,
+                                rest=given_rest, progress=staged(progress, 0, 2, "simulating"), **options)
+    shown = shown_palate(recording, motion, model, palate)
     frames = MotionFrames(motion, progress=staged(progress, 1, 2, "reconstructing frames"))
-    session.set_motion(motion, frames, palate, shown)
-    return session
+    return Simulated(model, motion, frames, palate, shown)
+
+
+def simulate_session(session: Session, **options) -> Session:
+    """Simulate ``session.recording`` with :func:`simulate_motion` (its ``options``: model, mesh_path,
+    modes, warping, landmarks, progress, palate; the rest ``session.given_rest``) and return the session
+    with ``motion``, ``frames``, ``rest`` and the palates set (for scripts, the CLI and tests on one
+    thread; the app sets them on the GUI thread instead)."""
+    return simulate_motion(session.recording, session.given_rest, **options).apply(session)
 
 
 def shown_palate(recording, motion, model, palate):

@@ -1,4 +1,13 @@
-"""The main window: 3D views, sensor panel and tabs, audio, transport, menus."""
+"""The main window: 3D views, sensor panel and tabs, audio, transport, menus.
+
+The window holds the app model (:class:`~tonguevis.appstate.AppState`, ``window.state``)
+and lays out the views; it does not push data into them.  Opening a recording is
+``state.set_session(session)``; its simulation runs through the job runner
+(:func:`tonguevis.gui.worker.run_job`) and, back on the GUI thread, the motion is
+set on the session and announced with ``state.set_motion(session)``.  Every view
+showing a session follows the model (``state.follow_session(view.set_session)``);
+the status bar shows the model's ``status`` events.
+"""
 
 from __future__ import annotations
 
@@ -7,8 +16,7 @@ import os
 from pathlib import Path
 
 from PySide6.QtCore import QSettings, Qt, Signal
-from PySide6.QtWidgets import (QFileDialog, QLabel, QMainWindow, QProgressDialog, QSplitter, QTabWidget,
-                               QVBoxLayout, QWidget)
+from PySide6.QtWidgets import QFileDialog, QLabel, QMainWindow, QSplitter, QTabWidget, QVBoxLayout, QWidget
 
 from tonguevis.appstate import AppState
 from tonguevis.errors import TonguevisError
@@ -24,7 +32,7 @@ from tonguevis.gui.sensor_panel import SensorPanel
 from tonguevis.gui.session import Session, load_session, needs_sensor_map, remap_session
 from tonguevis.gui.transport import TransportBar
 from tonguevis.gui.view3d import View3D
-from tonguevis.gui.worker import Worker
+from tonguevis.gui.worker import Job, run_job
 
 log = logging.getLogger("tonguevis")
 MESH_SUFFIXES = (".vtu", ".vtk", ".msh", ".node", ".ele", ".mesh", ".npz", ".inp", ".xdmf")
@@ -36,8 +44,9 @@ TAB_FACTORIES: list[tuple[str, object]] = []
 def register_tab_factory(title: str, factory) -> None:
     """Add a tab to every window created from now on (Energy, Morph, Segmentation ...).
 
-    ``factory(state, window)`` returns the widget; if it has ``set_session(session)``
-    it is called whenever a recording is opened or its simulation finishes.
+    ``factory(state, window)`` returns the widget, which subscribes to the app model
+    ``state`` itself (e.g. ``state.follow_session(widget.set_session)``: called whenever a
+    recording is opened or its simulation finishes).
     """
     TAB_FACTORIES.append((title, factory))
 
@@ -46,8 +55,7 @@ class MainWindow(MenusMixin, RestMixin, PalateMixin, QMainWindow):
     """The tonguevis window.  ``modes``, ``mesh_path`` and ``palate`` (None: no contact; "generic";
     a speaker's PalateSurface or palate file) configure the simulation."""
 
-    session_changed = Signal(object)
-    simulation_finished = Signal(bool)  # True on success
+    simulation_finished = Signal(bool)  # True on success (scripts and tests wait for it)
 
     def __init__(self, state: AppState | None = None, settings: QSettings | None = None, modes: int = 100,
                  mesh_path: str | os.PathLike | None = None, warping: bool = True, palate=None):
@@ -57,21 +65,24 @@ class MainWindow(MenusMixin, RestMixin, PalateMixin, QMainWindow):
         self.setAcceptDrops(True)
         self.state = state or AppState()
         self.settings = settings or QSettings("tonguevis", "tonguevis")
-        self.modes, self.mesh_path, self.warping = modes, mesh_path, warping
+        self.modes, self.warping = modes, warping
+        if mesh_path is not None or self.state.mesh_path is not None:
+            self.state.set_tongue_model(None, mesh_path, self)
         self.landmarks = "speaker"  # sensor nodes: the speaker's layout ("rule": the paper's placement)
         self.palate = palate
-        self.session: Session | None = None
-        self.model = None
-        self.model_key = None
-        self.worker: Worker | None = None
-        self.progress_dialog: QProgressDialog | None = None
+        self.worker: Job | None = None  # the simulation's job
+        self.export_job: Job | None = None  # the latest export or palate fit
         self.last_dialog = None
-        self.session_widgets: list = []
+        self.feature_tabs: dict[str, QWidget] = {}
+        self.state.subscribe("status", lambda event: self.statusBar().showMessage(event.value))
+        # The window's own reactions first: the time range is the new motion's before any view redraws.
+        self.state.subscribe("session", self._session_opened)
+        self.state.subscribe("motion", self._motion_ready)
         self._build_views()
         self._build_menus()
         self.playback = PlaybackController(self.state, self)
-        self.playback.status.connect(lambda text: self.statusBar().showMessage(text))
-        self.statusBar().showMessage("Open a recording (File ▸ Open, or drop a file here)")
+        self.playback.status.connect(lambda text: self.state.set_status(text, self.playback))
+        self.state.set_status("Open a recording (File ▸ Open, or drop a file here)")
         self.frame_status = QLabel("")  # the views' frame of reference and the palate contact at the cursor
         self.frame_status.setStyleSheet("QLabel { border-left: 1px solid #b0b0b0; padding-left: 6px; }")
         self.frame_status.setToolTip("the 3D views' frame of reference (View ▸ Head frame / Jaw frame) and, at the "
@@ -108,15 +119,44 @@ class MainWindow(MenusMixin, RestMixin, PalateMixin, QMainWindow):
         layout.addWidget(vertical, 1)
         layout.addWidget(self.transport)
         self.setCentralWidget(central)
-        self.session_widgets = [self.view3d, self.sensor_panel, self.modal_tab, self.palate_panel]
+        for view in (self.view3d, self.sensor_panel, self.modal_tab, self.palate_panel):
+            self.state.follow_session(view.set_session)
 
     def register_tab(self, title: str, widget: QWidget) -> int:
-        """Append a tab beside Sensors and Modal q(t); returns its index."""
-        if hasattr(widget, "set_session"):
-            self.session_widgets.append(widget)
-            if self.session is not None:
-                widget.set_session(self.session)
+        """Append a tab beside Sensors and Modal q(t) (it subscribes to ``state`` itself); returns its index."""
+        self.feature_tabs[title] = widget
         return self.tabs.addTab(widget, title)
+
+    @property
+    def energy_tab(self):
+        return self.feature_tabs.get("Energy")
+
+    @property
+    def morph_tab(self):
+        return self.feature_tabs.get("Morph")
+
+    @property
+    def segmentation_tab(self):
+        return self.feature_tabs.get("Segmentation")
+
+    # -- the app model's contents, as the window's -----------------------------------
+    @property
+    def session(self) -> Session | None:
+        """The recording the views show (the model's primary session)."""
+        return self.state.session
+
+    @property
+    def model(self):
+        """The tongue model every simulation uses (the app model's; None: built on first need)."""
+        return self.state.tongue_model
+
+    @model.setter
+    def model(self, model) -> None:
+        self.state.set_tongue_model(model, self.state.mesh_path, self)
+
+    @property
+    def mesh_path(self):
+        return self.state.mesh_path
 
     @property
     def time_views(self) -> dict[str, object]:
@@ -125,10 +165,11 @@ class MainWindow(MenusMixin, RestMixin, PalateMixin, QMainWindow):
                 "palate": self.palate_panel, "audio": self.audio, "transport": self.transport}
 
     # -- errors ---------------------------------------------------------------
-    def show_error(self, title: str, message: str, path=None) -> None:
+    def show_error(self, title: str, message: str, path=None):
         log.warning("%s: %s", title, message)
         self.last_dialog = error_box(self, title, message, path)
-        self.statusBar().showMessage(f"{title}: {message}")
+        self.state.set_status(f"{title}: {message}", self)
+        return self.last_dialog
 
     # -- drag and drop ----------------------------------------------------------
     def dragEnterEvent(self, event) -> None:
@@ -216,21 +257,28 @@ class MainWindow(MenusMixin, RestMixin, PalateMixin, QMainWindow):
         from tonguevis.gui.simulation import build_model
 
         try:
-            self.model = build_model(path)
+            model = build_model(path)  # on the GUI thread: reading a mesh is quick
         except (TonguevisError, OSError) as exc:
             self.show_error("Cannot open mesh", str(exc), path)
             return
         except Exception as exc:  # a model that cannot be built from this mesh
             self.show_error("Cannot use mesh", f"{type(exc).__name__}: {exc}", path)
             return
-        self.mesh_path = path
-        self.statusBar().showMessage(f"mesh {path}: {self.model.mesh.n_nodes} nodes")
+        self.state.set_tongue_model(model, path, self)
+        self.state.set_status(f"mesh {path}: {model.mesh.n_nodes} nodes", self)
         if self.session is not None:
             self._simulate(self.session)
 
     def show_session(self, session: Session) -> None:
         """Show the recording at once (plots, audio), then simulate it."""
-        self.session = session
+        self.state.set_session(session, source=self)
+        self._simulate(session)
+
+    def _session_opened(self, event) -> None:
+        """A recording was opened: the window's title, the time range, the sound, the productions."""
+        session = event.value
+        if event.key != "primary" or session is None:
+            return
         self.setWindowTitle(f"tonguevis — {session.name}")
         start, end, period = session.time_range
         self.state.set_range(start, end, period, self)
@@ -239,85 +287,67 @@ class MainWindow(MenusMixin, RestMixin, PalateMixin, QMainWindow):
         self.audio.show_audio(session.recording.audio, (start, end), session.productions,
                               session.recording.labels)
         self.show_rest(session)
-        self._publish()
-        self._simulate(session)
 
-    def _publish(self) -> None:
-        for widget in self.session_widgets:
-            widget.set_session(self.session)
-        self.session_changed.emit(self.session)
-
-    # -- simulation in a worker thread --------------------------------------------
-    def _simulate(self, session: Session, palate=NO_PALATE) -> None:
-        """Simulate ``session`` in the worker, against ``palate`` (default: the window's)."""
-        from tonguevis.gui.simulation import build_model, simulate_session
-
-        self._cancel_worker()
-        window = self
-        palate = self.palate if palate is NO_PALATE else palate
-        self._simulating_palate = palate
-
-        def work(progress):
-            if window.model is None:
-                window.model = build_model(window.mesh_path)
-            return simulate_session(session, model=window.model, modes=window.modes, warping=window.warping,
-                                    landmarks=window.landmarks, progress=progress, palate=palate)
-
-        self.worker = Worker(work, self)
-        dialog = QProgressDialog(f"Simulating {session.name}…", "Cancel", 0, 1000, self)
-        dialog.setWindowTitle("tonguevis: simulation")
-        dialog.setWindowModality(Qt.WindowModality.WindowModal)
-        dialog.setMinimumDuration(300)
-        dialog.setValue(0)
-        dialog.canceled.connect(self.worker.cancel)
-        self.progress_dialog = dialog
-        self.worker.progressed.connect(self._on_progress)
-        self.worker.succeeded.connect(self._on_simulated)
-        self.worker.failed.connect(lambda message: self._on_sim_failed(session, message))
-        self.worker.cancelled.connect(self._on_sim_cancelled)
-        self.worker.finished.connect(dialog.reset)
-        against = "" if palate is None else f" against the {self._palate_name(palate)}"
-        self.statusBar().showMessage(f"simulating {session.name} with {self.modes} modes{against}…")
-        self.worker.start()
-
-    def _on_progress(self, done: int, total: int, message: str) -> None:
-        if self.progress_dialog is not None:
-            self.progress_dialog.setMaximum(max(total, 1))
-            self.progress_dialog.setValue(min(done, total))
-            self.progress_dialog.setLabelText(message)
-
-    def _on_simulated(self, session: Session) -> None:
-        if session is not self.session:
-            return  # a newer recording was opened meanwhile
-        self.palate = session.palate  # a palate chosen becomes the window's once it simulated
+    def _motion_ready(self, event) -> None:
+        """The primary recording's simulation is in: its time range and rest line."""
+        if event.key != "primary":
+            return
+        session = event.value
         start, end, period = session.time_range
         self.state.set_range(start, end, period, self)
         self.show_rest(session)
-        self._publish()
+
+    # -- simulation through the job runner -----------------------------------------
+    def _simulate(self, session: Session, palate=NO_PALATE) -> None:
+        """Simulate ``session`` in a job, against ``palate`` (default: the window's).
+
+        The job returns the model it used and the motion; nothing is assigned until
+        :meth:`_on_simulated` runs on the GUI thread."""
+        from tonguevis.gui.simulation import simulate_motion
+
+        self._cancel_worker()
+        palate = self.palate if palate is NO_PALATE else palate
+        model, mesh_path = self.state.tongue_model, self.state.mesh_path  # read here, on the GUI thread
+        recording, rest = session.recording, session.given_rest
+        options = {"modes": self.modes, "warping": self.warping, "landmarks": self.landmarks, "palate": palate}
+
+        def work(progress):
+            return simulate_motion(recording, rest, model=model, mesh_path=mesh_path, progress=progress, **options)
+
+        def explain(message: str) -> str:
+            if palate is None:
+                return message
+            kept = "" if session.motion is None else " The views keep the previous simulation."
+            return message + (f"\n\n(simulated against the {self._palate_name(palate)}: File ▸ No palate simulates "
+                              f"without contact.{kept})")
+
+        against = "" if palate is None else f" against the {self._palate_name(palate)}"
+        self.state.set_status(f"simulating {session.name} with {self.modes} modes{against}…", self)
+        self.worker = run_job(self, "Simulation", work, lambda result: self._on_simulated(session, result, mesh_path),
+                              label=f"Simulating {session.name}…", path=session.path, explain=explain,
+                              on_failed=lambda _message: self.simulation_finished.emit(False),
+                              on_cancelled=lambda: self.simulation_finished.emit(False),
+                              status=lambda text: self.state.set_status(text, self))
+
+    def _on_simulated(self, session: Session, result, mesh_path) -> None:
+        """The job's result, on the GUI thread: the model kept, the motion set on the session and announced."""
+        if self.state.tongue_model is None and self.state.mesh_path == mesh_path:
+            self.state.set_tongue_model(result.model, mesh_path, self)  # built by the job: kept for the next
+        if self.state.role_of(session) is None:
+            return  # a newer recording was opened meanwhile
+        result.apply(session)
+        self.palate = session.palate  # a palate chosen becomes the window's once it simulated
+        self.state.set_motion(session, self)
         motion = session.motion
-        self.statusBar().showMessage(
+        self.state.set_status(
             f"{session.name}: {motion.n_frames} frames simulated, "
             f"{int((~motion.converged).sum())} not converged; press Space to play"
-            + "".join(f"; {note}" for note in session.notes))
+            + "".join(f"; {note}" for note in session.notes), self)
         self.simulation_finished.emit(True)
 
-    def _on_sim_failed(self, session: Session, message: str) -> None:
-        palate = getattr(self, "_simulating_palate", None)
-        if palate is not None:
-            kept = "" if session.motion is None else " The views keep the previous simulation."
-            message += (f"\n\n(simulated against the {self._palate_name(palate)}: File ▸ No palate simulates "
-                        f"without contact.{kept})")
-        self.show_error("Simulation failed", message, session.path)
-        self.simulation_finished.emit(False)
-
-    def _on_sim_cancelled(self) -> None:
-        self.statusBar().showMessage("simulation cancelled")
-        self.simulation_finished.emit(False)
-
     def _cancel_worker(self) -> None:
-        if self.worker is not None and self.worker.isRunning():
-            self.worker.cancel()
-            self.worker.wait(30000)
+        if self.worker is not None:
+            self.worker.stop()
         self.worker = None
 
     # -- exports ------------------------------------------------------------------
@@ -330,7 +360,7 @@ class MainWindow(MenusMixin, RestMixin, PalateMixin, QMainWindow):
         from tonguevis.gui.export import atomic_save_image
 
         atomic_save_image(self.grab_window(), path)
-        self.statusBar().showMessage(f"saved {path}")
+        self.state.set_status(f"saved {path}", self)
 
     def ask_export_screenshot(self) -> None:
         path, _ = QFileDialog.getSaveFileName(self, "Save a screenshot", "tonguevis.png", "PNG (*.png)")
@@ -343,16 +373,18 @@ class MainWindow(MenusMixin, RestMixin, PalateMixin, QMainWindow):
     def ask_export_video(self) -> None:
         from tonguevis.gui.export import ask_video
 
-        ask_video(self)
+        self.export_job = ask_video(self) or self.export_job
 
     def ask_export_vtk(self) -> None:
         from tonguevis.gui.export import ask_vtk
 
-        ask_vtk(self)
+        self.export_job = ask_vtk(self) or self.export_job
 
     def closeEvent(self, event) -> None:
         self.playback.shutdown()
         self._cancel_worker()
+        if self.export_job is not None:
+            self.export_job.stop()
         self.view3d.close_view()
         for plot in (self.audio, self.sensor_panel.plot, self.modal_tab.map, self.palate_panel):
             plot.close_plot()
