@@ -91,9 +91,9 @@ class MorphTab(QtWidgets.QWidget):
         blend.addWidget(self.play_button)
 
         if plotter is None:
-            from pyvistaqt import QtInteractor
+            from tonguevis.gui.view3d import make_plotter
 
-            plotter = QtInteractor(self, shape="1|3", border=False)
+            plotter = make_plotter(self, shape="1|3", border=False)
         self.plotter = plotter
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(form)

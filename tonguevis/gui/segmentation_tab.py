@@ -196,9 +196,9 @@ class SegmentationTab(QtWidgets.QWidget):
     def ensure_views(self):
         """The two side-by-side views, built on first need (the tab costs nothing until shown)."""
         if self.plotter is None:
-            from pyvistaqt import QtInteractor
+            from tonguevis.gui.view3d import make_plotter
 
-            self.plotter = QtInteractor(self, shape=(1, 2), border=False)
+            self.plotter = make_plotter(self, shape=(1, 2), border=False)
             self.plotter.set_background("white")
             self.plotter.link_views()
             self.views_box.addWidget(self.plotter.interactor, 1)

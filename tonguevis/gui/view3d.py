@@ -97,6 +97,41 @@ def frame_text(frames, i: int, productions, caption: str | None = None) -> str:
     return text
 
 
+def image_views() -> bool:
+    """Whether the 3D views render off screen and are painted as an image
+    (:mod:`tonguevis.gui.image_views`) rather than in pyvistaqt's ``QOpenGLWidget``: on X11 and
+    Windows, unless ``TONGUEVIS_VIEWS=qopenglwidget`` (``TONGUEVIS_VIEWS=image`` forces them);
+    elsewhere (Wayland, macOS) VTK's off-screen window may not exist and the ``QOpenGLWidget`` stays."""
+    import os
+
+    from PySide6.QtGui import QGuiApplication
+
+    choice = os.environ.get("TONGUEVIS_VIEWS", "").lower()
+    if choice in ("image", "qopenglwidget"):
+        return choice == "image"
+    return QGuiApplication.platformName() in ("xcb", "windows")
+
+
+def make_plotter(parent, multi_samples: int | None = None, auto_update: float | bool = 5.0, **kwargs):
+    """A Qt plotter (pyvista ``BasePlotter`` API, ``.interactor`` the widget) for every 3D view of the
+    app: an :class:`~tonguevis.gui.image_views.ImageInteractor` where :func:`image_views` says so,
+    pyvistaqt's ``QtInteractor`` elsewhere.  One ``QOpenGLWidget`` anywhere in the window (even in
+    a hidden tab) makes Qt composite the whole window through OpenGL, so every 3D view of the app
+    must come from here.  ``multi_samples`` None: pyvista's default; ``auto_update``: the
+    ``QtInteractor``'s renders per second by timer (the image views render when asked or painted)."""
+    if multi_samples is None:
+        import pyvista
+
+        multi_samples = pyvista.global_theme.multi_samples
+    if image_views():
+        from tonguevis.gui.image_views import ImageInteractor
+
+        return ImageInteractor(parent, multi_samples=multi_samples, **kwargs)
+    from pyvistaqt import QtInteractor
+
+    return QtInteractor(parent, auto_update=auto_update, multi_samples=multi_samples, **kwargs)
+
+
 class View3D(QWidget):
     """The four 3D views.  ``described(str)`` says, at each new frame, which frame of reference
     they show and the palate contact there (the window's status bar shows it)."""
@@ -105,14 +140,12 @@ class View3D(QWidget):
 
     def __init__(self, state: AppState, parent=None):
         super().__init__(parent)
-        from pyvistaqt import QtInteractor
-
         self.state = state
         self.session = None
         self.frame = -1
         self.renders = 0
         # No multisampling: under software OpenGL (Xvfb, VMs) 8x MSAA costs most of each frame.
-        self.plotter = QtInteractor(self, shape="1|3", splitting_position=0.72, auto_update=False, multi_samples=0)
+        self.plotter = make_plotter(self, shape="1|3", splitting_position=0.72, multi_samples=0, auto_update=False)
         self.scene = TongueScene(self.plotter)
         self.colour = QComboBox()
         for mode in COLOR_MODES:

@@ -1,0 +1,145 @@
+"""What keeps playback fast: frames dropped (never delayed) behind the clock, the 3D views
+painted in software from VTK's off-screen frame (no OpenGL composition of the window), one
+render per frame, and no full matplotlib redraw while playing."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("PySide6")
+pytest.importorskip("pyvistaqt")
+
+from tests.gui.conftest import demo_session, show_and_simulate  # noqa: E402
+
+pytestmark = [pytest.mark.gui, pytest.mark.timeout(120)]
+
+
+class StepClock:
+    """A clock the test moves by hand (recording seconds)."""
+
+    kind = "wall"
+
+    def __init__(self):
+        self.now = 0.0
+
+    def start(self, t0, t1, speed):
+        self.now = t0
+
+    def time(self):
+        return self.now
+
+    def exhausted(self):
+        return False
+
+    def stop(self):
+        pass
+
+
+def test_slow_frames_are_dropped_not_delayed(qtbot, monkeypatch):
+    """Each tick shows the clock's time, however long the last frame took to draw: a draw
+    that takes 0.25 s of a 100 frames/s recording skips 25 frames instead of falling behind."""
+    from PySide6.QtCore import QObject
+
+    import tonguevis.gui.playback as playback
+    from tonguevis.appstate import AppState
+
+    parent = QObject()
+    state = AppState(0.0, 10.0, 0.01)
+    controller = playback.PlaybackController(state, parent)
+    clock = StepClock()
+    monkeypatch.setattr(controller, "_make_clock", lambda: (clock, "test clock"))
+    shown = []
+
+    state.subscribe("time", lambda event: shown.append(event.value))
+    state.set_time(1.0)
+    state.set_playing(True)
+    controller.timer.stop()  # ticks by hand
+    shown.clear()
+    for _ in range(4):
+        clock.now += 0.25  # the last frame took a quarter of a second to draw
+        controller.tick()
+    state.set_playing(False)
+    # Every tick shows where the clock is now, not the frame after the last one shown.
+    assert np.allclose(shown, [1.25, 1.5, 1.75, 2.0])
+    assert np.allclose(np.diff(shown), 0.25)  # 25 frames skipped each time
+    controller.shutdown()
+
+
+def test_playback_keeps_up_with_the_wall_clock_on_a_slow_view(qtbot, monkeypatch):
+    """With a real wall clock and a view that needs 40 ms a frame (slower than the 15 ms tick),
+    the time shown trails the clock by at most one draw, and frames are skipped."""
+    from PySide6.QtCore import QObject
+
+    import tonguevis.gui.playback as playback
+    from tonguevis.appstate import AppState
+
+    parent = QObject()
+    state = AppState(0.0, 10.0, 0.01)
+    controller = playback.PlaybackController(state, parent)
+    shown = []
+
+    def slow_view(event):
+        shown.append((event.value, controller.clock.time() if controller.clock else None))
+        time.sleep(0.04)
+
+    state.subscribe("time", slow_view)
+    state.set_time(1.0)
+    state.set_playing(True)
+    qtbot.waitUntil(lambda: state.time > 1.6, timeout=5000)
+    state.set_playing(False)
+    lag = [clock - shown_t for shown_t, clock in shown if clock is not None]
+    assert max(lag) < 0.005  # shown at the clock's time when it was read, not queued behind
+    distinct = sorted({round(t, 2) for t, _ in shown})
+    frames_passed = round(100 * (distinct[-1] - distinct[0]))
+    assert len(distinct) < 0.6 * frames_passed  # ~40 ms a frame at 100 frames/s: most frames skipped
+    controller.shutdown()
+
+
+def test_three_d_views_are_painted_in_software_one_render_per_frame(qtbot, window):
+    """On X11 the window holds no QOpenGLWidget (one would make Qt composite the whole window
+    through OpenGL), the 3D views are an image a plain grab sees, and playback renders the four
+    views once per frame shown, with no full redraw of any matplotlib canvas."""
+    from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
+    from PySide6.QtGui import QGuiApplication
+    from PySide6.QtOpenGLWidgets import QOpenGLWidget
+
+    from tonguevis.gui.image_views import ImageInteractor
+    from tonguevis.gui.scene import BACKGROUND
+    from tonguevis.gui.view3d import image_views
+
+    if QGuiApplication.platformName() != "xcb" or not image_views():
+        pytest.skip("image views are used on X11 only")
+    show_and_simulate(qtbot, window, demo_session())
+    plotter = window.view3d.plotter
+    assert isinstance(plotter, ImageInteractor)
+    assert window.findChildren(QOpenGLWidget) == []
+
+    # A plain QWidget.grab (no VTK read-back pasted in) shows the views: background and tongue.
+    state = window.state
+    state.set_time(5.6)
+    qtbot.wait(200)
+    image = plotter.grab().toImage()
+    rgb = np.array([[image.pixelColor(x, y).getRgbF()[:3] for x in range(0, image.width(), 8)]
+                    for y in range(0, image.height(), 8)])
+    import matplotlib.colors as mcolors
+
+    backdrop = np.linalg.norm(rgb - np.array(mcolors.to_rgb(BACKGROUND)), axis=-1) < 0.03
+    assert 0.2 < backdrop.mean() < 0.95, backdrop.mean()
+
+    state.set_time(5.2)
+    qtbot.wait(300)  # the plots' first draws (after the simulation) are done
+    draws = []
+    for canvas in window.findChildren(FigureCanvasQTAgg):
+        canvas.mpl_connect("draw_event", lambda _e, c=canvas: draws.append((type(c).__name__, round(state.time, 2))))
+    renders, frames = plotter.renders, window.view3d.renders
+    state.set_playing(True)
+    qtbot.waitUntil(lambda: state.time > 6.0, timeout=10000)
+    state.set_playing(False)
+    qtbot.wait(100)
+    new_frames = window.view3d.renders - frames
+    assert new_frames > 3
+    assert plotter.renders - renders <= new_frames + 1  # one render per frame (a paint may add one)
+    assert draws == [], draws  # cursors move on an overlay: no canvas is redrawn while playing

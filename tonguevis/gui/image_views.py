@@ -1,0 +1,204 @@
+"""A pyvista plotter drawn as a picture in an ordinary widget: VTK renders off screen.
+
+pyvistaqt's ``QtInteractor`` is a ``QOpenGLWidget``: VTK renders into frame
+buffers that Qt then composites with the rest of the window through OpenGL,
+and a ``QOpenGLWidget`` turns on OpenGL composition for the *whole* top-level
+window.  Without a GPU (Mesa's llvmpipe: Xvfb, VMs, laptops without a
+working driver) that composition is drawn pixel by pixel on the CPU every
+time any widget repaints: measured on the app at 1624 × 950, repainting the
+status bar alone cost 36 ms, and every frame of playback paid ~50 ms of
+composition on top of VTK's render.  A native child window that VTK draws
+into avoids the composition but still pays VTK's copy of its frame to the
+window and the buffer swap (13 of a four-view frame's 22 ms of fixed cost
+under llvmpipe).
+
+:class:`ImageInteractor` renders off screen (VTK's own frame buffers, no
+window, no swap), reads the frame back (one copy, ~1 ms) and paints it as an
+image: Qt draws the window in software as if there were no OpenGL at all,
+``QWidget.grab`` sees the 3D views, and the pixels are VTK's, unchanged.
+Mouse and keys go to VTK's interactor as in VTK's ``QVTKRenderWindowInteractor``
+(whose event handlers it reuses), so the views rotate, pan and zoom as before.
+
+It offers what the app uses of ``QtInteractor``: the pyvista ``BasePlotter``
+API (subplots, ``add_mesh``, ``render``, ``screenshot``, ...), ``interactor``
+(the widget), ``update()`` to draw the scene again at the next paint, and
+``close``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import numpy as np
+from PySide6.QtCore import QPoint, Qt, QTimer
+from PySide6.QtGui import QImage, QPainter
+from PySide6.QtWidgets import QSizePolicy, QWidget
+from pyvista.plotting import BasePlotter
+from pyvista.plotting.render_window_interactor import RenderWindowInteractor
+from vtkmodules.qt.QVTKRenderWindowInteractor import QVTKRenderWindowInteractor
+from vtkmodules.util.numpy_support import vtk_to_numpy
+from vtkmodules.vtkCommonCore import vtkUnsignedCharArray
+from vtkmodules.vtkRenderingCore import vtkRenderWindow
+from vtkmodules.vtkRenderingUI import vtkGenericRenderWindowInteractor
+
+
+@contextlib.contextmanager
+def _no_base_plotter_init():
+    """PySide continues the cooperative ``__init__`` chain past QWidget into BasePlotter
+    (with no arguments): make that call a no-op while the widget is built."""
+    original = BasePlotter.__init__
+    BasePlotter.__init__ = lambda self, *a, **k: None
+    try:
+        yield
+    finally:
+        BasePlotter.__init__ = original
+
+
+class _NoEvents:
+    """Stands in for the VTK interactor after close (Qt may still send leave or key events)."""
+
+    def __getattr__(self, _name):
+        return lambda *a, **k: None
+
+
+class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
+    """pyvista plotter rendering off screen and painted as an image in this widget.
+
+    Keyword arguments go to ``BasePlotter`` (``shape``, ``splitting_position``, ...);
+    ``multi_samples``: the render window's multisampling (0, none, is what software
+    OpenGL can afford).  ``renders`` counts VTK renders, ``paints`` the widget's paints.
+    """
+
+    def __init__(self, parent=None, multi_samples: int = 0, **kwargs):
+        # Not QVTKRenderWindowInteractor.__init__: it makes a native window for VTK to draw in.
+        with _no_base_plotter_init():
+            QWidget.__init__(self, parent)
+        # The state QVTKRenderWindowInteractor's mouse and key handlers keep (name-mangled).
+        self._ActiveButton = Qt.MouseButton.NoButton
+        self._QVTKRenderWindowInteractor__saveX = 0
+        self._QVTKRenderWindowInteractor__saveY = 0
+        self._QVTKRenderWindowInteractor__saveModifiers = Qt.KeyboardModifier.NoModifier
+        self._QVTKRenderWindowInteractor__saveButtons = Qt.MouseButton.NoButton
+        self._QVTKRenderWindowInteractor__wheelDelta = 0
+        self._RenderWindow = vtkRenderWindow()
+        self._RenderWindow.SetOffScreenRendering(1)
+        self._RenderWindow.SetMultiSamples(int(multi_samples))
+        self._Iren = vtkGenericRenderWindowInteractor()
+        self._Iren.SetRenderWindow(self._RenderWindow)
+        self.setAttribute(Qt.WidgetAttribute.WA_OpaquePaintEvent)
+        self.setMouseTracking(True)
+        self.setFocusPolicy(Qt.FocusPolicy.WheelFocus)
+        self.setSizePolicy(QSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding))
+        self._Timer = QTimer(self)
+        self._Timer.timeout.connect(self.TimerEvent)
+        self._Iren.AddObserver("CreateTimerEvent", self.CreateTimer)
+        self._Iren.AddObserver("DestroyTimerEvent", self.DestroyTimer)
+        self._RenderWindow.AddObserver("CursorChangedEvent", self.CursorChangedEvent)
+
+        BasePlotter.__init__(self, **kwargs)
+        self.interactor = self
+        self.ren_win = self._RenderWindow
+        for renderer in self.renderers:
+            self.ren_win.AddRenderer(renderer)
+        self._off_screen = False
+        self.iren = RenderWindowInteractor(self, interactor=self._Iren)
+        self.iren.interactor.RemoveObservers("MouseMoveEvent")
+        self.iren.initialize()
+        self.enable_trackball_style()
+        self._first_time = False  # BasePlotter renders only once this is False
+        self._pixels = vtkUnsignedCharArray()
+        self._image: QImage | None = None
+        self._rendered = False  # rendered since the last paint (e.g. by the interactor): paint shows that
+        self._painting = False
+        self.renders = self.paints = 0
+        self._RenderWindow.AddObserver("EndEvent", self._on_rendered)
+        self._resize_render_window()
+
+    # -- pyvista -------------------------------------------------------------------------
+    def __getattr__(self, name):
+        # QVTKRenderWindowInteractor forwards unknown names to VTK's interactor; pyvista's lazy
+        # plugin lookups come last.
+        iren = self.__dict__.get("_Iren")
+        if iren is not None and not isinstance(iren, _NoEvents) and hasattr(iren, name):
+            return getattr(iren, name)
+        return BasePlotter.__getattr__(self, name)
+
+    def _check_has_ren_win(self) -> None:
+        # Other OpenGL contexts (another plotter, a video export) may be current on this thread.
+        if self.render_window is not None:
+            self.render_window.MakeCurrent()
+        BasePlotter._check_has_ren_win(self)
+
+    def render(self) -> None:
+        """Render now and show the result at the next paint (no-op once closed)."""
+        if getattr(self, "_closed", False):
+            return
+        BasePlotter.render(self)
+
+    def _on_rendered(self, *_args) -> None:
+        self.renders += 1
+        self._rendered = True
+        if not self._painting:
+            QWidget.update(self)
+
+    # -- Qt --------------------------------------------------------------------------------
+    def paintEngine(self):  # noqa: N802 (Qt name): QVTKRenderWindowInteractor returns None (paint on screen)
+        return QWidget.paintEngine(self)
+
+    def _resize_render_window(self) -> None:
+        ratio = self.devicePixelRatioF() or 1.0
+        w, h = max(1, int(round(ratio * self.width()))), max(1, int(round(ratio * self.height())))
+        self._RenderWindow.SetDPI(int(round(72 * ratio)))
+        self._RenderWindow.SetSize(w, h)
+        self._Iren.SetSize(w, h)
+
+    def resizeEvent(self, _event) -> None:  # noqa: N802 (Qt name)
+        if getattr(self, "_closed", False):
+            return
+        self._resize_render_window()
+        self._Iren.ConfigureEvent()
+        self._rendered = False
+        QWidget.update(self)
+
+    def _read_image(self) -> None:
+        w, h = self._RenderWindow.GetSize()
+        self._RenderWindow.GetRGBACharPixelData(0, 0, w - 1, h - 1, 0, self._pixels, 0)
+        rgba = vtk_to_numpy(self._pixels).reshape(h, w, 4)
+        self._rows = np.ascontiguousarray(rgba[::-1])  # VTK's first row is the bottom one
+        image = QImage(self._rows.data, w, h, 4 * w, QImage.Format.Format_RGBX8888)
+        image.setDevicePixelRatio(w / max(self.width(), 1))
+        self._image = image
+
+    def paintEvent(self, _event) -> None:  # noqa: N802 (Qt name)
+        """Render the scene (unless it was rendered since the last paint) and draw the frame."""
+        if getattr(self, "_closed", False):
+            return
+        self._painting = True
+        try:
+            if not self._rendered:
+                self._RenderWindow.Render()
+            self._read_image()
+            self._rendered = False
+        finally:
+            self._painting = False
+        self.paints += 1
+        painter = QPainter(self)
+        painter.drawImage(QPoint(0, 0), self._image)
+        painter.end()
+
+    def Render(self) -> None:  # noqa: N802 (QVTKRenderWindowInteractor's name): a repaint renders
+        QWidget.update(self)
+
+    def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
+        if not getattr(self, "_closed", False):
+            self.Finalize()
+        event.accept()
+
+    def close(self) -> None:
+        """Release VTK's render window and context, then the widget (returns None, like QtInteractor.close)."""
+        if getattr(self, "_closed", True):
+            return
+        BasePlotter.close(self)
+        QWidget.close(self)
+        self._Iren = _NoEvents()
+        self._RenderWindow = None
