@@ -43,7 +43,7 @@ def check_recording(rec, n_expected=None):
         assert key in rec.metadata, key
     if rec.audio is not None:
         # float audio (MVIEW) may exceed [-1, 1]; only shape, type and rate are promised
-        assert rec.audio.samples.ndim == 1 and rec.audio.samples.dtype == np.float64 and rec.audio.rate > 0
+        assert rec.audio.samples.ndim == 1 and rec.audio.samples.dtype == np.float32 and rec.audio.rate > 0
 
 
 def test_reader_returns_truth_in_metres(example):

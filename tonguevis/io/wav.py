@@ -1,6 +1,6 @@
 """WAV audio in and out, through :mod:`scipy.io.wavfile`.
 
-Reading gives mono float64 samples nominally in [-1, 1]: integer PCM of any
+Reading gives mono samples (float32 in the Audio) nominally in [-1, 1]: integer PCM of any
 width (8-bit unsigned, 16 to 64-bit signed, WAVE_FORMAT_EXTENSIBLE too) is
 divided by its container's full scale, IEEE float is taken as is; several
 channels are averaged.  A file cut short keeps the samples present, with a
