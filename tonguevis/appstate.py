@@ -49,8 +49,9 @@ log = logging.getLogger("tonguevis")
 
 MIN_SPEED = 0.25
 MAX_SPEED = 1.0
-#: Surface colourings the 3D view offers ("contact": distance to the palate).
-COLOR_MODES = ("displacement", "energy", "contact", "plain")
+#: Surface colourings the 3D view offers ("contact": distance to the palate; "difference": distance
+#: to the compared recording's tongue, while one is compared).
+COLOR_MODES = ("displacement", "energy", "contact", "plain", "difference")
 #: Frames of reference of the 3D views (the same as tonguevis.sim.reference.REFERENCE_FRAMES).
 REFERENCE_FRAMES = ("head", "jaw")
 #: Slots of the open recordings: the primary one the views show, a second one to compare with.

@@ -136,3 +136,28 @@ def test_export_video_command(tmp_path):
                   "--modes", "20", "--size", "320x240", "--quiet")
     assert result.returncode == 0, result.stderr[-2000:]
     assert sorted(probe_streams(out)) == ["audio", "video"]
+
+
+def test_view_compare_screenshot_command(tmp_path):
+    """`view A --compare B --screenshot`: both simulated, B drawn in its own view beside A's."""
+    other = DEMO.with_name("spk2_ta.tsv")
+    if not (DEMO.exists() and other.exists() and _default_model_available()):
+        pytest.skip("needs the demo corpus and the shipped mesh")
+    import matplotlib.colors as mcolors
+    import matplotlib.image as mimage
+
+    from tonguevis.gui.compare import _background
+
+    out = tmp_path / "compare.png"
+    result = _run("view", str(DEMO), "--compare", str(other), "--screenshot", str(out), "--frame", "620",
+                  "--modes", "20", "--color", "difference")
+    assert result.returncode == 0, result.stderr[-2000:]
+    rgb = mimage.imread(out)[..., :3].astype(np.float64)
+    assert _screenshot_problems(rgb) == []
+    # B's view (right of A's four) is painted: tongue colours, not only its flat background
+    height, width = rgb.shape[:2]
+    b_view = rgb[int(0.2 * height):int(0.7 * height), int(0.42 * width):int(0.66 * width)]
+    backdrop = np.linalg.norm(b_view - np.array(mcolors.to_rgb(_background())), axis=-1) < 0.03
+    assert 0.1 < 1 - backdrop.mean() < 0.95, f"B's view is {1 - backdrop.mean():.0%} tongue"
+    bad = _run("view", str(DEMO), "--compare", str(tmp_path / "missing.tsv"), "--screenshot", str(out))
+    assert bad.returncode == 2 and "missing.tsv" in bad.stderr and "Traceback" not in bad.stderr

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 #: Surface colourings (tonguevis.appstate.COLOR_MODES, spelled out so the parser needs no import).
-COLOR_CHOICES = ("displacement", "energy", "contact", "plain")
+COLOR_CHOICES = ("displacement", "energy", "contact", "plain", "difference")
 
 
 def add_arguments(parser) -> None:
@@ -28,6 +28,17 @@ def add_arguments(parser) -> None:
                              "palate fixed) or jaw (the jaw's motion removed)")
     parser.add_argument("--color", choices=COLOR_CHOICES, help="surface colouring (default: displacement magnitude; "
                         "contact = distance to the palate)")
+    parser.add_argument("--compare", type=Path, metavar="B",
+                        help="a second recording shown with the first: two speakers, two trials, before and after")
+    parser.add_argument("--compare-layout", choices=("side", "ghost"), default="side",
+                        help="side: B in its own view beside A's, the same camera (default); ghost: B translucent "
+                             "inside A's views")
+    parser.add_argument("--compare-time", choices=("production", "absolute"), default="production",
+                        help="production: each production of B laid over the same production of A by normalised "
+                             "time (default); absolute: the same time on both clocks")
+    parser.add_argument("--compare-linear", action="store_true",
+                        help="simulate B without modal warping (compare a recording with itself: --compare A)")
+    parser.add_argument("--compare-sensors", metavar="MAP", help="sensor map of B (as --sensors)")
     add_rest_argument(parser)
     add_companion_arguments(parser)
 
@@ -45,4 +56,11 @@ def run(args) -> int:
 
     return run_view(args.file, args.sensors, args.mesh, args.modes, args.screenshot, args.frame, rest=rest,
                     audio=args.audio, labels=args.label_file, palate=palate, reference=args.reference,
-                    color=args.color)
+                    color=args.color, compare=_compare_options(args))
+
+
+def _compare_options(args) -> dict | None:
+    if args.compare is None:
+        return None
+    return {"path": args.compare, "sensor_map": args.compare_sensors, "layout": args.compare_layout,
+            "time_mode": args.compare_time, "warping": False if args.compare_linear else None}

@@ -86,14 +86,22 @@ def opening_problem(window, file):
 
 def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None,
              rest=None, audio=None, labels=None, palate=None, reference: str | None = None,
-             color: str | None = None) -> int:
+             color: str | None = None, compare: dict | None = None) -> int:
     """``tonguevis view``: run the app; with ``screenshot``, save the window at ``frame``, print the
     rest line and exit.  ``rest``: (start_s, end_s) of the rest interval, None to find it; ``audio``,
     ``labels``: a WAV and a TextGrid, None for those beside the file; ``palate``: simulate against it
-    (None: no contact); ``reference``: "head" or "jaw" frame; ``color``: the surface colouring."""
+    (None: no contact); ``reference``: "head" or "jaw" frame; ``color``: the surface colouring;
+    ``compare``: the keyword arguments of :meth:`MainWindow.open_compare` (``path`` ...) for a
+    second recording shown with the first (a screenshot waits for both simulations)."""
     app = application()
     window = create_window(file, sensors, mesh, modes, rest=rest, audio=audio, labels=labels, palate=palate,
                            frame=reference)
+    if compare is not None and window.session is not None:
+        if not window.open_compare(**compare) and screenshot is not None:
+            window.close()
+            from tonguevis.errors import TonguevisError
+
+            raise TonguevisError(window.state.status)  # "<title>: <message naming the file>"
     if color is not None:
         window.state.set_color(color)
     if screenshot is None:
@@ -126,6 +134,20 @@ def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=No
         problem = opening_problem(window, file)
         window.close()
         raise problem  # the CLI prints it as one line and exits with status 2
-    window.simulation_finished.connect(shoot)
+    if compare is None:
+        window.simulation_finished.connect(shoot)
+    else:  # both recordings simulated (or one failed) before the picture
+        outcomes: dict[str, bool] = {}
+
+        def finished(role: str, ok: bool) -> None:
+            outcomes[role] = ok
+            if len(outcomes) == 2 or not ok:
+                if not outcomes.get("primary", True) or not outcomes.get("compare", True):
+                    shoot(False)
+                elif len(outcomes) == 2:
+                    shoot(True)
+
+        window.simulation_finished.connect(lambda ok: finished("primary", ok))
+        window.compare_finished.connect(lambda ok: finished("compare", ok))
     code = app.exec()
     return code if code else status["code"]

@@ -25,6 +25,8 @@ class MenusMixin:
         self.recent_menu = file_menu.addMenu("Open &recent")
         self._fill_recent()
         self._action(file_menu, "Open &demo", self.open_demo)
+        self._action(file_menu, "&Compare with another recording…", self.ask_compare)
+        self._action(file_menu, "S&top comparing", self.stop_comparing)
         file_menu.addSeparator()
         self._action(file_menu, "Load &palate…", self.ask_load_palate)
         self._action(file_menu, "&Fit palate from traces…", self.ask_fit_palate)

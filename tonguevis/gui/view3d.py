@@ -15,7 +15,8 @@ from tonguevis.gui.scene import SPEAKER_PALATE_STYLE, TongueScene
 
 log = logging.getLogger("tonguevis")
 COLOUR_LABELS = {"displacement": "displacement magnitude", "energy": "elastic energy density",
-                 "contact": "distance to palate", "plain": "plain"}
+                 "contact": "distance to palate", "plain": "plain",
+                 "difference": "distance to B (compared recording)"}
 REFERENCE_LABELS = {"head": "head frame (jaw moving, palate fixed)", "jaw": "jaw frame (jaw's motion removed)"}
 
 
@@ -174,6 +175,9 @@ class View3D(QWidget):
         self.reset.clicked.connect(self.reset_camera)
         self.cursor_time = state.time
         self.drawn = None  # the FrameDrawing shown (tests read it)
+        #: name -> hook(i, drawn) called with each new frame before it is painted (the compare
+        #: view colours A's surface by the distance to B there).
+        self.frame_hooks: dict = {}
         state.subscribe("time", self._on_time)
         state.subscribe("color", self._on_colour)
         state.subscribe("reference", self._on_reference)
@@ -214,6 +218,8 @@ class View3D(QWidget):
                           context_offsets=drawn.context_offsets)
         self.scene.set_view_labels(f" · {drawn.caption.split(':')[0]}")
         self.described.emit(contact_line(self.session, i, reference))
+        for hook in list(self.frame_hooks.values()):
+            hook(i, drawn)
         # One render per frame: the widget's paint renders the scene (pyvistaqt's paintGL
         # always renders), so asking for a repaint instead of render() avoids a second one.
         self.plotter.interactor.update()

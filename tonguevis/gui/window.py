@@ -21,6 +21,7 @@ from PySide6.QtWidgets import QFileDialog, QLabel, QMainWindow, QSplitter, QTabW
 from tonguevis.appstate import AppState
 from tonguevis.errors import TonguevisError
 from tonguevis.gui.audio_panel import AudioPlot
+from tonguevis.gui.compare_actions import CompareMixin
 from tonguevis.gui.dialogs import SensorMapDialog, error_box
 from tonguevis.gui.menus import MenusMixin
 from tonguevis.gui.modal_tab import ModalTab
@@ -51,11 +52,12 @@ def register_tab_factory(title: str, factory) -> None:
     TAB_FACTORIES.append((title, factory))
 
 
-class MainWindow(MenusMixin, RestMixin, PalateMixin, QMainWindow):
+class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
     """The tonguevis window.  ``modes``, ``mesh_path`` and ``palate`` (None: no contact; "generic";
     a speaker's PalateSurface or palate file) configure the simulation."""
 
     simulation_finished = Signal(bool)  # True on success (scripts and tests wait for it)
+    compare_finished = Signal(bool)  # the compared recording's simulation: True on success
 
     def __init__(self, state: AppState | None = None, settings: QSettings | None = None, modes: int = 100,
                  mesh_path: str | os.PathLike | None = None, warping: bool = True, palate=None):
@@ -121,6 +123,7 @@ class MainWindow(MenusMixin, RestMixin, PalateMixin, QMainWindow):
         self.setCentralWidget(central)
         for view in (self.view3d, self.sensor_panel, self.modal_tab, self.palate_panel):
             self.state.follow_session(view.set_session)
+        self._build_compare_panel(top)  # after the views: it draws into A's scene once A's view has built it
 
     def register_tab(self, title: str, widget: QWidget) -> int:
         """Append a tab beside Sensors and Modal q(t) (it subscribes to ``state`` itself); returns its index."""
@@ -383,6 +386,9 @@ class MainWindow(MenusMixin, RestMixin, PalateMixin, QMainWindow):
     def closeEvent(self, event) -> None:
         self.playback.shutdown()
         self._cancel_worker()
+        if self.compare_job is not None:
+            self.compare_job.stop()
+        self.compare_panel.close_view()
         if self.export_job is not None:
             self.export_job.stop()
         self.view3d.close_view()

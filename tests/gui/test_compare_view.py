@@ -1,0 +1,150 @@
+"""Two recordings in the app: B beside A (one camera) or as a ghost in A's views, one transport,
+productions lined up by normalised time, the distance between the tongues as a colouring."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("PySide6")
+pytest.importorskip("pyvistaqt")
+
+from tests.gui.conftest import DEMO, crop, demo_session, show_and_simulate  # noqa: E402
+
+pytestmark = [pytest.mark.gui, pytest.mark.timeout(180)]
+
+
+def other_session(path_name: str = "spk2_ta.tsv", start: float = 3.0, end: float = 8.0):
+    """Another demo speaker's /ta/ (a different rate), cut to its first train."""
+    from tonguevis.gui.session import load_session, make_session
+
+    path = DEMO.with_name(path_name)
+    if not path.exists():
+        pytest.skip(f"demo corpus not built: {path}")
+    return make_session(crop(load_session(path).recording, start, end), path)
+
+
+def compare(qtbot, window, session, **options):
+    with qtbot.waitSignal(window.compare_finished, timeout=60000) as blocker:
+        window.compare_session(session, **options)
+    assert blocker.args == [True], window.state.status
+    qtbot.waitUntil(lambda: window.compare_panel.comparison is not None, timeout=5000)
+    return window.compare_panel
+
+
+@pytest.fixture
+def pair(qtbot, window):
+    a = show_and_simulate(qtbot, window, demo_session())
+    b = other_session()
+    panel = compare(qtbot, window, b)
+    return window, a, b, panel
+
+
+def test_one_transport_drives_both_and_productions_line_up(qtbot, pair):
+    from tonguevis.analysis.compare import match_frames
+
+    window, a, b, panel = pair
+    assert panel.isVisible() and panel.comparison.mode == "production"
+    assert len(a.productions) >= 2 and len(b.productions) >= 2
+    reference = match_frames(a.motion.times, b.motion.times, panel.comparison.productions_a,
+                             panel.comparison.productions_b)
+    for k in (0, len(reference) // 3, len(reference) - 1):  # moments inside the paired productions
+        before = panel.renders
+        window.state.set_time(float(a.motion.times[reference.frames_a[k]]))
+        assert panel.frame_b == reference.frames_b[k] and panel.renders == before + 1
+        assert window.view3d.frame == reference.frames_a[k]  # A moved with the same transport
+    # the middle of A's second production shows the middle of B's second one, whatever the rates
+    (sa, ea), (sb, eb) = a.productions[1], b.productions[1]
+    window.state.set_time(0.5 * (sa + ea))
+    assert abs(b.motion.times[panel.frame_b] - 0.5 * (sb + eb)) <= 0.011
+    assert "production 2, 50 % through" in panel.caption.text()
+
+
+def test_absolute_time_shows_b_at_the_same_moment(qtbot, pair):
+    window, a, b, panel = pair
+    panel.set_time_mode("absolute")
+    assert panel.comparison.mode == "absolute"
+    t = 5.0
+    window.state.set_time(t)
+    expected = int(np.argmin(np.abs(b.motion.times - a.motion.times[a.frames.frame_at(t)])))
+    assert panel.frame_b == expected
+
+
+def test_side_by_side_views_share_one_camera(qtbot, pair):
+    window, _a, _b, panel = pair
+    camera_a = window.view3d.plotter.renderers[0].GetActiveCamera()
+    assert panel.plotter.renderer.GetActiveCamera() is camera_a  # turning either turns both
+    assert panel.plotter.interactor.isVisible()
+    before = panel.plotter.renderer.GetActiveCamera().GetPosition()
+    camera_a.Azimuth(30)
+    assert panel.plotter.renderer.GetActiveCamera().GetPosition() != before
+
+
+def test_ghost_draws_b_translucent_in_each_of_a_views(qtbot, pair):
+    window, _a, b, panel = pair
+    panel.set_layout("ghost")
+    renderers = window.view3d.plotter.renderers
+    assert len(panel._ghosts) == len(renderers) == 4
+    for renderer, ghost in zip(renderers, panel._ghosts):
+        assert renderer.HasViewProp(ghost) and ghost.GetVisibility() and ghost.prop.opacity < 0.5
+    assert not panel.plotter.interactor.isVisible()
+    window.state.set_time(6.0)
+    j = panel.frame_b
+    np.testing.assert_allclose(panel._surface.points, b.frames.points[j] + b.motion.jaw_offset[j].astype(np.float32),
+                               atol=1e-7)  # B's head-frame shape at its matched frame
+    panel.set_layout("side")
+    assert not any(g.GetVisibility() for g in panel._ghosts) and panel.plotter.interactor.isVisible()
+
+
+def test_difference_colouring_is_the_distance_between_the_tongues(qtbot, pair):
+    window, a, b, panel = pair
+    window.state.set_color("difference")
+    window.state.set_time(6.1)
+    i, j = window.view3d.frame, panel.frame_b
+    shown = np.asarray(window.view3d.scene.surface.point_data["value"])
+    nodes = a.frames.nodes  # the drawn nodes (surface and sensors)
+    reference = 1e3 * panel.comparison.difference(i, j, nodes)  # float64, from q
+    np.testing.assert_allclose(shown[nodes], reference, atol=2e-3)  # float32 drawing data, mm
+    assert shown[nodes].max() > 0.05  # two speakers: the tongues differ
+    np.testing.assert_allclose(np.asarray(panel._surface.point_data["difference"]), shown, atol=1e-6)
+    assert window.view3d.scene.mode == "difference"
+    assert window.view3d.scene.scalar_bar.GetTitle().startswith("distance to")
+
+
+def test_the_energy_tab_gets_both_recordings(qtbot, window):
+    from tonguevis.gui.tabs import add_feature_tabs
+
+    add_feature_tabs(window)
+    show_and_simulate(qtbot, window, demo_session())
+    compare(qtbot, window, other_session())
+    names = set(window.state.motions)
+    assert any("spk1_ta" in n for n in names) and any("spk2_ta" in n for n in names), names
+
+
+def test_stop_comparing_hides_the_panel_and_the_difference_colouring(qtbot, pair):
+    window, _a, _b, panel = pair
+    window.state.set_color("difference")
+    window.stop_comparing()
+    assert not panel.isVisible() and panel.comparison is None
+    assert "difference" not in window.view3d.frame_hooks and window.state.color == "displacement"
+
+
+def test_a_recording_compared_with_itself_under_the_linear_model(qtbot, window):
+    a = show_and_simulate(qtbot, window, demo_session())
+    panel = compare(qtbot, window, demo_session(), warping=False)
+    b = window.state.session_of("compare")
+    assert a.motion.warping and not b.motion.warping
+    window.state.set_time(6.1)
+    assert panel.frame_b == window.view3d.frame  # the same recording: the same frame
+    difference = panel.comparison.difference(window.view3d.frame, panel.frame_b)
+    assert 0 < difference.max() < 5e-3  # warping changes the shape a little, not centimetres
+
+
+def test_a_bad_file_to_compare_is_a_dialog_and_a_is_kept(qtbot, window, tmp_path):
+    a = show_and_simulate(qtbot, window, demo_session())
+    bad = tmp_path / "broken.tsv"
+    bad.write_text("not an EMA file\n1\t2\n")
+    assert not window.open_compare(bad)
+    assert "broken.tsv" in window.state.status and window.last_dialog is not None
+    assert window.state.session_of("compare") is None and window.session is a
+    assert not window.compare_panel.isVisible()

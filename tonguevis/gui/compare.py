@@ -1,0 +1,355 @@
+"""Two recordings compared in the app: the second one (B) beside the first (A) or inside its views.
+
+The second recording is a session in the app model's ``"compare"`` slot
+(:meth:`AppState.set_session`), simulated like the first.  The comparison
+itself is Qt-free (:class:`tonguevis.analysis.compare.Comparison`): which
+moment of B goes with each moment of A (productions lined up by normalised
+time, or absolute time) and how far apart the two tongues are.  Here it is
+only shown:
+
+- *side by side*: :class:`ComparePanel` draws B's tongue in its own view beside
+  A's views, with A's main camera (one camera object: turning either view turns
+  both);
+- *ghost*: B's surface drawn translucent inside each of A's four views;
+- *difference*: with the colouring "distance to B", A's surface (and B's) is
+  coloured by the per-node distance between the two shapes at matched time, in
+  the model frame (both recordings aligned onto the same tongue).
+
+One transport drives both: the panel follows the app model's time and shows B
+at the matched moment.
+"""
+
+from __future__ import annotations
+
+import logging
+from types import SimpleNamespace
+
+import numpy as np
+from PySide6.QtCore import QTimer
+from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
+
+from tonguevis.errors import TonguevisError
+
+log = logging.getLogger("tonguevis")
+
+#: How B is shown: beside A (its own view, A's camera) or as a translucent ghost in A's views.
+LAYOUTS = {"side": "side by side", "ghost": "ghost in A's views"}
+#: How B's time follows A's (:class:`~tonguevis.analysis.compare.Comparison` modes).
+TIME_MODES = {"production": "per production", "absolute": "absolute time"}
+GHOST_COLOUR = "#7fd1ff"
+GHOST_PANEL_WIDTH = 460  # px: the panel's controls, when B is drawn inside A's views
+GHOST_OPACITY = 0.35
+B_COLOUR = "#f2c57c"
+#: Colour range of the distance between the tongues: at least this (mm), else the 98th percentile
+#: of a sample of matched frames.
+DIFFERENCE_MIN_RANGE_MM = 1.0
+DIFFERENCE_SAMPLE_FRAMES = 200
+
+
+def spans(productions) -> list:
+    """Productions as objects with ``start``/``end`` (from (start, end) pairs or such objects)."""
+    out = []
+    for p in productions or []:
+        if hasattr(p, "start"):
+            out.append(p)
+        else:
+            out.append(SimpleNamespace(start=float(p[0]), end=float(p[1])))
+    return out
+
+
+def make_comparison(session_a, session_b, mode: str):
+    """The :class:`Comparison` of two simulated sessions (production mode falls back to absolute
+    time, with the reason, when a recording has no productions).  Returns (comparison, note)."""
+    from tonguevis.analysis.compare import Comparison
+
+    if mode == "production":
+        try:
+            return Comparison(session_a.motion, session_b.motion, "production", spans(session_a.productions),
+                              spans(session_b.productions)), ""
+        except TonguevisError as exc:
+            return Comparison(session_a.motion, session_b.motion, "absolute"), f"{exc}: on absolute time"
+    return Comparison(session_a.motion, session_b.motion, mode), ""
+
+
+def frame_difference_mm(frames_a, i: int, frames_b, j: int) -> np.ndarray:
+    """(n,) float32 distance (mm) between node k of A's frame ``i`` and of B's frame ``j``, in the model
+    frame, from the drawing data (the nodes not drawn sit at rest in both: 0)."""
+    return 1e3 * np.linalg.norm(frames_a.points[i] - frames_b.points[j], axis=1)
+
+
+def difference_range(comparison, frames_a, frames_b) -> tuple[float, float]:
+    """(0, high) mm: the 98th percentile of the distance over a sample of matched frames."""
+    n = frames_a.n_frames
+    picks = np.unique(np.linspace(0, n - 1, min(n, DIFFERENCE_SAMPLE_FRAMES)).astype(int))
+    values = [frame_difference_mm(frames_a, int(i), frames_b, comparison.frame_b(frames_a.times[int(i)]))
+              for i in picks]
+    high = float(np.percentile(np.concatenate(values), 98)) if values else 0.0
+    return 0.0, max(DIFFERENCE_MIN_RANGE_MM, high)
+
+
+class ComparePanel(QWidget):
+    """The second recording's controls and its view (side by side), following the app model.
+
+    ``view_a``: A's :class:`~tonguevis.gui.view3d.View3D` (its main camera is shared, its
+    views get the ghost and the difference colouring).
+    """
+
+    def __init__(self, state, view_a, parent=None):
+        super().__init__(parent)
+        from tonguevis.gui.view3d import make_plotter
+
+        self.state, self.view_a = state, view_a
+        self.layout_mode, self.time_mode = "side", "production"
+        self.comparison = None
+        self.note = ""
+        self.frame_b = -1
+        self.renders = 0
+        self._surface = None  # B's drawn surface (PolyData), shared by the panel's view and the ghosts
+        self._ghosts: list = []
+        self._clim: tuple[float, float] | None = None
+        self._camera_seen = None
+        self.title = QLabel("")
+        self.layout_box = QComboBox()
+        for key, text in LAYOUTS.items():
+            self.layout_box.addItem(text, key)
+        self.time_box = QComboBox()
+        for key, text in TIME_MODES.items():
+            self.time_box.addItem(text, key)
+        self.time_box.setToolTip("Per production: each production of B is laid over the same production of A by\n"
+                                 "normalised time, so syllables line up whatever the speakers' rates.")
+        self.close_button = QPushButton("Stop comparing")
+        self.caption = QLabel("")
+        self.caption.setWordWrap(True)
+        bar = QHBoxLayout()
+        bar.addWidget(self.title, 1)
+        bar.addWidget(self.layout_box)
+        bar.addWidget(self.time_box)
+        bar.addWidget(self.close_button)
+        self.plotter = make_plotter(self, multi_samples=0)
+        self.plotter.set_background(_background())
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addLayout(bar)
+        layout.addWidget(self.caption)
+        layout.addWidget(self.plotter.interactor, 1)
+        layout.addStretch(0)  # takes the room when the view is hidden (ghost): the controls stay on top
+        self.layout_box.currentIndexChanged.connect(lambda _i: self.set_layout(self.layout_box.currentData()))
+        self.time_box.currentIndexChanged.connect(lambda _i: self.set_time_mode(self.time_box.currentData()))
+        self.close_button.clicked.connect(lambda: state.set_session(None, "compare", self))
+        for name in ("time", "reference", "color"):
+            state.subscribe(name, lambda _event: self.show_time(self.state.time))
+        state.subscribe("session", self._on_sessions)
+        state.subscribe("motion", self._on_sessions)
+        self.setVisible(False)
+
+    # -- what is compared --------------------------------------------------------------------
+    @property
+    def session_a(self):
+        return self.state.session_of("primary")
+
+    @property
+    def session_b(self):
+        return self.state.session_of("compare")
+
+    def _on_sessions(self, _event) -> None:
+        self.rebuild()
+
+    def rebuild(self) -> None:
+        """Compare the app model's two sessions afresh (or hide, with no second one)."""
+        a, b = self.session_a, self.session_b
+        self.setVisible(b is not None)
+        self.comparison, self.note, self.frame_b = None, "", -1
+        self._remove_ghosts()
+        if b is None:
+            self._set_difference_colouring(False)
+            return
+        self.title.setText(f"<b>B</b>: {b.name}  (A: {a.name if a is not None else '—'})")
+        if a is None or a.frames is None or b.frames is None:
+            self.caption.setText("simulating…")
+            return
+        self.comparison, self.note = make_comparison(a, b, self.time_mode)
+        self._build_surface(b)
+        self._clim = (difference_range(self.comparison, a.frames, b.frames) if self.comparison.same_mesh else None)
+        self._set_difference_colouring(self._clim is not None)
+        self._share_camera()
+        self.set_layout(self.layout_mode)
+        self.show_time(self.state.time)
+
+    def _build_surface(self, session) -> None:
+        import pyvista as pv
+
+        from tonguevis.gui.scene import SENSOR_COLOUR, VertexNormals, faces_to_vtk
+        from tonguevis.gui.view3d import surface_faces
+
+        frames = session.frames
+        faces = surface_faces(frames.motion.model)
+        points = np.asarray(frames.points[0], dtype=np.float32)
+        self.plotter.clear()
+        self._normals = VertexNormals(faces, len(points))
+        self._surface = pv.PolyData(points.copy(), faces_to_vtk(faces))
+        self._surface.point_data["difference"] = np.zeros(len(points), dtype=np.float32)
+        self._surface.point_data["Normals"] = self._normals(points)
+        self._surface.point_data.active_normals_name = "Normals"
+        self._b_actor = self.plotter.add_mesh(self._surface, color=B_COLOUR, name="tongue_b", reset_camera=False,
+                                              show_scalar_bar=False, scalars="difference", cmap="plasma",
+                                              specular=0.3, specular_power=15)
+        self._b_actor.mapper.scalar_visibility = False
+        n_sensors = max(len(frames.motion.sensor_names), 1)
+        self._sensors = pv.PolyData(np.zeros((n_sensors, 3), dtype=np.float32))
+        self.plotter.add_mesh(self._sensors, color=SENSOR_COLOUR, point_size=12, render_points_as_spheres=True,
+                              name="sensors_b", reset_camera=False)
+        self.plotter.add_text("B", position="upper_right", font_size=12, name="label_b")
+
+    def _share_camera(self) -> None:
+        """The panel looks through A's main camera (one vtkCamera): turning either view turns both."""
+        camera = self.view_a.plotter.renderers[0].GetActiveCamera()
+        self.plotter.renderer.SetActiveCamera(camera)
+        if getattr(self, "_camera_observer", None) is None:
+            self._camera_observer = camera.AddObserver("ModifiedEvent", self._camera_moved)
+
+    def _camera_moved(self, camera, _event) -> None:
+        seen = (camera.GetPosition(), camera.GetFocalPoint(), camera.GetViewUp(), camera.GetParallelScale(),
+                camera.GetViewAngle())
+        if seen != self._camera_seen:  # a render's own clipping-range update is not a move
+            self._camera_seen = seen
+            QTimer.singleShot(0, self._repaint_both)
+
+    def _repaint_both(self) -> None:
+        self.plotter.interactor.update()
+        self.view_a.plotter.interactor.update()
+
+    # -- settings -----------------------------------------------------------------------------
+    def set_layout(self, layout: str) -> None:
+        """"side" (B in the panel's view) or "ghost" (B translucent in A's four views)."""
+        if layout not in LAYOUTS:
+            raise ValueError(f"compare layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
+        self.layout_mode = layout
+        index = self.layout_box.findData(layout)
+        if index != self.layout_box.currentIndex():
+            self.layout_box.setCurrentIndex(index)
+        self.plotter.interactor.setVisible(layout == "side")
+        # The ghost needs no view of its own: the panel keeps its controls only.
+        self.setMaximumWidth(16777215 if layout == "side" else GHOST_PANEL_WIDTH)
+        if layout == "ghost" and self._surface is not None and not self._ghosts:
+            self._add_ghosts()
+        for actor in self._ghosts:
+            actor.SetVisibility(layout == "ghost")
+        self.view_a.plotter.interactor.update()
+
+    def set_time_mode(self, mode: str) -> None:
+        """"production" or "absolute" (see :class:`~tonguevis.analysis.compare.Comparison`)."""
+        if mode not in TIME_MODES:
+            raise ValueError(f"compare time must be one of {', '.join(TIME_MODES)}, got {mode!r}")
+        self.time_mode = mode
+        index = self.time_box.findData(mode)
+        if index != self.time_box.currentIndex():
+            self.time_box.setCurrentIndex(index)
+        self.rebuild()
+
+    def _add_ghosts(self) -> None:
+        plotter = self.view_a.plotter
+        for index in range(len(plotter.renderers)):
+            plotter.subplot(*_subplot_index(plotter, index))
+            actor = plotter.add_mesh(self._surface, color=GHOST_COLOUR, opacity=GHOST_OPACITY, name=f"ghost_b{index}",
+                                     reset_camera=False, show_scalar_bar=False, scalars=None)
+            actor.mapper.scalar_visibility = False
+            self._ghosts.append(actor)
+        plotter.subplot(*_subplot_index(plotter, 0))
+
+    def _remove_ghosts(self) -> None:
+        plotter = self.view_a.plotter
+        for index, actor in enumerate(self._ghosts):
+            try:
+                plotter.renderers[index].RemoveActor(actor)
+            except Exception:  # the view was rebuilt meanwhile
+                pass
+        self._ghosts = []
+
+    def _set_difference_colouring(self, available: bool) -> None:
+        """Offer the colouring "distance to B" in A's views while a comparison with one mesh is shown."""
+        scene = self.view_a.scene
+        if available:
+            # The scene's colour ranges and scalar-bar titles are per colouring; this one lives as
+            # long as the comparison.
+            scene._clim["difference"] = self._clim
+            scene._titles["difference"] = "distance to\nB (mm)"
+            self.view_a.frame_hooks["difference"] = self._colour_a
+            if self.state.color == "difference":
+                scene.set_mode("difference")
+        else:
+            self.view_a.frame_hooks.pop("difference", None)
+            if self.state.color == "difference":
+                self.state.set_color("displacement", self)
+
+    # -- per frame -----------------------------------------------------------------------------
+    def matched_frame(self, t_a: float) -> int | None:
+        """B's frame shown with time ``t_a`` of A (None before both are simulated)."""
+        return None if self.comparison is None else self.comparison.frame_b(t_a)
+
+    def _colour_a(self, i: int, drawn) -> None:
+        """A's frame hook: with the colouring "distance to B", A's surface shows the distance."""
+        if self.state.color != "difference" or self.comparison is None:
+            return
+        j = self.comparison.frame_b(self.session_a.frames.times[i])
+        self.view_a.scene.surface.point_data["value"][:] = frame_difference_mm(
+            self.session_a.frames, i, self.session_b.frames, j)
+
+    def show_time(self, t_a: float) -> None:
+        """Show B at the moment matched with A's time ``t_a``."""
+        if self.comparison is None or self._surface is None or not self.isVisible():
+            return
+        from tonguevis.gui.drawing import draw_frame
+
+        session_a, session_b = self.session_a, self.session_b
+        i = session_a.frames.frame_at(t_a)
+        j = self.comparison.frame_b(float(session_a.frames.times[i]))
+        reference = self.state.reference
+        drawn = draw_frame(session_b, j, reference, "plain")
+        self._surface.points[:] = drawn.points
+        self._surface.point_data["Normals"][:] = self._normals(drawn.points)
+        if len(drawn.sensor_points):
+            self._sensors.points[:] = drawn.sensor_points
+        difference = self.state.color == "difference" and self._clim is not None
+        if difference:
+            self._surface.point_data["difference"][:] = frame_difference_mm(session_a.frames, i, session_b.frames, j)
+            self._b_actor.mapper.lookup_table = self.view_a.scene.surface_actors[0].mapper.lookup_table
+            self._b_actor.mapper.scalar_range = self._clim
+        self._b_actor.mapper.scalar_visibility = difference
+        self.frame_b = j
+        self.caption.setText(self._caption(session_a, i, session_b, j))
+        if self.layout_mode == "side":
+            self.plotter.interactor.update()
+        else:
+            self.view_a.plotter.interactor.update()
+        self.renders += 1
+
+    def _caption(self, session_a, i: int, session_b, j: int) -> str:
+        times_b = session_b.frames.times
+        text = f"B at t = {times_b[j]:.3f} s, frame {j + 1}/{len(times_b)}"
+        phase = self.comparison.phase(float(session_a.frames.times[i]))
+        if phase is not None:
+            text += f"   ·   production {phase[0]}, {100 * phase[1]:.0f} % through (both)"
+        elif self.comparison.mode == "production":
+            text += "   ·   between productions"
+        else:
+            text += "   ·   absolute time"
+        if not self.comparison.same_mesh:
+            text += "   ·   other tongue mesh: no per-node distance"
+        if self.note:
+            text += f"\n{self.note}"
+        return text
+
+    def close_view(self) -> None:
+        self.plotter.close()
+
+
+def _subplot_index(plotter, index: int) -> tuple[int, ...]:
+    """The ``subplot`` arguments of renderer ``index`` of ``plotter``."""
+    loc = plotter.renderers.index_to_loc(index)
+    return tuple(int(v) for v in np.atleast_1d(loc))
+
+
+def _background() -> str:
+    from tonguevis.gui.scene import BACKGROUND
+
+    return BACKGROUND if isinstance(BACKGROUND, str) else BACKGROUND[0]
