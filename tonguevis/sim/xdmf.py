@@ -7,8 +7,8 @@ exported frame adds only its displacement, in float32 rounded to
 hundredth of EMA's own accuracy of a few tenths of a millimetre) and stored with HDF5's shuffle + deflate filters, which
 every HDF5 reader (ParaView's included) undoes by itself: the rounding empties
 the low mantissa bits that plain float32 noise would fill, so a frame of the
-whole 1,802-node tongue takes about 10 KB instead of 22 (6 KB for its 736
-surface nodes).  Frames are reconstructed from q chunk by chunk
+whole 1,802-node tongue takes about 7.5 KB instead of 22, written in HDF5
+1.10's file format (which indexes a one-chunk dataset without a B-tree).  Frames are reconstructed from q chunk by chunk
 (:meth:`Motion.iter_displacements`), so memory does not grow with the recording either.
 
 Two files, in the layout meshio's XDMF time-series writer makes (so
@@ -90,7 +90,10 @@ def write_xdmf(motion, path, surface_only: bool = False, stride: int = 1, frames
     tmp_xdmf = path.with_name(f".{path.name}.partial")
     n = len(nodes)
     try:
-        with h5py.File(tmp_h5, "w") as h5, open(tmp_xdmf, "w", encoding="utf-8") as xml:
+        # HDF5 1.10's file format (ParaView 5.5+, any h5py of the last years): a dataset of one
+        # chunk is indexed without a B-tree, 2.7 KB less per frame (7.5 KB instead of 10.1).
+        with h5py.File(tmp_h5, "w", libver=("v110", "v110")) as h5, \
+                open(tmp_xdmf, "w", encoding="utf-8") as xml:
             h5.attrs["format"] = "tonguevis motion (XDMF 3 time series)"
             h5.attrs["units"] = "metres, seconds; axes x anterior, y left, z up (the model frame)"
             h5.attrs["frame_of_reference"] = note
