@@ -16,7 +16,7 @@ README = REPO_DIR / "README.md"
 #: Commands quick enough to run here (the others simulate; their own tests run them).
 CHEAP = ("info", "syllables", "convert")
 #: Arguments of the commands that name the recordings they read.
-INPUTS = ("file", "input", "paths", "source", "target")
+INPUTS = ("file", "input", "paths", "source", "target", "compare")
 
 
 def readme_commands() -> list[list[str]]:
