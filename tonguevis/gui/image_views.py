@@ -27,7 +27,9 @@ API (subplots, ``add_mesh``, ``render``, ``screenshot``, ...), ``interactor``
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import weakref
 
 import numpy as np
 from PySide6.QtCore import QPoint, Qt, QTimer
@@ -52,6 +54,36 @@ def _no_base_plotter_init():
         yield
     finally:
         BasePlotter.__init__ = original
+
+
+#: Every ImageInteractor not closed yet: closed at exit while Qt and the X connections are still
+#: alive (one left to the garbage collector at interpreter exit, e.g. in a tab whose window was
+#: closed without closing its children, tore VTK's X connection down out of order, and Xlib's
+#: fatal I/O error then ended the process with status 1).
+_OPEN: weakref.WeakSet = weakref.WeakSet()
+
+
+@atexit.register
+def _close_all() -> None:
+    for plotter in list(_OPEN):
+        with contextlib.suppress(Exception):
+            plotter.close()
+
+
+def _offscreen_render_window():
+    """VTK's EGL render window where it exists (no X connection of its own: nothing for the
+    window system to tear down out of order), else the platform's own, off screen."""
+    try:
+        from vtkmodules.vtkRenderingOpenGL2 import vtkEGLRenderWindow
+
+        window = vtkEGLRenderWindow()
+    except ImportError:
+        window = vtkRenderWindow()
+    else:
+        if not window.IsA("vtkEGLRenderWindow"):
+            window = vtkRenderWindow()
+    window.SetOffScreenRendering(1)
+    return window
 
 
 class _NoEvents:
@@ -80,8 +112,7 @@ class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
         self._QVTKRenderWindowInteractor__saveModifiers = Qt.KeyboardModifier.NoModifier
         self._QVTKRenderWindowInteractor__saveButtons = Qt.MouseButton.NoButton
         self._QVTKRenderWindowInteractor__wheelDelta = 0
-        self._RenderWindow = vtkRenderWindow()
-        self._RenderWindow.SetOffScreenRendering(1)
+        self._RenderWindow = _offscreen_render_window()
         self._RenderWindow.SetMultiSamples(int(multi_samples))
         self._Iren = vtkGenericRenderWindowInteractor()
         self._Iren.SetRenderWindow(self._RenderWindow)
@@ -113,6 +144,7 @@ class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
         self.renders = self.paints = 0
         self._RenderWindow.AddObserver("EndEvent", self._on_rendered)
         self._resize_render_window()
+        _OPEN.add(self)
 
     # -- pyvista -------------------------------------------------------------------------
     def __getattr__(self, name):
@@ -134,8 +166,20 @@ class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
         if getattr(self, "_closed", False):
             return
         BasePlotter.render(self)
+        self._RenderWindow.ReleaseCurrent()
+
+    def screenshot(self, *args, **kwargs):
+        """pyvista's screenshot, leaving no context of ours current (see :meth:`_on_rendered`)."""
+        try:
+            return BasePlotter.screenshot(self, *args, **kwargs)
+        finally:
+            if self._RenderWindow is not None:
+                self._RenderWindow.ReleaseCurrent()
 
     def _on_rendered(self, *_args) -> None:
+        # Our EGL context is released after each use (render, read-back, screenshot): left
+        # current, it would stop a GLX context on this thread (the video export's off-screen
+        # plotter) from being made current.
         self.renders += 1
         self._rendered = True
         if not self._painting:
@@ -162,7 +206,9 @@ class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
 
     def _read_image(self) -> None:
         w, h = self._RenderWindow.GetSize()
+        self._RenderWindow.MakeCurrent()
         self._RenderWindow.GetRGBACharPixelData(0, 0, w - 1, h - 1, 0, self._pixels, 0)
+        self._RenderWindow.ReleaseCurrent()
         rgba = vtk_to_numpy(self._pixels).reshape(h, w, 4)
         self._rows = np.ascontiguousarray(rgba[::-1])  # VTK's first row is the bottom one
         image = QImage(self._rows.data, w, h, 4 * w, QImage.Format.Format_RGBX8888)
@@ -198,6 +244,7 @@ class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
         """Release VTK's render window and context, then the widget (returns None, like QtInteractor.close)."""
         if getattr(self, "_closed", True):
             return
+        _OPEN.discard(self)
         BasePlotter.close(self)
         QWidget.close(self)
         self._Iren = _NoEvents()
