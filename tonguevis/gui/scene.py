@@ -38,7 +38,69 @@ COLORMAP = "plasma"
 CONTACT_COLORMAP = "RdYlBu"
 INSIDE_COLOUR = "#ff00ff"
 NO_PALATE_COLOUR = TONGUE_COLOUR
-BACKGROUND = ("#20242c", "#3b4252")  # bottom, top
+#: One flat colour, the middle of the old gradient (#20242c to #3b4252): a gradient background
+#: is drawn per pixel in every view (a sixth of a frame under software OpenGL), a flat one is a clear.
+BACKGROUND = "#2b303a"
+#: Two lights (a key light above and to the right of the camera, and a head light) instead of
+#: pyvista's five-light kit: under software OpenGL each light is paid per pixel, and the kit's
+#: two back lights and fill light add little to a surface seen from the front.  (direction
+#: in camera coordinates, intensity); the head light has no direction.
+LIGHTS = (((0.6, 0.8, 1.0), 0.75), (None, 0.45))
+#: Caption font sizes in pixels (the time and frame in the main view, the direction in the small ones).
+CAPTION_PX = {"main": 15, "small": 12}
+
+
+class Caption:
+    """Text in a view's upper-left corner with a fixed font size.
+
+    A vtkCornerAnnotation fits its font to the view every time its text changes
+    (about 30 ms a frame for the frame caption under software OpenGL); this
+    vtkTextActor only lays out its new text.  ``GetText(2)``/``SetText(2, text)``
+    as the corner annotation's upper-left corner.
+    """
+
+    def __init__(self, plotter, text: str, size_px: int, name: str, colour: str = "white"):
+        import vtk
+
+        self.actor = vtk.vtkTextActor()
+        self.actor.SetInput(text)
+        prop = self.actor.GetTextProperty()
+        prop.SetFontSize(int(size_px))
+        prop.SetColor(pv.Color(colour).float_rgb)
+        prop.SetVerticalJustificationToTop()
+        prop.SetJustificationToLeft()
+        prop.SetFontFamilyToArial()
+        coordinate = self.actor.GetPositionCoordinate()
+        coordinate.SetCoordinateSystemToNormalizedViewport()
+        coordinate.SetValue(0.006, 0.99)
+        plotter.add_actor(self.actor, reset_camera=False, name=name, pickable=False)
+
+    def GetText(self, _corner: int = 2) -> str:  # noqa: N802 (the corner annotation's name)
+        return self.actor.GetInput() or ""
+
+    def SetText(self, _corner: int, text: str) -> None:  # noqa: N802
+        if text != self.GetText():
+            self.actor.SetInput(text)
+
+    def SetVisibility(self, visible: bool) -> None:  # noqa: N802
+        self.actor.SetVisibility(visible)
+
+
+def set_lights(renderer) -> None:
+    """Replace ``renderer``'s lights by :data:`LIGHTS`."""
+    import vtk
+
+    renderer.RemoveAllLights()
+    for direction, intensity in LIGHTS:
+        light = vtk.vtkLight()
+        if direction is None:
+            light.SetLightTypeToHeadlight()
+        else:
+            light.SetLightTypeToCameraLight()
+            light.SetPosition(*direction)
+            light.SetFocalPoint(0.0, 0.0, 0.0)
+        light.SetIntensity(intensity)
+        renderer.AddLight(light)
 
 
 def faces_to_vtk(faces: np.ndarray) -> np.ndarray:
@@ -90,12 +152,13 @@ class TongueScene:
         self._mode = "plain"
         self._clim: dict[str, tuple[float, float]] = {}
         self._titles: dict[str, str] = {}
-        plotter.set_background(BACKGROUND[0], top=BACKGROUND[1])
+        plotter.set_background(BACKGROUND)
         for renderer in plotter.renderers:
             # Plain alpha blending for the jaw and palate: VTK's order-independent
             # transparency costs extra full-screen passes (3x the frame under software GL),
             # and two convex-ish context shells need no exact ordering.
             renderer.SetUseOIT(False)
+            set_lights(renderer)
 
     def _each_view(self):
         for index in (MAIN, TOP, FRONT, LATERAL):
@@ -150,7 +213,9 @@ class TongueScene:
                 self.surface, scalars="value", cmap=COLORMAP, clim=(0.0, 1.0), show_scalar_bar=False,
                 specular=0.3, specular_power=15, name=f"tongue{index}", reset_camera=False,
             )
-            actor.mapper.interpolate_before_map = True
+            # Colours mapped at the nodes and interpolated (the nodes are 2-3 mm apart): mapping
+            # per pixel through a colour texture cost a quarter of the tongue's drawing.
+            actor.mapper.interpolate_before_map = False
             self.surface_actors.append(actor)
             if n_sensors:
                 plotter.add_mesh(self.sensors, color=SENSOR_COLOUR, point_size=14 if main else 8,
@@ -174,15 +239,14 @@ class TongueScene:
                     label_font_size=11,
                 )
                 self.scalar_bar.SetVerticalTitleSeparation(8)
-                self.time_text = plotter.add_text("", position="upper_left", font_size=10, name="time")
+                self.time_text = Caption(plotter, "", CAPTION_PX["main"], "time")
                 if n_sensors:
                     plotter.add_text("sensor node", position=(8, 26), font_size=8, name="legend_s",
                                      color=SENSOR_COLOUR)
                     plotter.add_text("measured EMA (line = residual)", position=(8, 8), font_size=8,
                                      name="legend_t", color=TARGET_COLOUR)
             else:
-                self.view_labels[index] = plotter.add_text(VIEW_NAMES[index], position="upper_left", font_size=8,
-                                                           name=f"label{index}")
+                self.view_labels[index] = Caption(plotter, VIEW_NAMES[index], CAPTION_PX["small"], f"label{index}")
                 plotter.enable_parallel_projection()
         self._default_lut = self.surface_actors[0].mapper.lookup_table
         self.reset_cameras()
