@@ -226,6 +226,8 @@ def main() -> int:
                              "whole cost (otherwise the rasterising is counted at the swap, outside the views)")
     parser.add_argument("--json", type=Path, help="write the figures to this JSON file")
     parser.add_argument("--screenshot", type=Path, help="save the window after playback (PNG)")
+    parser.add_argument("--screenshot-time", type=float, default=5.6,
+                        help="recording time (s from the start) the screenshot shows")
     parser.add_argument("--events", action="store_true", help="print the Qt events that take the time (by type and "
                                                                    "receiver; nested events are counted in their parents too)")
     args = parser.parse_args()
@@ -373,6 +375,9 @@ def main() -> int:
           f"full plot redraws during playback: {timings.plot_draws}")
     print(f"  shown frame behind the clock: mean {results['lag_ms']['mean']:.1f} ms, max {results['lag_ms']['max']:.1f} ms")
     if args.screenshot is not None:
+        # At a fixed time (the first syllable's closure), so that pictures of two versions compare.
+        state.set_time(state.start + args.screenshot_time)
+        wait(1.0)
         window.export_screenshot(os.fspath(args.screenshot))
         print(f"wrote {args.screenshot}")
     if args.json is not None:
