@@ -36,9 +36,9 @@ log = logging.getLogger("tonguevis")
 LAYOUTS = {"side": "side by side", "ghost": "ghost in A's views"}
 #: How B's time follows A's (:class:`~tonguevis.analysis.compare.Comparison` modes).
 TIME_MODES = {"production": "per production", "absolute": "absolute time"}
-GHOST_COLOUR = "#7fd1ff"
+GHOST_COLOUR = "#8ff0ff"
 GHOST_PANEL_WIDTH = 460  # px: the panel's controls, when B is drawn inside A's views
-GHOST_OPACITY = 0.35
+GHOST_OPACITY = 0.4
 B_COLOUR = "#f2c57c"
 #: Colour range of the distance between the tongues: at least this (mm), else the 98th percentile
 #: of a sample of matched frames.
@@ -269,13 +269,8 @@ class ComparePanel(QWidget):
         """Offer the colouring "distance to B" in A's views while a comparison with one mesh is shown."""
         scene = self.view_a.scene
         if available:
-            # The scene's colour ranges and scalar-bar titles are per colouring; this one lives as
-            # long as the comparison.
-            scene._clim["difference"] = self._clim
-            scene._titles["difference"] = "distance to\nB (mm)"
+            scene.set_colour_range("difference", self._clim, "distance to\nB (mm)")
             self.view_a.frame_hooks["difference"] = self._colour_a
-            if self.state.color == "difference":
-                scene.set_mode("difference")
         else:
             self.view_a.frame_hooks.pop("difference", None)
             if self.state.color == "difference":

@@ -322,6 +322,14 @@ class TongueScene:
             self.scalar_bar.SetBelowRangeAnnotation("inside")
             self.scalar_bar.SetNanAnnotation("no palate above")
 
+    def set_colour_range(self, mode: str, clim: tuple[float, float], title: str) -> None:
+        """Offer colouring ``mode`` with range ``clim`` and scalar-bar ``title`` (e.g. the compare
+        view's distance to the other tongue); applied now if it is the mode shown."""
+        self._clim[mode] = tuple(clim)
+        self._titles[mode] = title
+        if self._mode == mode:
+            self.set_mode(mode)
+
     def set_context_visible(self, visible: bool) -> None:
         """Show or hide the jaw and palate (hiding them triples the frame rate under software GL)."""
         self.context_visible = bool(visible)
