@@ -148,3 +148,15 @@ def test_a_bad_file_to_compare_is_a_dialog_and_a_is_kept(qtbot, window, tmp_path
     assert "broken.tsv" in window.state.status and window.last_dialog is not None
     assert window.state.session_of("compare") is None and window.session is a
     assert not window.compare_panel.isVisible()
+
+
+def test_closing_b_while_it_simulates_stops_its_job(qtbot, window):
+    show_and_simulate(qtbot, window, demo_session())
+    window.compare_session(other_session())
+    job = window.compare_job
+    assert job is not None and job.isRunning()
+    window.compare_panel.close_button.click()  # the panel's own button: through the app model
+    assert window.compare_job is None and not job.isRunning()
+    assert window.state.session_of("compare") is None and not window.compare_panel.isVisible()
+    qtbot.wait(200)  # a late result would be ignored, and none comes
+    assert window.state.session_of("compare") is None

@@ -54,18 +54,20 @@ class CompareMixin:
         if layout is not None:
             self.compare_panel.set_layout(layout)
         if time_mode is not None:
-            self.compare_panel.time_mode = time_mode
-            self.compare_panel.time_box.setCurrentIndex(self.compare_panel.time_box.findData(time_mode))
+            self.compare_panel.set_time_mode(time_mode)
         settings = {"warping": self.warping if warping is None else bool(warping),
                     "modes": self.modes if modes is None else int(modes)}
         self.state.set_session(session, "compare", self)
         self._simulate_compare(session, settings)
 
     def stop_comparing(self) -> None:
-        if self.compare_job is not None:
+        self.state.set_session(None, "compare", self)
+
+    def _compare_closed(self, event) -> None:
+        """B closed (the menu, the panel's button, a script): its simulation is not wanted any more."""
+        if event.key == "compare" and event.value is None and self.compare_job is not None:
             self.compare_job.stop()
             self.compare_job = None
-        self.state.set_session(None, "compare", self)
 
     def _simulate_compare(self, session, settings: dict) -> None:
         from tonguevis.gui.simulation import simulate_motion
@@ -104,3 +106,4 @@ class CompareMixin:
         self.compare_panel = ComparePanel(self.state, self.view3d, self)
         splitter.insertWidget(1, self.compare_panel)
         splitter.setSizes([900, 450, 600])
+        self.state.subscribe("session", self._compare_closed)
