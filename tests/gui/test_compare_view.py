@@ -160,3 +160,13 @@ def test_closing_b_while_it_simulates_stops_its_job(qtbot, window):
     assert window.state.session_of("compare") is None and not window.compare_panel.isVisible()
     qtbot.wait(200)  # a late result would be ignored, and none comes
     assert window.state.session_of("compare") is None
+
+
+def test_b_without_productions_is_compared_on_absolute_time_and_says_so(qtbot, window):
+    show_and_simulate(qtbot, window, demo_session())
+    rest_only = other_session(start=0.0, end=3.0)  # before the first train: no production
+    assert not rest_only.productions
+    panel = compare(qtbot, window, rest_only)
+    assert panel.comparison.mode == "absolute" and "absolute time" in panel.note
+    window.state.set_time(1.0)
+    assert "on absolute time" in panel.caption.text()
