@@ -108,6 +108,8 @@ class ComparePanel(QWidget):
         self._ghosts: list = []
         self._clim: tuple[float, float] | None = None
         self._camera_seen = None
+        self._observed_camera = None  # the vtkCamera whose moves repaint both views
+        self._camera_observer = None
         self.title = QLabel("")
         self.layout_box = QComboBox()
         for key, text in LAYOUTS.items():
@@ -204,8 +206,11 @@ class ComparePanel(QWidget):
         """The panel looks through A's main camera (one vtkCamera): turning either view turns both."""
         camera = self.view_a.plotter.renderers[0].GetActiveCamera()
         self.plotter.renderer.SetActiveCamera(camera)
-        if getattr(self, "_camera_observer", None) is None:
+        if self._observed_camera is not camera:  # A's views may have been rebuilt with a new camera
+            if self._observed_camera is not None:
+                self._observed_camera.RemoveObserver(self._camera_observer)
             self._camera_observer = camera.AddObserver("ModifiedEvent", self._camera_moved)
+            self._observed_camera = camera
 
     def _camera_moved(self, camera, _event) -> None:
         seen = (camera.GetPosition(), camera.GetFocalPoint(), camera.GetViewUp(), camera.GetParallelScale(),
