@@ -149,26 +149,32 @@ def validate(
         schedules.append(drive_schedule(held, recording.rate, basis.eigenvalues, phi_s, sensor_stiffness))
     trials = np.stack([sch[0] for sch in schedules])  # (S, F, S, 3)
     compliance = np.stack([sch[1] for sch in schedules])  # (S, F, S)
-    q_runs: dict[str, list] = {}
+    # Per method and trial: the held-out node's trajectory (F, 3) and the converged flags; each
+    # trial's q (F, m) is dropped once its node is reconstructed (a long recording's five trials of
+    # q are hundreds of MB a method).
+    predicted: dict[str, list] = {}
+
+    def keep_held_out(method: str, runs, warping: bool) -> None:
+        predicted[method] = [(_node_trajectory(basis, w_full, int(nodes[h]), q, warping), np.asarray(conv, bool))
+                             for h, (q, conv) in enumerate(runs)]
+
     for k, (method, warping) in enumerate((("model", True), ("linear", False))):
         report(progress, 1 + k, 4, f"leave-one-out: {method}")
-        q_runs[method] = _drive_trials(basis, phi_s, w_s, trials, compliance, warping, 1.0 / recording.rate,
-                                       model.material, tolerance)
+        keep_held_out(method, _drive_trials(basis, phi_s, w_s, trials, compliance, warping, 1.0 / recording.rate,
+                                            model.material, tolerance), warping)
     if quasi_static:
         from tonguevis.analysis.quasistatic import quasi_static as solve_static
 
         report(progress, 3, 4, "leave-one-out: quasi-static")
-        q_runs["static"] = [solve_static(basis.eigenvalues, phi_s, w_s, t, tolerance, compliance=c)[:2]
-                            for t, c in zip(trials, compliance)]
+        keep_held_out("static", [solve_static(basis.eigenvalues, phi_s, w_s, t, tolerance, compliance=c)[:2]
+                                 for t, c in zip(trials, compliance)], True)
     held_out: dict[str, HeldOutSensor] = {}
     scores: dict[str, dict[str, Any]] = {}
     for h, name in enumerate(names):
         keep = np.array([k for k in range(s) if k != h])
         item = HeldOutSensor(name, int(nodes[h]), [names[k] for k in keep], prep.displacement[:, h])
-        for method, runs in q_runs.items():
-            q, conv = runs[h]
-            item.predicted[method] = _node_trajectory(basis, w_full, int(nodes[h]), q, method != "linear")
-            item.converged[method] = np.asarray(conv, dtype=bool)
+        for method, runs in predicted.items():
+            item.predicted[method], item.converged[method] = runs[h]
         weights = interpolation_weights(centres[keep], centres[h][None])[0]
         item.predicted["kinematic"] = np.einsum("n,fnc->fc", weights, prep.displacement[:, keep])
         item.converged["kinematic"] = np.ones(len(recording.times), dtype=bool)
