@@ -230,3 +230,18 @@ def test_drift_is_measured_after_the_sensors_return_to_rest(box_model):
     assert r["drift_beyond_static_mm"] == pytest.approx(r["drift_mm"], abs=1e-9)
     # The damped model has settled 0.3 s after the sensors came back: well under the 6 mm raise.
     assert r["drift_mm"] < 0.1
+
+
+def test_a_long_recording_is_advised_to_skip_the_quasi_static_baseline():
+    from types import SimpleNamespace
+
+    from tonguevis.cli.validate import LONG_FOR_STATIC_S, long_static_advice
+
+    def recording(seconds):
+        times = np.arange(0.0, seconds, 0.01)
+        return SimpleNamespace(times=times, n_samples=len(times), metadata={"file": "long.tsv"})
+
+    advice = long_static_advice(recording(3 * LONG_FOR_STATIC_S), no_static=False)
+    assert advice is not None and "--no-static" in advice and "long.tsv" in advice
+    assert long_static_advice(recording(3 * LONG_FOR_STATIC_S), no_static=True) is None
+    assert long_static_advice(recording(0.5 * LONG_FOR_STATIC_S), no_static=False) is None

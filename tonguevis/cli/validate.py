@@ -36,6 +36,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+#: Beyond this many seconds of recording the quasi-static baseline (a Newton solve per frame in
+#: Python, per left-out sensor) takes longer than the rest of the validation many times over.
+LONG_FOR_STATIC_S = 120.0
+
+
+def long_static_advice(recording, no_static: bool) -> str | None:
+    """A warning for a long recording validated with the quasi-static baseline, else None."""
+    duration = float(recording.times[-1] - recording.times[0]) if recording.n_samples > 1 else 0.0
+    if no_static or duration <= LONG_FOR_STATIC_S:
+        return None
+    return (f"{recording.metadata.get('file', 'the recording')}: {duration / 60:.0f} minutes; the quasi-static "
+            "baseline solves every frame of every leave-one-out run in Python (for 30 minutes: over 20 minutes); "
+            "--no-static skips it and keeps the model, linear and kinematic scores")
+
+
 def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
     from tonguevis.analysis.validation import validate
@@ -49,6 +64,11 @@ def run(args: argparse.Namespace) -> int:
         raise TonguevisError(f"--modes must be at least 1, got {args.modes}")
     rest = rest_arg(args)
     recording = read_recording_args(args)
+    advice = long_static_advice(recording, args.no_static)
+    if advice:
+        import logging
+
+        logging.getLogger("tonguevis").warning(advice)
     model = load_model_args(args)
     with tqdm_progress("validating", disable=args.quiet) as progress:
         result = validate(recording, model, modes=args.modes, landmarks=args.landmarks,
