@@ -108,6 +108,7 @@ class ComparePanel(QWidget):
         self._ghosts: list = []
         self._clim: tuple[float, float] | None = None
         self._camera_seen = None
+        self._last_difference = None
         self._observed_camera = None  # the vtkCamera whose moves repaint both views
         self._camera_observer = None
         self.title = QLabel("")
@@ -161,6 +162,7 @@ class ComparePanel(QWidget):
         a, b = self.session_a, self.session_b
         self.setVisible(b is not None)
         self.comparison, self.note, self.frame_b = None, "", -1
+        self._last_difference = None  # (i, j, distances): the pair of frames last coloured
         self._remove_ghosts()
         if b is None:
             self._set_difference_colouring(False)
@@ -291,8 +293,15 @@ class ComparePanel(QWidget):
         if self.state.color != "difference" or self.comparison is None:
             return
         j = self.comparison.frame_b(self.session_a.frames.times[i])
-        self.view_a.scene.surface.point_data["value"][:] = frame_difference_mm(
-            self.session_a.frames, i, self.session_b.frames, j)
+        self.view_a.scene.surface.point_data["value"][:] = self._difference(i, j)
+
+    def _difference(self, i: int, j: int) -> np.ndarray:
+        """:func:`frame_difference_mm` of A's frame i and B's frame j, once per pair: A's hook and
+        B's drawing both colour by it in the same frame."""
+        if self._last_difference is None or self._last_difference[:2] != (i, j):
+            values = frame_difference_mm(self.session_a.frames, i, self.session_b.frames, j)
+            self._last_difference = (i, j, values)
+        return self._last_difference[2]
 
     def show_time(self, t_a: float) -> None:
         """Show B at the moment matched with A's time ``t_a``."""
@@ -311,7 +320,7 @@ class ComparePanel(QWidget):
             self._sensors.points[:] = drawn.sensor_points
         difference = self.state.color == "difference" and self._clim is not None
         if difference:
-            self._surface.point_data["difference"][:] = frame_difference_mm(session_a.frames, i, session_b.frames, j)
+            self._surface.point_data["difference"][:] = self._difference(i, j)
             self._b_actor.mapper.lookup_table = self.view_a.scene.surface_actors[0].mapper.lookup_table
             self._b_actor.mapper.scalar_range = self._clim
         self._b_actor.mapper.scalar_visibility = difference
