@@ -39,6 +39,7 @@ from tonguevis.io._common import (
     check_times, format_rows, decode_text, dropped_frames, estimate_rate, parse_axes,
     parse_number_table, read_bytes, rotate_quaternions, split_lines, unit_scale, unterminated_row_complete,
 )
+from tonguevis.io.fast_table import plain_table
 from tonguevis.io.recording import Audio, Recording
 from tonguevis.io.registry import RecordingFormat, register_format
 from tonguevis.io.wav import write_wav
@@ -105,26 +106,63 @@ def _parse_header(header: list[str], path) -> tuple[list[dict], str]:
     return blocks, (units.pop() if units else "mm")
 
 
-def read_ndi_wave(path, axes=None, rate: float | None = None) -> Recording:
-    """Read an NDI Wave TSV export (see the module docstring).
+def _header_fields(header_text: str) -> list[str]:
+    header = header_text.rstrip("\r\n").split("\t")
+    while header and not header[-1].strip():
+        header.pop()
+    return header
 
-    axes : None (device frame) or an axis mapping for :func:`parse_axes`.
-    rate : sample rate in Hz; default estimated from the times (100 Hz if one frame).
+
+def _read_table(path: Path) -> tuple[list[str], np.ndarray, int, bool]:
+    """(header fields, (N, C) float64 table, line number of the first data row, whether an incomplete
+    last line was dropped) of the file at ``path``.
+
+    A well-formed file goes through :func:`tonguevis.io.fast_table.plain_table` (C++ parsing);
+    anything it declines is read by :func:`_read_table_carefully`, which names every problem.
+    A test proves both give the same table.
     """
-    path = Path(path)
-    text = decode_text(read_bytes(path), path)
+    data = read_bytes(path)
+    fast = plain_table(data)
+    if fast is not None:
+        checked = _checked_fast_table(fast, path)
+        if checked is not None:
+            return _header_fields(fast.header), checked[0], fast.first_data_line, checked[1]
+    return _read_table_carefully(data, path)
+
+
+def _checked_fast_table(fast, path: Path) -> tuple[np.ndarray, bool] | None:
+    """(table, truncated): the fast table cut to the header's width, its end checked as the careful
+    path checks it; None when only the careful path can say what is wrong."""
+    ncols = len(_header_fields(fast.header))
+    table = fast.values
+    if table.shape[1] < ncols or (table.shape[1] > ncols and not np.isnan(table[:, ncols:]).all()):
+        return None
+    table = table[:, :ncols]
+    if fast.ended:
+        return table, False
+    # An unterminated last line may be cut inside a number: keep it only if it is whole.
+    rows = [text.rstrip("\r\n").split("\t")[:ncols] for _, text in fast.last_lines]
+    if unterminated_row_complete(rows[-1], rows[-2] if len(rows) > 1 else None):
+        return table, False
+    if len(table) == 1:
+        return None  # no complete data row: the careful path's error
+    log.warning("%s: dropped the incomplete last line %d (file truncated?)", path, fast.last_lines[-1][0])
+    return table[:-1], True
+
+
+def _read_table_carefully(data: bytes, path: Path) -> tuple[list[str], np.ndarray, int, bool]:
+    """:func:`_read_table` in Python, line by line: any file, every problem named with its line."""
+    text = decode_text(data, path)
+    del data
     lines, ended = split_lines(text)
     del text  # the lines hold it now
     numbered = [(i + 1, line) for i, line in enumerate(lines) if line.strip()]
     del lines
     if not numbered:
         raise RecordingError("empty file", path)
-    header_line, header_text = numbered[0]
-    header = header_text.rstrip("\r\n").split("\t")
-    while header and not header[-1].strip():
-        header.pop()
-    blocks, unit = _parse_header(header, path)
-    scale = unit_scale(unit, path)
+    header = _header_fields(numbered[0][1])
+    _, unit = _parse_header(header, path)  # the header's problems first, as they come first in the file
+    unit_scale(unit, path)
     ncols = len(header)
     body = numbered[1:]
     if not body:
@@ -162,6 +200,19 @@ def read_ndi_wave(path, axes=None, rate: float | None = None) -> Recording:
     del rows
     table = tables[0] if len(tables) == 1 else np.concatenate(tables)
     del tables
+    return header, table, first_data_line, truncated is not None
+
+
+def read_ndi_wave(path, axes=None, rate: float | None = None) -> Recording:
+    """Read an NDI Wave TSV export (see the module docstring).
+
+    axes : None (device frame) or an axis mapping for :func:`parse_axes`.
+    rate : sample rate in Hz; default estimated from the times (100 Hz if one frame).
+    """
+    path = Path(path)
+    header, table, first_data_line, truncated = _read_table(path)
+    blocks, unit = _parse_header(header, path)
+    scale = unit_scale(unit, path)
     times = table[:, 0]
     check_times(times, path, "AudioTime column", first_line=first_data_line)
     if rate is None:
@@ -207,7 +258,7 @@ def read_ndi_wave(path, axes=None, rate: float | None = None) -> Recording:
         "ndi_ids": ids,
         "ndi_status": np.stack(status_all, axis=1),
         "meas_id": table[:, 1].copy() if blocks[0]["id_col"] > 1 else None,
-        "truncated": truncated is not None,
+        "truncated": truncated,
     }
     return Recording(rate=rate, times=times.copy(), sensors=sensors, orientations=orientations,
                      metadata=metadata)
