@@ -110,7 +110,7 @@ def test_a_runaway_frame_keeps_the_previous_shape_and_stops(bar, monkeypatch):
 def test_compiled_integrator_equals_the_numpy_reference(warping, compliance, monkeypatch):
     import tonguevis.sim.constrained as constrained
     import tonguevis.sim.newmark as newmark
-    from tonguevis.sim.newmark_kernel import integrate_compiled
+    from tonguevis.sim.newmark_kernel import CompiledIntegrator, integrate_compiled
 
     if compliance == "runaway":  # a low limit, so that recoveries happen and must match
         monkeypatch.setattr(constrained, "RUNAWAY_ROTATION", 0.05)
@@ -151,3 +151,13 @@ def test_compiled_integrator_equals_the_numpy_reference(warping, compliance, mon
     both = integrate_compiled(lam, phi_s, w_s, np.stack([targets, 0.5 * targets]), settings, compliance=comp,
                               external=push)
     np.testing.assert_allclose(both[0].q, fast.q, rtol=0, atol=1e-15 * scale)
+    # In segments, each launch resuming from the last one's state, bit for bit the one launch; the cuts fall
+    # on a sensor's loss (frame 60) and release (110), where the integrator looks at the frame before.
+    integrator = CompiledIntegrator(lam, phi_s, w_s, settings, n_sensors=4)
+    comp_all = np.broadcast_to(comp, (200, 4))
+    cuts = [0, 1, 60, 67, 110, 111, 200]
+    parts = [integrator.advance(targets[None, a:b], comp_all[None, a:b], push[None, a:b])[0]
+             for a, b in zip(cuts[:-1], cuts[1:])]
+    for field in ("q", "qd", "qdd", "converged", "recovered", "iterations", "residual"):
+        joined = np.concatenate([getattr(part, field) for part in parts])
+        np.testing.assert_array_equal(joined, getattr(fast, field), err_msg=field)

@@ -16,6 +16,7 @@ import numpy as np
 _lock = threading.Lock()
 _kernel = None
 _flux_kernel = None
+_figures_kernel = None
 _wp = None
 
 
@@ -70,8 +71,33 @@ def _build():
             p2 = points[f, faces[k, 2]]
             wp.atomic_add(out, f, wp.dot(p0, wp.cross(p1, p2)) / wp.float64(6.0))
 
-        global _flux_kernel
+        @wp.kernel
+        def surface_figures(lin: wp.array2d(dtype=wp.vec3f), w: wp.array2d(dtype=wp.vec3f),
+                            rest: wp.array(dtype=wp.vec3d), faces: wp.array2d(dtype=int), warping: int,
+                            moved: wp.array2d(dtype=wp.vec3d),
+                            volume: wp.array(dtype=wp.float64), largest: wp.array(dtype=wp.float64)):
+            # One frame per thread: warp each surface node's displacement (in float64 from the float32
+            # products), keep the largest, then the enclosed volume of the moved surface (moved: scratch).
+            f = wp.tid()
+            top = wp.float64(0.0)
+            for i in range(lin.shape[1]):
+                d = wp.vec3d(lin[f, i])
+                if warping != 0:
+                    wi = wp.vec3d(w[f, i])
+                    a, b = coefficients(wp.length(wi))
+                    wd = wp.cross(wi, d)
+                    d = d + a * wd + b * wp.cross(wi, wd)
+                moved[f, i] = rest[i] + d
+                top = wp.max(top, wp.dot(d, d))
+            acc = wp.float64(0.0)
+            for k in range(faces.shape[0]):
+                acc = acc + wp.dot(moved[f, faces[k, 0]], wp.cross(moved[f, faces[k, 1]], moved[f, faces[k, 2]]))
+            volume[f] = acc / wp.float64(6.0)
+            largest[f] = wp.sqrt(top)
+
+        global _flux_kernel, _figures_kernel
         _flux_kernel = surface_flux
+        _figures_kernel = surface_figures
         _wp = wp
         _kernel = {np.dtype(np.float64): (warp_rotate, wp.vec3d), np.dtype(np.float32): (warp_rotate32, wp.vec3f)}
 
@@ -125,3 +151,33 @@ def enclosed_volumes(points: np.ndarray, faces: np.ndarray, device: str | None =
     out = wp.zeros(n_frames, dtype=wp.float64, device=dev)
     wp.launch(_flux_kernel, dim=(n_frames, len(faces)), inputs=[pa, fa], outputs=[out], device=dev)
     return out.numpy()
+
+
+def surface_figures(lin: np.ndarray, w: np.ndarray | None, rest: np.ndarray, faces: np.ndarray,
+                    warping: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(volume (F,) m³, largest displacement (F,) m) of the surface nodes, one frame per CPU thread.
+
+    lin : (F, k, 3) the nodes' linear displacement Φq, m; w : (F, k, 3) their rotation vectors Wq
+    (unused without ``warping``); both float32 (the products are the costly part; the rest runs in
+    float64); rest : (k, 3) their rest positions, m; faces : (f, 3) the closed outward surface in
+    these k nodes.  The warped displacement is R̃(w) Φq as in :func:`rotate_accumulated_compiled`,
+    the volume ⅙ Σ p0 · (p1 × p2) as in :func:`enclosed_volumes`; fused, nothing of a frame but its
+    figures is written out (a test checks them against the float64 whole-array reference).
+    """
+    _build()
+    wp = _wp
+    n_frames, k = lin.shape[:2]
+    volume, largest = np.empty(n_frames), np.empty(n_frames)
+    if n_frames == 0:
+        return volume, largest
+    lin = np.ascontiguousarray(lin, dtype=np.float32).reshape(n_frames, k, 3)
+    w = lin if w is None else np.ascontiguousarray(w, dtype=np.float32).reshape(n_frames, k, 3)
+    arrays = [wp.array(a, dtype=dtype, device="cpu", copy=False) for a, dtype in (
+        (lin, wp.vec3f), (w, wp.vec3f), (np.ascontiguousarray(rest, dtype=np.float64), wp.vec3d))]
+    faces_a = wp.array(np.ascontiguousarray(faces, dtype=np.int32), dtype=wp.int32, device="cpu")
+    moved = wp.empty((n_frames, k), dtype=wp.vec3d, device="cpu")
+    outs = [wp.array(a, dtype=wp.float64, device="cpu", copy=False) for a in (volume, largest)]
+    wp.launch(_figures_kernel, dim=n_frames, inputs=[*arrays, faces_a, int(bool(warping)), moved], outputs=outs,
+              device="cpu")
+    wp.synchronize_device("cpu")
+    return volume, largest

@@ -196,6 +196,18 @@ class TongueModel:
             out[start : start + len(chunk)] = lin
         return out
 
+    def modal_fields(self, q: np.ndarray, nodes: np.ndarray | None = None, warping: bool = True,
+                     dtype=np.float64) -> tuple[np.ndarray, np.ndarray | None]:
+        """(Φq, Wq) at ``nodes`` (all by default) for ``q`` (F, m): (F, k, 3) linear displacement in m
+        and rotation vectors in rad (None without ``warping``), in ``dtype``; the two halves of
+        :meth:`displacements` before the rotation."""
+        dtype = np.dtype(dtype)
+        q = np.atleast_2d(np.asarray(q, dtype=np.float64))
+        phi_t, w_t = self._reconstruction_matrices(self.basis(q.shape[1]), dtype, nodes)
+        q = q.astype(dtype, copy=False)
+        shape = (len(q), phi_t.shape[1] // 3, 3)
+        return (q @ phi_t).reshape(shape), (q @ w_t).reshape(shape) if warping else None
+
     def _reconstruction_matrices(self, basis: ModalBasis, dtype: np.dtype,
                                  nodes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Φᵀ and Wᵀ (m, 3n) in ``dtype`` (columns of ``nodes`` only, if given), contiguous, kept per

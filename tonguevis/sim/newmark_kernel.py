@@ -258,15 +258,19 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                     out_rec: wp.array2d(dtype=int),
                     vecs: wp.array3d(dtype=f64), svec: wp.array3d(dtype=f64), small: wp.array4d(dtype=f64),
                     rotb: wp.array3d(dtype=wp.mat33d), dgb: wp.array3d(dtype=wp.mat33d),
-                    wb: wp.array3d(dtype=wp.vec3d), act: wp.array2d(dtype=int), wasact: wp.array2d(dtype=int)):
+                    wb: wp.array3d(dtype=wp.vec3d), act: wp.array2d(dtype=int), wasact: wp.array2d(dtype=int),
+                    offset: int):
+            # offset: the recording's frame number of targets[:, 0]; past 0 the state (q, q̇, q̈ and
+            # the scratch arrays) is the previous segment's, so segments integrate as one run.
             t = wp.tid()
             m = lam.shape[0]
             n_frames = targets.shape[1]
             n_sensors = targets.shape[2] // 3
-            for j in range(m):
-                vecs[t, _V_Q, j] = f64(0.0)
-                vecs[t, _V_QD, j] = f64(0.0)
-                vecs[t, _V_QDD, j] = f64(0.0)
+            if offset == 0:
+                for j in range(m):
+                    vecs[t, _V_Q, j] = f64(0.0)
+                    vecs[t, _V_QD, j] = f64(0.0)
+                    vecs[t, _V_QDD, j] = f64(0.0)
             for i in range(n_frames):
                 # A sensor that acted in the last frame and does not now: velocity from the last two
                 # shapes, acceleration zero (see newmark.py); then this frame's active flags.
@@ -278,7 +282,7 @@ def _build():  # noqa: C901 - one kernel and its helpers, kept together
                             now = int(0)
                     if not wp.isfinite(comp[t, i, s]):
                         now = int(0)
-                    if i > 0 and wasact[t, s] == 1 and now == 0:
+                    if i + offset > 0 and wasact[t, s] == 1 and now == 0:
                         released = int(1)
                     wasact[t, s] = now
                 for j in range(m):
@@ -532,65 +536,106 @@ def integrate_compiled(
     external : external modal forces, (F, m) or (T, F, m), or None.
     rates : keep q̇ and q̈ of every frame (else ``qd`` and ``qdd`` are None: a long recording
         then holds q alone, 144 MB for 30 minutes at 100 Hz instead of three times that).
+    The whole run as one segment of a :class:`CompiledIntegrator`.
     """
-    from tonguevis.sim.constrained import MAX_ROTATION_STEP, RUNAWAY_ROTATION, STATIONARITY_RTOL
-
-    _build()
-    wp = _wp
     batch = targets.ndim == 4
     tg = targets if batch else targets[None]
-    n_trials, n_frames, n_sensors, _ = tg.shape
-    comp = np.broadcast_to(np.asarray(compliance, dtype=np.float64), tg.shape[:3])
-    ext = (np.zeros((n_trials, 1, len(eigenvalues))) if external is None  # no forces: one frame of zeros
-           else np.broadcast_to(np.asarray(external, dtype=np.float64), (n_trials, n_frames, len(eigenvalues))))
-    lam = np.ascontiguousarray(eigenvalues, dtype=np.float64)
-    m = len(lam)
-    n_c = 3 * n_sensors
-    h = float(settings.dt)
-    bn = h * h / 4.0
-    damp = settings.alpha + settings.beta * lam
-    a_inv = 1.0 / (1.0 + 0.5 * h * damp + bn * lam)
-    arr = lambda x, dtype=wp.float64: wp.array(np.ascontiguousarray(x), dtype=dtype, device=device)  # noqa: E731
-    phi2 = phi_s.reshape(n_c, m)
-    q_full = (phi2 * a_inv) @ phi2.T  # Φ_s A⁻¹ Φ_sᵀ
-    p_full = (w_s.reshape(n_c, m) * a_inv) @ phi2.T  # W_s A⁻¹ Φ_sᵀ
-    out_q = wp.zeros((n_trials, n_frames, m), dtype=wp.float64, device=device)
-    out_qd = wp.zeros_like(out_q) if rates else wp.zeros((n_trials, 1, m), dtype=wp.float64, device=device)
-    out_qdd = wp.zeros_like(out_qd)
-    out_res = wp.zeros((n_trials, n_frames, n_sensors), dtype=wp.float64, device=device)
-    out_conv = wp.zeros((n_trials, n_frames), dtype=wp.int32, device=device)
-    out_iter = wp.zeros((n_trials, n_frames), dtype=wp.int32, device=device)
-    out_rec = wp.zeros((n_trials, n_frames), dtype=wp.int32, device=device)
-    vecs = wp.zeros((n_trials, N_VECTORS, m), dtype=wp.float64, device=device)
-    svec = wp.zeros((n_trials, N_SMALLVEC, n_c), dtype=wp.float64, device=device)
-    small = wp.zeros((n_trials, N_SMALL, n_c, n_c + 1), dtype=wp.float64, device=device)
-    rotb = wp.zeros((n_trials, 2, n_sensors), dtype=wp.mat33d, device=device)
-    dgb = wp.zeros((n_trials, 2, n_sensors), dtype=wp.mat33d, device=device)
-    wb = wp.zeros((n_trials, 2, n_sensors), dtype=wp.vec3d, device=device)
-    act = wp.zeros((n_trials, n_sensors), dtype=wp.int32, device=device)
-    wp.launch(
-        _kernel,
-        dim=n_trials,
-        inputs=[
-            arr(lam), arr(a_inv), arr(damp), arr(phi2), arr(w_s.reshape(n_c, m)), arr(q_full), arr(p_full),
-            arr(tg.reshape(n_trials, n_frames, n_c)), arr(comp), arr(ext),
-            h, bn, float(settings.tolerance), float(STATIONARITY_RTOL), int(settings.max_iterations),
-            float(MAX_ROTATION_STEP), float(RUNAWAY_ROTATION),
-            int(bool(settings.warping)),
-            out_q, out_qd, out_qdd, out_res, out_conv, out_iter, out_rec, vecs, svec, small, rotb, dgb, wb, act,
-            wp.zeros((n_trials, n_sensors), dtype=wp.int32, device=device),
-        ],
-        device=device,
-    )
-    res = out_res.numpy()
-    invalid = np.any(np.isnan(tg), axis=3)
-    res[invalid] = np.nan
-    results = [
-        IntegrationResult(q, qd if rates else None, qdd if rates else None, r, c.astype(bool), it.astype(np.int64),
-                          rec.astype(bool))
-        for q, qd, qdd, r, c, it, rec in zip(
-            out_q.numpy(), out_qd.numpy(), out_qdd.numpy(), res, out_conv.numpy(), out_iter.numpy(),
-            out_rec.numpy()
-        )
-    ]
+    integrator = CompiledIntegrator(eigenvalues, phi_s, w_s, settings, n_sensors=tg.shape[2], trials=tg.shape[0],
+                                    device=device, rates=rates)
+    results = integrator.advance(tg, compliance, external)  # (F, S) and (F, m) broadcast over the one trial
     return results if batch else results[0]
+
+
+class CompiledIntegrator:
+    """The compiled frame loop, resumable: :meth:`advance` integrates the next frames from where the
+    last call stopped (q, q̇, q̈ and every scratch array kept between launches), so a recording
+    integrated in segments gives bit for bit the q of one launch (a test checks it).  This is what lets
+    the figures of the frames done be computed while the next are integrated, and the app show the
+    first seconds of a long recording before the rest is simulated.
+
+    trials : T trials integrated side by side (one warp thread each); n_sensors : S.
+    """
+
+    def __init__(self, eigenvalues: np.ndarray, phi_s: np.ndarray, w_s: np.ndarray, settings: NewmarkSettings,
+                 n_sensors: int, trials: int = 1, device: str = "cpu", rates: bool = True):
+        _build()
+        wp = _wp
+        self.device, self.rates, self.settings = device, rates, settings
+        self.trials, self.n_sensors = int(trials), int(n_sensors)
+        self.frames_done = 0
+        lam = np.ascontiguousarray(eigenvalues, dtype=np.float64)
+        m = self.m = len(lam)
+        n_c = 3 * n_sensors
+        h = float(settings.dt)
+        bn = h * h / 4.0
+        damp = settings.alpha + settings.beta * lam
+        a_inv = 1.0 / (1.0 + 0.5 * h * damp + bn * lam)
+        phi2 = phi_s.reshape(n_c, m)
+        q_full = (phi2 * a_inv) @ phi2.T  # Φ_s A⁻¹ Φ_sᵀ
+        p_full = (w_s.reshape(n_c, m) * a_inv) @ phi2.T  # W_s A⁻¹ Φ_sᵀ
+        self._constants = [self._array(x) for x in (lam, a_inv, damp, phi2, w_s.reshape(n_c, m), q_full, p_full)]
+        self._scalars = [h, bn]
+        t = self.trials
+        self._state = [  # the integrator's memory between frames, kept between segments
+            wp.zeros((t, N_VECTORS, m), dtype=wp.float64, device=device),
+            wp.zeros((t, N_SMALLVEC, n_c), dtype=wp.float64, device=device),
+            wp.zeros((t, N_SMALL, n_c, n_c + 1), dtype=wp.float64, device=device),
+            wp.zeros((t, 2, n_sensors), dtype=wp.mat33d, device=device),
+            wp.zeros((t, 2, n_sensors), dtype=wp.mat33d, device=device),
+            wp.zeros((t, 2, n_sensors), dtype=wp.vec3d, device=device),
+            wp.zeros((t, n_sensors), dtype=wp.int32, device=device),
+            wp.zeros((t, n_sensors), dtype=wp.int32, device=device),
+        ]
+
+    def _array(self, x, dtype=None):
+        return _wp.array(np.ascontiguousarray(x), dtype=dtype or _wp.float64, device=self.device)
+
+    def advance(self, targets: np.ndarray, compliance: np.ndarray | float = 0.0,
+                external: np.ndarray | None = None) -> list[IntegrationResult]:
+        """Integrate the next f frames of every trial; one :class:`IntegrationResult` per trial (f frames).
+
+        targets : (T, f, S, 3) m; compliance : broadcast to (T, f, S), m/N; external : (T, f, m) or None.
+        """
+        from tonguevis.sim.constrained import MAX_ROTATION_STEP, RUNAWAY_ROTATION, STATIONARITY_RTOL
+
+        wp, device, settings, m = _wp, self.device, self.settings, self.m
+        tg = np.asarray(targets, dtype=np.float64)
+        n_trials, n_frames, n_sensors, _ = tg.shape
+        if n_trials != self.trials or n_sensors != self.n_sensors:
+            raise ValueError(f"targets {tg.shape} do not fit this integrator ({self.trials} trials, "
+                             f"{self.n_sensors} sensors)")
+        comp = np.broadcast_to(np.asarray(compliance, dtype=np.float64), tg.shape[:3])
+        ext = (np.zeros((n_trials, 1, m)) if external is None  # no forces: one frame of zeros
+               else np.broadcast_to(np.asarray(external, dtype=np.float64), (n_trials, n_frames, m)))
+        out_q = wp.zeros((n_trials, n_frames, m), dtype=wp.float64, device=device)
+        out_qd = wp.zeros_like(out_q) if self.rates else wp.zeros((n_trials, 1, m), dtype=wp.float64, device=device)
+        out_qdd = wp.zeros_like(out_qd)
+        out_res = wp.zeros((n_trials, n_frames, n_sensors), dtype=wp.float64, device=device)
+        out_conv = wp.zeros((n_trials, n_frames), dtype=wp.int32, device=device)
+        out_iter = wp.zeros((n_trials, n_frames), dtype=wp.int32, device=device)
+        out_rec = wp.zeros((n_trials, n_frames), dtype=wp.int32, device=device)
+        wp.launch(
+            _kernel,
+            dim=n_trials,
+            inputs=[
+                *self._constants,
+                self._array(tg.reshape(n_trials, n_frames, 3 * n_sensors)), self._array(comp), self._array(ext),
+                *self._scalars, float(settings.tolerance), float(STATIONARITY_RTOL), int(settings.max_iterations),
+                float(MAX_ROTATION_STEP), float(RUNAWAY_ROTATION),
+                int(bool(settings.warping)),
+                out_q, out_qd, out_qdd, out_res, out_conv, out_iter, out_rec, *self._state, int(self.frames_done),
+            ],
+            device=device,
+        )
+        self.frames_done += n_frames
+        res = out_res.numpy()
+        res[np.any(np.isnan(tg), axis=3)] = np.nan
+        rates = self.rates
+        return [
+            IntegrationResult(q, qd if rates else None, qdd if rates else None, r, c.astype(bool),
+                              it.astype(np.int64), rec.astype(bool))
+            for q, qd, qdd, r, c, it, rec in zip(
+                out_q.numpy(), out_qd.numpy(), out_qdd.numpy(), res, out_conv.numpy(), out_iter.numpy(),
+                out_rec.numpy()
+            )
+        ]

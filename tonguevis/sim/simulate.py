@@ -41,6 +41,8 @@ def simulate(
     backend: str = "warp",
     palate=None,
     progress: ProgressCallback | None = None,
+    preview=None,
+    preview_seconds: float = 20.0,
 ) -> Motion:
     """Drive ``model`` (default: our shipped tongue) with ``recording``.
 
@@ -70,6 +72,12 @@ def simulate(
         and ``motion.contact_area`` report, per frame, the deepest node inside
         it and the area in contact; sensors above it win and are listed in
         ``metadata["contact"]["conflicts"]``.
+
+    preview : called once, from the simulating thread, with the :class:`Motion` of the first
+        ``preview_seconds`` s (a little more: whole segments) as soon as they are final, before
+        the rest is simulated (``metadata["preview"]``: frames shown and of how many); its frames
+        equal the whole motion's.  Only on the compiled backend without a palate (the frame loop
+        and the figures then run side by side, :mod:`tonguevis.sim.pipeline`); else not called.
     """
     from tonguevis._backend import check_backend
     from tonguevis.sim.constrained import point_stiffness
@@ -101,57 +109,163 @@ def simulate(
     targets, compliance, schedule = drive_schedule(prep.displacement, recording.rate, basis.eigenvalues, phi_s,
                                                    sensor_stiffness, contact=contact)
     report(progress, 1, 3, "integrating")
-    if backend == "warp":
-        from tonguevis.sim.newmark_kernel import integrate_compiled
+    run = _Run(model, recording, prep, basis, phi_s, w_s, targets, compliance, schedule, warping, backend, modes,
+               landmarks, sensor_stiffness, k_ref, contact)
+    if backend == "warp" and contact is None:
+        from tonguevis.sim.pipeline import integrate_and_measure
 
-        result = integrate_compiled(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance,
-                                    external=schedule.get("external"), rates=False)  # q̇, q̈ unused: q alone
+        # The frame loop and the figures side by side; the first stretch offered as a preview once it is final.
+        wanted = min(len(targets), max(1, int(round(preview_seconds * recording.rate))))
+
+        def offer(progressive) -> None:
+            if preview is not None and not run.previewed and wanted <= progressive.done < len(targets):
+                run.previewed = True
+                try:
+                    shown = run.motion(progressive.result, progressive.figures, progressive.done)
+                except SimulationError as exc:  # the whole run will say it; no preview then
+                    logger.info("no preview of the first %d frames: %s", progressive.done, exc)
+                    return
+                preview(shown)
+
+        done = integrate_and_measure(model, basis.eigenvalues, phi_s, w_s, targets, settings, compliance, warping,
+                                     progress=_stage(progress, 1, 3, span=2), on_segment=offer)
+        result, figures = done.result, done.figures
     else:
-        result = integrate(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance,
-                           external=schedule.get("external"), progress=_stage(progress, 1, 3))
-    if contact is not None:
-        base = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * k_ref)
-        result.q, corrected = _keep_below_palate(result.q, contact, schedule, basis, phi_s, base)
-        schedule["corrected_frames"] = corrected
-    report(progress, 2, 3, "reconstructing the mesh")
-    # Chunk by chunk: the full-mesh displacement of every frame is never held at once.
-    figures = frame_figures(model, result.q, warping, backend, None if contact is None else
-                            _contact_probe(contact, schedule, model), progress=_stage(progress, 2, 3))
-    volume_change = figures.volume_change
-    energy = model.energy(result.q)
-    misfit = _sensor_misfit(result.q, phi_s, w_s, prep.displacement, warping)
-    plausibility, absurd = plausibility_from_largest(figures.largest_displacement, prep.displacement, volume_change,
-                                                     misfit)
-    if len(absurd):
-        # Frames no tongue could produce (volume, or a node far beyond every sensor): the static shape for
-        # the same targets instead, when that one is sane; flagged as recovered either way.
-        from tonguevis.sim.constrained import compliant_shapes
+        if backend == "warp":
+            from tonguevis.sim.newmark_kernel import integrate_compiled
 
-        fixed = compliant_shapes(basis.eigenvalues, phi_s, targets[absurd], compliance[absurd])
-        sub = frame_figures(model, fixed, warping, backend)
-        sane = np.isfinite(sub.volume_change) & (np.abs(sub.volume_change) <= ABSURD_VOLUME)
-        frames = absurd[sane]
-        result.q[frames] = fixed[sane]
-        result.recovered[frames] = True
-        volume_change[frames] = sub.volume_change[sane]
-        figures.largest_displacement[frames] = sub.largest_displacement[sane]
-        misfit = _sensor_misfit(result.q, phi_s, w_s, prep.displacement, warping)
-        plausibility, absurd = plausibility_from_largest(figures.largest_displacement, prep.displacement,
-                                                         volume_change, misfit)
-        energy = model.energy(result.q)
-    times = recording.times
-    file = recording.metadata.get("file")
-    n_recovered = int(result.recovered.sum())
-    if (not np.all(np.isfinite(result.q)) or len(absurd) > ABSURD_SHARE * len(times)
-            or n_recovered > RECOVERED_SHARE * len(times)):
-        bad_frames = np.union1d(absurd, np.flatnonzero(result.recovered | ~np.all(np.isfinite(result.q), axis=1)))
-        raise SimulationError(
-            f"the model could not follow this recording plausibly: {len(absurd)} of {len(times)} frames change "
-            f"the volume by over {100 * ABSURD_VOLUME:.0f} % or move a node over {ABSURD_AMPLIFICATION:g}x as far as "
-            f"any sensor, {n_recovered} had to be recovered (first at t = {times[bad_frames[0]]:.2f} s); try more "
-            f"modes (--modes, now {modes}) or the speaker's sensor layout (--landmarks speaker)", file)
-    bad = np.flatnonzero(~result.converged)
-    recovered = np.flatnonzero(result.recovered)
+            result = integrate_compiled(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance,
+                                        external=schedule.get("external"), rates=False)  # q̇, q̈ unused: q alone
+        else:
+            result = integrate(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance,
+                               external=schedule.get("external"), progress=_stage(progress, 1, 3))
+        if contact is not None:
+            base = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * k_ref)
+            result.q, corrected = _keep_below_palate(result.q, contact, schedule, basis, phi_s, base)
+            schedule["corrected_frames"] = corrected
+        report(progress, 2, 3, "reconstructing the mesh")
+        # Chunk by chunk: the full-mesh displacement of every frame is never held at once.
+        figures = frame_figures(model, result.q, warping, backend, None if contact is None else
+                                _contact_probe(contact, schedule, model), progress=_stage(progress, 2, 3))
+    motion = run.motion(result, figures, len(targets))
+    report(progress, 3, 3, "done")
+    return motion
+
+
+class _Run:
+    """One simulation's inputs, to make its :class:`Motion` from the integration and the figures, for every
+    frame or (a preview) for the first ones only, the same way."""
+
+    def __init__(self, model, recording, prep, basis, phi_s, w_s, targets, compliance, schedule, warping, backend,
+                 modes, landmarks, sensor_stiffness, k_ref, contact):
+        self.model, self.recording, self.prep, self.basis = model, recording, prep, basis
+        self.phi_s, self.w_s, self.targets, self.compliance, self.schedule = phi_s, w_s, targets, compliance, schedule
+        self.warping, self.backend, self.modes, self.landmarks = warping, backend, modes, landmarks
+        self.sensor_stiffness, self.k_ref, self.contact = sensor_stiffness, k_ref, contact
+        self.previewed = False
+
+    def motion(self, result, figures, n: int) -> Motion:
+        """The :class:`Motion` of frames 0..n-1 (``n`` = all: the simulation's result, made from ``result``
+        and ``figures`` in place; fewer: a preview on copies, ``metadata["preview"]`` saying how many frames
+        of how many, nothing logged).  Frames no tongue could produce are recovered; too many of them
+        (or a non-finite q) raise SimulationError naming the file."""
+        model, prep, basis, warping, backend = self.model, self.prep, self.basis, self.warping, self.backend
+        phi_s, w_s, schedule, contact = self.phi_s, self.w_s, self.schedule, self.contact
+        total = len(self.targets)
+        whole = n == total
+        cut = slice(0, n)
+        q = result.q if whole else result.q[cut].copy()
+        converged, recovered = result.converged[cut], result.recovered[cut].copy()
+        iterations = result.iterations[cut]
+        volume_change = figures.volume_change if whole else figures.volume_change[cut].copy()
+        largest = figures.largest_displacement if whole else figures.largest_displacement[cut].copy()
+        measured = prep.displacement[cut]
+        energy = model.energy(q)
+        misfit = _sensor_misfit(q, phi_s, w_s, measured, warping)
+        plausibility, absurd = plausibility_from_largest(largest, measured, volume_change, misfit)
+        if len(absurd):
+            # Frames no tongue could produce (volume, or a node far beyond every sensor): the static shape for
+            # the same targets instead, when that one is sane; flagged as recovered either way.
+            from tonguevis.sim.constrained import compliant_shapes
+
+            fixed = compliant_shapes(basis.eigenvalues, phi_s, self.targets[absurd], self.compliance[absurd])
+            sub = frame_figures(model, fixed, warping, backend)
+            sane = np.isfinite(sub.volume_change) & (np.abs(sub.volume_change) <= ABSURD_VOLUME)
+            frames = absurd[sane]
+            q[frames] = fixed[sane]
+            recovered[frames] = True
+            volume_change[frames] = sub.volume_change[sane]
+            largest[frames] = sub.largest_displacement[sane]
+            misfit = _sensor_misfit(q, phi_s, w_s, measured, warping)
+            plausibility, absurd = plausibility_from_largest(largest, measured, volume_change, misfit)
+            energy = model.energy(q)
+        times = self.recording.times[cut]
+        file = self.recording.metadata.get("file")
+        n_recovered = int(recovered.sum())
+        if (not np.all(np.isfinite(q)) or len(absurd) > ABSURD_SHARE * len(times)
+                or n_recovered > RECOVERED_SHARE * len(times)):
+            bad_frames = np.union1d(absurd, np.flatnonzero(recovered | ~np.all(np.isfinite(q), axis=1)))
+            raise SimulationError(
+                f"the model could not follow this recording plausibly: {len(absurd)} of {len(times)} frames change "
+                f"the volume by over {100 * ABSURD_VOLUME:.0f} % or move a node over {ABSURD_AMPLIFICATION:g}x as far "
+                f"as any sensor, {n_recovered} had to be recovered (first at t = {times[bad_frames[0]]:.2f} s); try "
+                f"more modes (--modes, now {self.modes}) or the speaker's sensor layout (--landmarks speaker)", file)
+        bad = np.flatnonzero(~converged)
+        recovered_frames = np.flatnonzero(recovered)
+        if whole:
+            _log_doubts(recovered_frames, absurd, volume_change, times, self.modes)
+        released = schedule["released"][cut]
+        contact_figures, penetration, contact_area = {}, None, None
+        if contact is not None:
+            penetration, contact_area = figures.penetration, figures.contact_area
+            contact_figures = _contact_report(penetration, contact_area, contact, schedule, times)
+        stiffness = self.sensor_stiffness
+        metadata = {
+            "recording": dict(self.recording.metadata),
+            "landmarks": self.landmarks,
+            "modes": self.modes,
+            "ignored_sensors": prep.ignored,
+            "rest": prep.rest.as_dict(),
+            "midsagittal_alignment": prep.midsagittal,
+            "alignment_scale": prep.transform.scale,
+            "alignment_matrix": prep.transform.matrix.tolist(),
+            "alignment_rms_m": prep.alignment_rms,
+            "sensor_stiffness": stiffness,
+            "sensor_stiffness_n_per_m": None if stiffness is None else float(stiffness * self.k_ref),
+            "point_stiffness_n_per_m": self.k_ref,
+            "dropouts": {"bridged_gaps": int(schedule["bridged"]), "released_frames": int(released.sum()),
+                         "released_by_sensor": {n: int(released[:, k].sum()) for k, n in enumerate(prep.names)}},
+            "unconverged_frames": bad.tolist(),
+            "recovered_frames": recovered_frames.tolist(),
+            "implausible_frames": absurd.tolist(),
+            "plausibility": plausibility,
+            **({"contact": contact_figures} if contact is not None else {}),
+            "newton_iterations_mean": float(iterations.mean()) if len(iterations) else 0.0,
+            **({} if whole else {"preview": {"frames": int(n), "of": int(total)}}),
+        }
+        rest_nodes = model.mesh.points[prep.nodes]
+        return Motion(
+            times=np.asarray(times, dtype=np.float64),
+            q=q,
+            model=model,
+            warping=warping,
+            sensor_names=prep.names,
+            sensor_nodes=prep.nodes,
+            targets=rest_nodes[None] + measured,
+            sensor_residual=misfit,
+            energy=energy,
+            volume_change=volume_change,
+            converged=converged & ~recovered,
+            penetration=penetration,
+            contact_area=contact_area,
+            jaw_offset=None if prep.jaw_offset is None else prep.jaw_offset[cut],
+            metadata=metadata,
+        )
+
+
+def _log_doubts(recovered: np.ndarray, absurd: np.ndarray, volume_change: np.ndarray, times: np.ndarray,
+                modes: int) -> None:
+    """Warn about recovered and implausible frames and a large volume change (once, for the whole run)."""
     if len(recovered):
         logger.warning("%d of %d frames ran away (non-finite, a sensor node turned past %.1f rad, or a shape no "
                        "tongue makes) and were recovered (first at t = %.2f s)",
@@ -163,53 +277,6 @@ def simulate(
         logger.warning(
             "the tongue changes volume by up to %.1f %% to follow the sensors: too few modes (%d) or sensor "
             "nodes far from the speaker's layout make it bend unnaturally", 100 * worst_volume, modes)
-    rest_nodes = model.mesh.points[prep.nodes]
-    released = schedule["released"]
-    contact_figures, penetration, contact_area = {}, None, None
-    if contact is not None:
-        penetration, contact_area = figures.penetration, figures.contact_area
-        contact_figures = _contact_report(penetration, contact_area, contact, schedule, times)
-    metadata = {
-        "recording": dict(recording.metadata),
-        "landmarks": landmarks,
-        "modes": modes,
-        "ignored_sensors": prep.ignored,
-        "rest": prep.rest.as_dict(),
-        "midsagittal_alignment": prep.midsagittal,
-        "alignment_scale": prep.transform.scale,
-        "alignment_matrix": prep.transform.matrix.tolist(),
-        "alignment_rms_m": prep.alignment_rms,
-        "sensor_stiffness": sensor_stiffness,
-        "sensor_stiffness_n_per_m": None if sensor_stiffness is None else float(sensor_stiffness * k_ref),
-        "point_stiffness_n_per_m": k_ref,
-        "dropouts": {"bridged_gaps": int(schedule["bridged"]), "released_frames": int(released.sum()),
-                     "released_by_sensor": {n: int(released[:, k].sum()) for k, n in enumerate(prep.names)}},
-        "unconverged_frames": bad.tolist(),
-        "recovered_frames": recovered.tolist(),
-        "implausible_frames": absurd.tolist(),
-        "plausibility": plausibility,
-        **({"contact": contact_figures} if contact is not None else {}),
-        "newton_iterations_mean": float(result.iterations.mean()) if len(result.iterations) else 0.0,
-    }
-    report(progress, 3, 3, "done")
-    return Motion(
-        times=np.asarray(times, dtype=np.float64),
-        q=result.q,
-        model=model,
-        warping=warping,
-        sensor_names=prep.names,
-        sensor_nodes=prep.nodes,
-        targets=rest_nodes[None] + prep.displacement,
-        sensor_residual=misfit,
-        energy=energy,
-        volume_change=volume_change,
-        converged=result.converged & ~result.recovered,
-        penetration=penetration,
-        contact_area=contact_area,
-        jaw_offset=prep.jaw_offset,
-        metadata=metadata,
-    )
-
 
 def drive_schedule(displacement: np.ndarray, rate: float, eigenvalues: np.ndarray, phi_s: np.ndarray,
                    sensor_stiffness: float | None, contact: dict | None = None):
@@ -385,13 +452,13 @@ def _sensor_misfit(q, phi_s, w_s, measured, warping):
     return out
 
 
-def _stage(progress: ProgressCallback | None, stage: int, stages: int) -> ProgressCallback | None:
-    """Map a sub-task's progress onto one of ``stages`` equal parts."""
+def _stage(progress: ProgressCallback | None, stage: int, stages: int, span: int = 1) -> ProgressCallback | None:
+    """Map a sub-task's progress onto ``span`` of ``stages`` equal parts, from part ``stage`` on."""
     if progress is None:
         return None
 
     def sub(done: int, total: int, message: str = "") -> None:
         frac = done / total if total else 1.0
-        progress(int(1000 * (stage + frac)), 1000 * stages, message)
+        progress(int(1000 * (stage + span * frac)), 1000 * stages, message)
 
     return sub
