@@ -110,7 +110,10 @@ def test_colour_modes_change_scalars(qtbot, window):
     window.state.set_color("energy")
     assert np.allclose(window.view3d.scene.surface.point_data["value"], frames.scalars["energy"][i])
     window.state.set_color("plain")
-    assert not window.view3d.scene.surface_actors[0].mapper.scalar_visibility
+    scene = window.view3d.scene
+    assert scene.lookup_table is None and not scene.scalar_bar.GetVisibility()
+    colours = scene.tongue_colours()
+    assert np.allclose(colours, colours[0])  # one colour, whatever the scalars
 
 
 def test_malformed_file_gives_a_dialog_and_the_app_keeps_running(qtbot, window, tmp_path):

@@ -206,7 +206,7 @@ def test_contact_colouring_shows_a_known_contact(qtbot, window, tmp_path):
     touching = values <= 0.3
     assert touching.sum() >= 3  # a patch of the tongue touches the roof in this frame
     # The colour map: touching is red, far is blue, inside the palate has its own colour, labelled on the bar.
-    lut = scene.surface_actors[0].mapper.lookup_table
+    lut = scene.lookup_table
     red, blue = (np.array(lut.map_value(v)[:3]) for v in (0.1, 9.9))
     assert red[0] > 0.6 and red[2] < 0.3 and blue[2] > 0.5 and blue[0] < 0.4
     assert tuple(lut.scalar_range) == (0.0, 10.0)

@@ -198,6 +198,7 @@ class ComparePanel(QWidget):
                                               show_scalar_bar=False, scalars="difference", cmap="plasma",
                                               specular=0.3, specular_power=15)
         self._b_actor.mapper.scalar_visibility = False
+        self._b_actor.prop.interpolation = "gouraud"  # smooth, from the normals, as A's tongue is shaded
         n_sensors = max(len(frames.motion.sensor_names), 1)
         self._sensors = pv.PolyData(np.zeros((n_sensors, 3), dtype=np.float32))
         self.plotter.add_mesh(self._sensors, color=SENSOR_COLOUR, point_size=12, render_points_as_spheres=True,
@@ -260,6 +261,7 @@ class ComparePanel(QWidget):
             actor = plotter.add_mesh(self._surface, color=GHOST_COLOUR, opacity=GHOST_OPACITY, name=f"ghost_b{index}",
                                      reset_camera=False, show_scalar_bar=False, scalars=None)
             actor.mapper.scalar_visibility = False
+            actor.prop.interpolation = "gouraud"
             self._ghosts.append(actor)
         plotter.subplot(*_subplot_index(plotter, 0))
 
@@ -321,7 +323,7 @@ class ComparePanel(QWidget):
         difference = self.state.color == "difference" and self._clim is not None
         if difference:
             self._surface.point_data["difference"][:] = self._difference(i, j)
-            self._b_actor.mapper.lookup_table = self.view_a.scene.surface_actors[0].mapper.lookup_table
+            self._b_actor.mapper.lookup_table = self.view_a.scene.lookup_table
             self._b_actor.mapper.scalar_range = self._clim
         self._b_actor.mapper.scalar_visibility = difference
         self.frame_b = j

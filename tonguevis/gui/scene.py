@@ -6,6 +6,13 @@ All four draw the *same* datasets, so one in-place update of the points and
 scalars and one ``render()`` moves every view to the same frame.  The same
 class drives the window's ``QtInteractor`` and the off-screen plotter of the
 video export.
+
+Every surface is lit on the CPU at its vertices (:mod:`tonguevis.render.shading`)
+and drawn unlit: under software OpenGL, VTK's per-pixel lighting of the large
+translucent jaw and palate and of four tongues cost a third of a frame.  Each
+view has its own colours (the lights follow each view's camera), recomputed
+just before that view renders when the surface, its colouring or the camera
+changed; the four views share the tongue's points.
 """
 
 from __future__ import annotations
@@ -14,6 +21,8 @@ import numpy as np
 import scipy.sparse as sp
 
 import pyvista as pv
+
+from tonguevis.render.shading import shade
 
 MAIN, TOP, FRONT, LATERAL = 0, 1, 2, 3
 VIEW_NAMES = {TOP: "top", FRONT: "front", LATERAL: "lateral (right side)"}
@@ -46,6 +55,12 @@ BACKGROUND = "#2b303a"
 #: two back lights and fill light add little to a surface seen from the front.  (direction
 #: in camera coordinates, intensity); the head light has no direction.
 LIGHTS = (((0.6, 0.8, 1.0), 0.75), (None, 0.45))
+#: The tongue's material (VTK's: ambient, diffuse, specular, specular power) and the shells'.
+TONGUE_MATERIAL = dict(ambient=0.0, diffuse=1.0, specular=0.3, specular_power=15.0)
+CONTEXT_MATERIAL = dict(ambient=0.0, diffuse=1.0, specular=0.0, specular_power=1.0)
+#: Opacity of a closed shell (jaw, palate) in the main view: drawn with its back faces culled,
+#: one layer of it shows where two (near and far wall) used to, so 0.2 ≈ 1 - (1 - 0.12)².
+CONTEXT_OPACITY = 0.2
 #: Caption font sizes in pixels (the time and frame in the main view, the direction in the small ones).
 CAPTION_PX = {"main": 15, "small": 12}
 
@@ -109,6 +124,42 @@ def faces_to_vtk(faces: np.ndarray) -> np.ndarray:
     return np.hstack([np.full((len(faces), 1), 3, dtype=np.int64), faces]).ravel()
 
 
+def sharing_geometry(surface: pv.PolyData) -> pv.PolyData:
+    """A PolyData drawing ``surface``'s points and triangles (the same VTK objects: writing
+    ``surface.points`` in place moves both), with point data of its own (a view's colours)."""
+    view = pv.PolyData()
+    view.SetPoints(surface.GetPoints())
+    view.SetPolys(surface.GetPolys())
+    return view
+
+
+def is_closed(faces: np.ndarray) -> bool:
+    """Whether a triangle surface (f, 3) is closed: every edge is shared by exactly two triangles."""
+    faces = np.asarray(faces, dtype=np.int64)
+    if not len(faces):
+        return False
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return bool(np.all(counts == 2))
+
+
+def outward_normals(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(n, 3) vertex normals of a triangle surface, pointing out of it if it is closed
+    (a surface wound inwards is turned: the lighting of a closed shell is one-sided)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    p = np.asarray(points, dtype=np.float64)
+    if is_closed(faces):
+        a, b, c = (p[faces[:, k]] for k in range(3))
+        if np.einsum("ij,ij->i", a, np.cross(b, c)).sum() < 0.0:  # 6 × signed volume
+            faces = faces[:, ::-1]
+    return VertexNormals(faces, len(p))(p)
+
+
+def _faces_of(surface: pv.PolyData) -> np.ndarray:
+    """(f, 3) triangles of a triangulated PolyData."""
+    return np.asarray(surface.faces).reshape(-1, 4)[:, 1:]
+
+
 class VertexNormals:
     """Area-weighted vertex normals of a triangle surface, vectorised (the surface
     deforms every frame, so shading normals are recomputed in place)."""
@@ -152,13 +203,25 @@ class TongueScene:
         self._mode = "plain"
         self._clim: dict[str, tuple[float, float]] = {}
         self._titles: dict[str, str] = {}
+        #: Per view: the tongue's PolyData with that view's colours, and the shells' (name -> PolyData).
+        self._tongue_views: dict[int, pv.PolyData] = {}
+        self._context_views: dict[int, dict[str, pv.PolyData]] = {}
+        self._context_normals: dict[str, np.ndarray] = {}
+        self._context_closed: dict[str, bool] = {}
+        self._shaded: dict[tuple, tuple] = {}  # (view, surface name) -> what its colours were computed from
+        self._style = 0  # bumped when the colouring changes (mode, range, lookup table)
+        self._lut = None
+        self._colours = None  # (what they were computed from, (colours, normals, points)) of the surface nodes
+        #: The nodes on the tongue's surface, the only ones lit and drawn.
+        self.shaded_nodes = np.zeros(0, dtype=np.int64)
         plotter.set_background(BACKGROUND)
-        for renderer in plotter.renderers:
+        for index, renderer in enumerate(plotter.renderers):
             # Plain alpha blending for the jaw and palate: VTK's order-independent
             # transparency costs extra full-screen passes (3x the frame under software GL),
             # and two convex-ish context shells need no exact ordering.
             renderer.SetUseOIT(False)
             set_lights(renderer)
+            renderer.AddObserver("StartEvent", lambda *_a, index=index: self.shade_view(index))
 
     def _each_view(self):
         for index in (MAIN, TOP, FRONT, LATERAL):
@@ -193,7 +256,13 @@ class TongueScene:
         self._context_rest = {name: np.array(surface.points, dtype=np.float32) for name, surface in self.context.items()}
         self._context_offsets = {name: np.zeros(3) for name in self.context}
         self.view_labels = {}
-        self._luts = {"contact": _contact_lut(self._clim.get("contact", (0.0, 1.0)))}
+        self._luts = {"contact": _contact_lut(self._clim.get("contact", (0.0, 1.0))),
+                      "default": pv.LookupTable(cmap=COLORMAP, n_values=256)}
+        self._context_normals = {name: outward_normals(surface.points, _faces_of(surface))
+                                 for name, surface in self.context.items()}
+        self._context_closed = {name: is_closed(_faces_of(surface)) for name, surface in self.context.items()}
+        self._tongue_views, self._context_views, self._shaded, self._colours = {}, {}, {}, None
+        self.shaded_nodes = np.unique(np.asarray(faces, dtype=np.int64))
         points = np.asarray(points, dtype=np.float32)
         self._normals = VertexNormals(faces, len(points))
         self.surface = pv.PolyData(points.copy(), faces_to_vtk(faces))
@@ -209,13 +278,10 @@ class TongueScene:
         self.context_actors = []
         for index in self._each_view():
             main = index == MAIN
-            actor = plotter.add_mesh(
-                self.surface, scalars="value", cmap=COLORMAP, clim=(0.0, 1.0), show_scalar_bar=False,
-                specular=0.3, specular_power=15, name=f"tongue{index}", reset_camera=False,
-            )
-            # Colours mapped at the nodes and interpolated (the nodes are 2-3 mm apart): mapping
-            # per pixel through a colour texture cost a quarter of the tongue's drawing.
-            actor.mapper.interpolate_before_map = False
+            tongue = self._tongue_views[index] = sharing_geometry(self.surface)
+            tongue.point_data["rgb"] = np.zeros((len(points), 3), dtype=np.uint8)
+            # Lit at the vertices (shade_view), drawn unlit: colours interpolated between nodes.
+            actor = _add_lit_surface(plotter, tongue, f"tongue{index}")
             self.surface_actors.append(actor)
             if n_sensors:
                 plotter.add_mesh(self.sensors, color=SENSOR_COLOUR, point_size=14 if main else 8,
@@ -226,15 +292,26 @@ class TongueScene:
                                  name=f"residuals{index}", reset_camera=False)
             # Transparent context costs a second render pass per view (most of a frame under
             # software OpenGL): draw it where it tells most, the main and the lateral views.
+            # A closed shell is drawn without its back faces: its far wall behind its near one
+            # doubled the translucent pixels, the costliest part of a frame under software GL.
+            self._context_views[index] = {}
             for name, surface in self.context.items() if index in CONTEXT_VIEWS else ():
-                colour, opacity = (context_style or {}).get(name, (CONTEXT_COLOUR, 0.12))
-                context_actor = plotter.add_mesh(surface, color=colour, opacity=opacity if main else 0.8 * opacity,
-                                                 name=f"{name}{index}", reset_camera=False, show_scalar_bar=False)
+                colour, opacity = (context_style or {}).get(name, (CONTEXT_COLOUR, CONTEXT_OPACITY))
+                shell = self._context_views[index][name] = sharing_geometry(surface)
+                shell.point_data["rgb"] = np.zeros((surface.n_points, 3), dtype=np.uint8)
+                shell.field_data["colour"] = np.asarray(pv.Color(colour).float_rgb)
+                context_actor = _add_lit_surface(plotter, shell, f"{name}{index}",
+                                                 opacity=opacity if main else 0.8 * opacity,
+                                                 cull_back=self._context_closed[name])
                 context_actor.SetVisibility(self.context_visible)
                 self.context_actors.append(context_actor)
             if main:
+                from pyvista.plotting.mapper import DataSetMapper
+
+                bar_mapper = DataSetMapper(self.surface)
+                bar_mapper.lookup_table = self._luts["default"]
                 self.scalar_bar = plotter.add_scalar_bar(
-                    title="", mapper=actor.mapper, vertical=True, n_labels=4, fmt="%.3g",
+                    title="", mapper=bar_mapper, vertical=True, n_labels=4, fmt="%.3g",
                     position_x=0.9, position_y=0.25, width=0.045, height=0.5, title_font_size=12,
                     label_font_size=11,
                 )
@@ -248,7 +325,6 @@ class TongueScene:
             else:
                 self.view_labels[index] = Caption(plotter, VIEW_NAMES[index], CAPTION_PX["small"], f"label{index}")
                 plotter.enable_parallel_projection()
-        self._default_lut = self.surface_actors[0].mapper.lookup_table
         self.reset_cameras()
         self.set_mode(self._mode)
 
@@ -302,16 +378,14 @@ class TongueScene:
     def set_mode(self, mode: str) -> None:
         """Colour by ``mode`` ('displacement', 'energy', 'contact' or 'plain')."""
         self._mode = mode
+        self._style += 1
         plain = mode not in self._clim
         contact = mode == "contact" and not plain
-        lut = self._luts["contact"] if contact else getattr(self, "_default_lut", None)
-        for actor in self.surface_actors:
-            actor.mapper.scalar_visibility = not plain
-            actor.prop.color = TONGUE_COLOUR
-            if lut is not None:
-                actor.mapper.lookup_table = lut
-            if not plain:
-                actor.mapper.scalar_range = self._clim[mode]
+        luts = getattr(self, "_luts", {})
+        lut = luts.get("contact") if contact else luts.get("default")
+        self._lut = None if plain else lut
+        if lut is not None and not plain:
+            lut.scalar_range = self._clim[mode]
         if self.scalar_bar is not None:
             self.scalar_bar.SetVisibility(not plain)
             self.scalar_bar.SetTitle(self._titles.get(mode, ""))
@@ -340,6 +414,76 @@ class TongueScene:
     def mode(self) -> str:
         return self._mode
 
+    @property
+    def lookup_table(self):
+        """The lookup table colouring the tongue (its range the mode's), None when plain."""
+        return self._lut
+
+    # -- shading ---------------------------------------------------------------------
+    def tongue_colours(self) -> np.ndarray:
+        """(m, 3) the unlit colours in [0, 1] of the tongue's surface nodes (:attr:`shaded_nodes`):
+        its scalars through the lookup table, or the plain tongue colour."""
+        return self._tongue_state()[0]
+
+    def _tongue_state(self) -> tuple:
+        """The surface nodes' (colours, normals, positions) for this frame, computed once for the
+        four views (when the surface, its scalars or the colouring changed)."""
+        key = (self.surface.GetMTime(), self._style)
+        if self._colours is not None and self._colours[0] == key:
+            return self._colours[1]
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+
+        nodes = self.shaded_nodes
+        data = self.surface.GetPointData()
+        if self._lut is None:
+            colours = np.broadcast_to(np.asarray(pv.Color(TONGUE_COLOUR).float_rgb), (len(nodes), 3))
+        else:
+            import vtk
+            from vtkmodules.util.numpy_support import numpy_to_vtk
+
+            values = np.ascontiguousarray(vtk_to_numpy(data.GetArray("value"))[nodes])
+            mapped = self._lut.MapScalars(numpy_to_vtk(values), vtk.VTK_COLOR_MODE_MAP_SCALARS, -1, vtk.VTK_RGB)
+            colours = vtk_to_numpy(mapped).reshape(len(nodes), 3) / 255.0
+        normals = vtk_to_numpy(data.GetArray("Normals"))[nodes]
+        points = vtk_to_numpy(self.surface.GetPoints().GetData())[nodes]
+        self._colours = (key, (colours, normals, points))
+        return self._colours[1]
+
+    def shade_view(self, index: int) -> None:
+        """Light view ``index``'s tongue and shells for its camera, where anything they depend on
+        changed (called as the view starts rendering)."""
+        if self.surface is None or index not in self._tongue_views or index >= len(self.surface_actors):
+            return  # not built yet (a view may render while build() adds its actors)
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+
+        camera = self.plotter.renderers[index].GetActiveCamera()
+        view = _matrix(camera.GetViewTransformMatrix())
+        parallel = bool(camera.GetParallelProjection())
+        # The camera's own MTime changes at every render (its clipping range is reset): the
+        # view matrix is what the lighting depends on.
+        seen = (view.tobytes(), parallel, self._style)
+        key = seen + (self.surface.GetMTime(),)
+        if self._shaded.get((index, "tongue")) != key and self.surface_actors[index].GetVisibility():
+            colours, normals, points = self._tongue_state()
+            rgb = self._tongue_views[index].GetPointData().GetArray("rgb")
+            vtk_to_numpy(rgb)[self.shaded_nodes] = shade(colours, normals, points, view, LIGHTS,
+                                                         parallel=parallel, **TONGUE_MATERIAL)
+            rgb.Modified()
+            self._shaded[(index, "tongue")] = key
+        if not self.context_visible:
+            return
+        for name, shell in self._context_views.get(index, {}).items():
+            # A closed shell without highlights is lit the same wherever it is moved to.
+            moves = not self._context_closed[name] or CONTEXT_MATERIAL["specular"] > 0.0
+            key = seen + ((self.context[name].GetMTime(),) if moves else ())
+            if self._shaded.get((index, name)) == key:
+                continue
+            colour = vtk_to_numpy(shell.GetFieldData().GetArray("colour"))
+            shell.point_data["rgb"][:] = shade(
+                colour, self._context_normals[name], self.context[name].points, view, LIGHTS,
+                parallel=parallel, two_sided=not self._context_closed[name], **CONTEXT_MATERIAL)
+            self._shaded[(index, name)] = key
+
     def reset_cameras(self) -> None:
         """Put every view back to its standard direction, fitted to the scene."""
         if self.surface is None:
@@ -362,6 +506,34 @@ class TongueScene:
             else:
                 camera.zoom(1.3)
         self.plotter.subplot(MAIN)
+
+
+def _add_lit_surface(plotter, surface: pv.PolyData, name: str, opacity: float = 1.0, cull_back: bool = False):
+    """Add ``surface`` drawn unlit in the colours of its "rgb" point array (lit by
+    :meth:`TongueScene.shade_view`) to the plotter's active view; returns the actor.
+
+    The mapper reads the array itself: pyvista's ``add_mesh(scalars=...)`` puts a Python
+    algorithm before the mapper that copies the surface every time it changes (every frame).
+    """
+    from pyvista.plotting.mapper import DataSetMapper
+
+    mapper = DataSetMapper()
+    mapper.SetInputData(surface)
+    mapper.SetScalarModeToUsePointFieldData()
+    mapper.SelectColorArray("rgb")
+    mapper.SetColorModeToDirectScalars()
+    mapper.ScalarVisibilityOn()
+    actor = pv.Actor(mapper=mapper)
+    actor.prop.lighting = False
+    actor.prop.opacity = opacity
+    actor.prop.SetBackfaceCulling(bool(cull_back))
+    plotter.add_actor(actor, reset_camera=False, name=name, pickable=False)
+    return actor
+
+
+def _matrix(vtk_matrix) -> np.ndarray:
+    """A vtkMatrix4x4 as a (4, 4) array."""
+    return np.array([[vtk_matrix.GetElement(r, c) for c in range(4)] for r in range(4)])
 
 
 def _contact_lut(clim: tuple[float, float]) -> "pv.LookupTable":
