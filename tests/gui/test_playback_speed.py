@@ -143,3 +143,60 @@ def test_three_d_views_are_painted_in_software_one_render_per_frame(qtbot, windo
     assert new_frames > 3
     assert plotter.renders - renders <= new_frames + 1  # one render per frame (a paint may add one)
     assert draws == [], draws  # cursors move on an overlay: no canvas is redrawn while playing
+
+
+def _pixels(image) -> np.ndarray:
+    """(h, w, 3) RGB of a QImage."""
+    from PySide6.QtGui import QImage
+
+    image = image.convertToFormat(QImage.Format.Format_RGB888)
+    rows = np.frombuffer(image.constBits(), dtype=np.uint8).reshape(image.height(), image.bytesPerLine())
+    return rows[:, : 3 * image.width()].reshape(image.height(), image.width(), 3).copy()
+
+
+def test_a_new_frame_renders_at_once_and_the_paint_shows_the_latest(qtbot):
+    """A frame change renders the views at once (Mesa rasterises it while the GUI thread goes on
+    with the plots), and the paint shows that render without rendering again; a second change
+    before the paint makes the paint render the newer frame, never show the stale one."""
+    import pyvista as pv
+    from PySide6.QtGui import QGuiApplication
+
+    from tonguevis.gui.image_views import ImageInteractor
+
+    if QGuiApplication.platformName() != "xcb":
+        pytest.skip("image views are used on X11 only")
+    plotter = ImageInteractor(None)
+    qtbot.addWidget(plotter)
+    plotter.setFixedSize(320, 240)
+    sphere = pv.Sphere(radius=0.5)
+    rest = np.array(sphere.points)
+    plotter.add_mesh(sphere, color="white")
+    plotter.set_background("black")
+    plotter.show()
+    qtbot.waitExposed(plotter)
+    qtbot.wait(200)
+
+    def move(dx: float) -> None:
+        sphere.points[:] = rest + [dx, 0.0, 0.0]
+
+    renders, paints = plotter.renders, plotter.paints
+    move(0.3)
+    plotter.request_render()
+    assert plotter.renders == renders + 1  # rendered before any paint
+    qtbot.waitUntil(lambda: plotter.paints > paints, timeout=5000)
+    assert plotter.renders == renders + 1  # the paint showed that render
+    shown_right = _pixels(plotter._image)
+
+    renders, paints = plotter.renders, plotter.paints
+    move(-0.1)
+    plotter.request_render()  # rendered, not painted yet...
+    move(-0.3)
+    plotter.request_render()  # ...and already stale
+    qtbot.waitUntil(lambda: plotter.paints > paints, timeout=5000)
+    assert plotter.renders == renders + 2
+    shown = _pixels(plotter._image)
+    expected = np.asarray(plotter.screenshot(return_img=True))[..., :3]
+    assert shown.shape == expected.shape
+    assert np.abs(shown.astype(int) - expected).mean() < 0.5  # the sphere moved left
+    assert np.abs(shown.astype(int) - shown_right).mean() > 5  # not where it was
+    plotter.close()

@@ -14,8 +14,11 @@ under llvmpipe).
 
 :class:`ImageInteractor` renders off screen (VTK's own frame buffers, no
 window, no swap), reads the frame back (one copy, ~1 ms) and paints it as an
-image: Qt draws the window in software as if there were no OpenGL at all,
-``QWidget.grab`` sees the 3D views, and the pixels are VTK's, unchanged.
+image.  A new frame is rendered when it is asked for (:meth:`~ImageInteractor.request_render`)
+and read back at the paint: in between, Mesa rasterises it on its threads while
+the GUI thread moves the plots' cursors and labels.  Qt draws the window in
+software as if there were no OpenGL at all, ``QWidget.grab`` sees the 3D views,
+and the pixels are VTK's, unchanged.
 Mouse and keys go to VTK's interactor as in VTK's ``QVTKRenderWindowInteractor``
 (whose event handlers it reuses), so the views rotate, pan and zoom as before.
 
@@ -83,6 +86,11 @@ def _offscreen_render_window():
         if not window.IsA("vtkEGLRenderWindow"):
             window = vtkRenderWindow()
     window.SetOffScreenRendering(1)
+    # Nothing to swap off screen, and Mesa's eglSwapBuffers on the pbuffer waits until the frame
+    # is rasterised: without it, Render() returns once the frame is submitted, llvmpipe's threads
+    # rasterise it while the GUI thread goes on with the rest of the frame (the plots' cursors,
+    # the labels), and the read-back at the paint waits only for what is left.
+    window.SetSwapBuffers(0)
     return window
 
 
@@ -162,19 +170,42 @@ class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
         BasePlotter._check_has_ren_win(self)
 
     def render(self) -> None:
-        """Render now and show the result at the next paint (no-op once closed)."""
+        """Render now and show the result at the next paint (no-op once closed).
+
+        Returns once the frame is submitted: releasing the context flushes it (EGL), and
+        Mesa's threads rasterise it until the paint reads it back."""
         if getattr(self, "_closed", False):
             return
         BasePlotter.render(self)
         self._RenderWindow.ReleaseCurrent()
 
     def screenshot(self, *args, **kwargs):
-        """pyvista's screenshot, leaving no context of ours current (see :meth:`_on_rendered`)."""
+        """pyvista's screenshot, leaving no context of ours current (see :meth:`_on_rendered`).
+
+        pyvista reads VTK's front buffer, which only the (otherwise switched off) buffer swap
+        fills: the scene is rendered once more with the swap on."""
+        window = self._RenderWindow
+        if window is None:
+            return BasePlotter.screenshot(self, *args, **kwargs)
+        window.SetSwapBuffers(1)
         try:
+            window.Render()
             return BasePlotter.screenshot(self, *args, **kwargs)
         finally:
-            if self._RenderWindow is not None:
-                self._RenderWindow.ReleaseCurrent()
+            window.SetSwapBuffers(0)
+            window.ReleaseCurrent()
+
+    def request_render(self) -> None:
+        """The scene changed: render it now, so that it rasterises while the GUI thread goes on,
+        and paint it at the next paint; a render done but not painted yet is stale, and the
+        paint renders again instead (one render per paint while the scene keeps changing)."""
+        if getattr(self, "_closed", False):
+            return
+        if self._rendered:
+            self._rendered = False
+            QWidget.update(self)
+            return
+        self.render()
 
     def _on_rendered(self, *_args) -> None:
         # Our EGL context is released after each use (render, read-back, screenshot): left

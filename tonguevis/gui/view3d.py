@@ -220,9 +220,13 @@ class View3D(QWidget):
         self.described.emit(contact_line(self.session, i, reference))
         for hook in list(self.frame_hooks.values()):
             hook(i, drawn)
-        # One render per frame: the widget's paint renders the scene (pyvistaqt's paintGL
-        # always renders), so asking for a repaint instead of render() avoids a second one.
-        self.plotter.interactor.update()
+        # One render per frame: the image view renders now and paints later (the frame
+        # rasterises meanwhile); pyvistaqt's paintGL always renders, so there a repaint is asked.
+        request = getattr(self.plotter.interactor, "request_render", None)
+        if request is not None:
+            request()
+        else:
+            self.plotter.interactor.update()
         self.renders += 1
 
     def _on_colour(self, event) -> None:
