@@ -6,6 +6,7 @@ from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QLabel, QSlider, QToolButton, QWidget
 
 from tonguevis.appstate import AppState, interval_at
+from tonguevis.gui.elastic_label import ElasticLabel
 
 SPEEDS = (0.25, 0.5, 0.75, 1.0)
 
@@ -25,8 +26,7 @@ class TransportBar(QWidget):
         self.loop = QCheckBox("loop production", toolTip="loop over the production under the cursor")
         self.slider = QSlider(Qt.Orientation.Horizontal)
         self.slider.setRange(0, 0)
-        self.label = QLabel()
-        self.label.setMinimumWidth(190)
+        self.label = ElasticLabel(minimum_width=190)  # "production 3/15" or not: no resize while playing
         layout = QHBoxLayout(self)
         layout.setContentsMargins(4, 2, 4, 2)
         for widget in (self.back, self.play, self.forward, self.speed, self.loop):
