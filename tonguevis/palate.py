@@ -42,6 +42,19 @@ class PalateError(TonguevisError):
     """A palate trace or file that cannot make a palate."""
 
 
+def check_mesh_path(path) -> Path:
+    """``path`` if its extension names a mesh format meshio writes (.stl, .obj, .vtk, .ply ...),
+    else :class:`PalateError` naming the file (checked before the work, not after it)."""
+    import meshio
+
+    path = Path(path)
+    if path.suffix.lower() not in meshio.extension_to_filetypes:
+        raise PalateError(f"{path.suffix or 'no extension'} is not a surface mesh format; give the palate file "
+                          "an extension such as .stl, .obj, .vtk or .ply (the grid is written beside it as "
+                          "<name>.palate.npz)", path)
+    return path
+
+
 @dataclass
 class PalateSurface:
     """A palate as a height field z = h(x, y), metres, in its own (recording) frame.
@@ -125,12 +138,13 @@ class PalateSurface:
 
     def save(self, path) -> None:
         """Write the surface mesh (.stl, .obj, .vtk, .ply ... by meshio; metres) and the grid beside it
-        (``<name>.palate.npz``, read back by :meth:`load`), each through a temporary file."""
+        (``<name>.palate.npz``, read back by :meth:`load`), each through a temporary file.
+        Raises :class:`PalateError` for a file type that is not a surface mesh's."""
         import meshio
 
         from tonguevis._files import atomic_write
 
-        path = Path(path)
+        path = check_mesh_path(path)
         pts, tris = self.triangles()
         atomic_write(path, lambda tmp: meshio.write(tmp, meshio.Mesh(pts, [("triangle", tris)])))
         meta = json.dumps(self.metadata, default=float)

@@ -157,6 +157,22 @@ def test_palate_files_round_trip(tmp_path):
     np.testing.assert_allclose(mesh_only.clearance(pts)[0], surface.clearance(pts)[0], atol=2e-4)
 
 
+def test_a_palate_file_that_is_not_a_mesh_format_is_refused_before_the_fit(tmp_path, capsys):
+    """`--out palate.npz` used to end in meshio's traceback after the whole fit; now the command
+    stops at once (the traces are not even read: this one does not exist) with one line naming
+    the file, and save() refuses it too, writing nothing."""
+    from tonguevis.cli import main
+    from tonguevis.palate import PalateError
+
+    out = tmp_path / "palate.npz"
+    assert main(["palate", str(tmp_path / "missing_trace.tsv"), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(out) in err[0] and ".npz is not a surface mesh format" in err[0]
+    with pytest.raises(PalateError, match="no extension"):
+        plane(0.01).save(tmp_path / "palate")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_the_speakers_palate_from_the_real_traces():
     from tonguevis.io import read_recording
     from tonguevis.palate import midline_of, trace_points

@@ -28,10 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from tonguevis.palate import PalateError, palate_from_traces
+    from tonguevis.palate import check_mesh_path, palate_from_traces
 
-    if not args.out.suffix:
-        raise PalateError("give the mesh a file extension (.stl, .obj, .vtk, .ply ...)", args.out)
+    check_mesh_path(args.out)
     surface = palate_from_traces(args.traces, args.probe, args.sensors)
     for path, count in surface.metadata["samples"].items():
         print(f"{path}: {count} probe samples")
