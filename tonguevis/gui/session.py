@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from tonguevis._memory import release_freed_memory
 from tonguevis.errors import RecordingError, TonguevisError
 from tonguevis.io.recording import Recording
 
@@ -224,6 +225,7 @@ def load_session(path: str | os.PathLike, sensor_map: dict | str | None = None, 
     session = make_session(recording, path)
     if rest is not None:
         session.given_rest = check_rest_interval(recording, rest, session.rest_sensors())
+    release_freed_memory()  # reading and finding the productions of a long recording leave much freed
     return session
 
 

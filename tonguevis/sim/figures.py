@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tonguevis._memory import release_freed_memory
 from tonguevis._progress import ProgressCallback, report
 from tonguevis.sim.model import CHUNK_FRAMES
 
@@ -147,18 +148,5 @@ def frame_figures(model, q: np.ndarray, warping: bool = True, backend: str = "wa
         with single_threaded_blas(), ThreadPoolExecutor(workers) as pool:
             for result in pool.map(measure, starts[1:]):
                 store(result)
-        _release_freed_memory()
+        release_freed_memory()
     return FrameFigures(volume, largest, pen, area)
-
-
-def _release_freed_memory() -> None:
-    """Hand the chunks' freed memory back to the system: glibc keeps what each worker thread
-    freed in that thread's arena (about 100 MB a worker, resident until the process ends)."""
-    import ctypes
-    import sys
-
-    if sys.platform.startswith("linux"):
-        try:
-            ctypes.CDLL("libc.so.6").malloc_trim(0)
-        except (OSError, AttributeError):  # not glibc (musl): nothing kept that way
-            pass

@@ -6,6 +6,7 @@ import logging
 
 import numpy as np
 
+from tonguevis._memory import release_freed_memory
 from tonguevis._progress import ProgressCallback, report
 from tonguevis.io.recording import Recording
 from tonguevis.preprocess.rest import RestChoice
@@ -108,6 +109,7 @@ def simulate(
         contact = _contact_context(palate, prep, model, basis, recording)
     targets, compliance, schedule = drive_schedule(prep.displacement, recording.rate, basis.eigenvalues, phi_s,
                                                    sensor_stiffness, contact=contact)
+    release_freed_memory()  # the preparation's temporaries: 150 MB kept for 30 minutes otherwise
     report(progress, 1, 3, "integrating")
     run = _Run(model, recording, prep, basis, phi_s, w_s, targets, compliance, schedule, warping, backend, modes,
                landmarks, sensor_stiffness, k_ref, contact)
@@ -148,6 +150,7 @@ def simulate(
         figures = frame_figures(model, result.q, warping, backend, None if contact is None else
                                 _contact_probe(contact, schedule, model), progress=_stage(progress, 2, 3))
     motion = run.motion(result, figures, len(targets))
+    release_freed_memory()
     report(progress, 3, 3, "done")
     return motion
 
