@@ -15,8 +15,10 @@ process so that its peak resident memory (``ru_maxrss``) is its own:
   exists, and ``simulate_paraview_surface`` with ``--surface-only``; before it,
   ``--out`` itself wrote the per-frame ``.vtu`` series);
 - ``view``: the app headless (Xvfb): create the window, open the recording,
-  wait for the first tongue frame drawn; then 200 steps of playback and 50
-  random seeks, each drawn, as milliseconds per frame.
+  wait for the first tongue frame drawn (``first_frame_s``; a long recording's
+  first seconds are drawn while the rest simulates: ``first_frame_preview``),
+  then for the whole motion (``whole_motion_s``); then 200 steps of playback
+  and 50 random seeks, each drawn, as milliseconds per frame.
 
 The same script runs on any checkout (it puts its own repository first on
 the children's ``PYTHONPATH``), so ``git worktree add /tmp/before COMMIT`` and a
@@ -158,11 +160,20 @@ def child_view(file: Path, started: float) -> dict:
         view = window.view3d
         return (window.session is not None and window.session.frames is not None and view.renders > 0)
 
-    def measure() -> None:
-        view, state = window.view3d, window.state
-        view.plotter.render()
+    def first_frame() -> None:
+        # A long recording's first seconds are drawn before the rest is simulated: that is the first frame.
+        window.view3d.plotter.render()
         result["first_frame_s"] = time.perf_counter() - started
         result["peak_mb_at_first_frame"] = _peak_mb()
+        motion = window.session.frames.motion
+        result["first_frame_of_frames"] = int(motion.n_frames)
+        result["first_frame_preview"] = "preview" in motion.metadata
+
+    def measure() -> None:
+        # Playback and seeking on the whole motion, once it is simulated.
+        view, state = window.view3d, window.state
+        view.plotter.render()
+        result["whole_motion_s"] = time.perf_counter() - started
         frames = window.session.frames
         n = frames.n_frames
         start = frames.frame_at(state.time)
@@ -180,8 +191,12 @@ def child_view(file: Path, started: float) -> dict:
         window.close()
         app.exit(0)
 
+    finished = []
+
     def poll() -> None:
-        if first_frame_drawn():
+        if "first_frame_s" not in result and first_frame_drawn():
+            first_frame()
+        if "first_frame_s" in result and finished:
             timer.stop()
             QTimer.singleShot(0, measure)
 
@@ -189,6 +204,7 @@ def child_view(file: Path, started: float) -> dict:
         if not ok:
             result["error"] = window.statusBar().currentMessage() or "simulation failed"
             app.exit(1)
+        finished.append(ok)
 
     window.simulation_finished.connect(failed)
     timer = QTimer()

@@ -39,6 +39,35 @@ def _endless(progress):
     return "never"
 
 
+def test_a_partial_result_comes_to_the_gui_thread_and_gives_the_window_back(qtbot, parent):
+    """A job handing over a first result: on_partial gets it on the GUI thread, the modal dialog closes
+    and the rest of the progress goes to the status line; then the whole result as usual."""
+    from tonguevis.gui.worker import Job, run_job
+
+    release = threading.Event()
+    partials, done, statuses = [], [], []
+
+    def work(progress, partial):
+        progress(1, 10, "first part")
+        partial("first seconds")
+        release.wait(10)
+        time.sleep(2 * Job.MIN_INTERVAL)  # progress is sent at most every MIN_INTERVAL
+        progress(7, 10, "the rest")
+        return "whole"
+
+    def on_partial(result):
+        partials.append((result, threading.current_thread() is threading.main_thread(), job.dialog.isVisible()))
+
+    job = run_job(parent, "Long", work, done.append, status=statuses.append, on_partial=on_partial,
+                  min_duration_ms=0)
+    qtbot.waitUntil(lambda: bool(partials), timeout=10000)
+    assert partials == [("first seconds", True, True)]  # the dialog was up until the first result
+    assert job.dialog is None and job.isRunning()  # given back while the job goes on
+    with qtbot.waitSignal(job.ended, timeout=10000):
+        release.set()
+    assert done == ["whole"] and statuses == ["Long: the rest (70 %)"]
+
+
 def test_cancel_stops_the_job_and_nothing_is_handed_back(qtbot, parent):
     from tonguevis.gui.worker import run_job
 

@@ -60,3 +60,33 @@ def test_a_two_minute_recording_opens_without_precomputing_every_frame(qtbot, wi
     assert np.allclose(frames.points[i][drawn], (model.mesh.points + u)[drawn], atol=1e-6)
     assert len(drawn) < model.mesh.n_nodes  # the surface only: the inside is not drawn
     assert COLOUR_FRAMES < frames.n_frames and frames.clim["displacement"][1] > 0
+
+
+def test_a_long_recording_shows_its_first_seconds_while_the_rest_simulates(qtbot, window):
+    """The first 20 s are drawn as soon as they are simulated (same frames as the whole motion), the
+    progress dialog gives the window back, the Energy tab waits for the whole motion."""
+    from tonguevis.gui.tabs import add_feature_tabs
+
+    add_feature_tabs(window)
+    seen = []
+
+    def on_motion(event):
+        session = event.value
+        seen.append((session.motion, window.view3d.renders, window.state.end))
+
+    window.state.subscribe("motion", on_motion)
+    energy_motions = []
+    window.energy_tab.motionsLoaded.connect(lambda motions: energy_motions.append(dict(motions)))
+    session = show_and_simulate(qtbot, window, tiled_session(1.0), timeout=240000)
+    assert len(seen) == 2
+    (preview, painted_before, _), (whole, painted_after, end) = seen
+    n = preview.n_frames
+    assert preview.metadata["preview"] == {"frames": n, "of": whole.n_frames}
+    assert 2000 <= n < whole.n_frames and "preview" not in whole.metadata
+    np.testing.assert_array_equal(preview.q, whole.q[:n])
+    np.testing.assert_array_equal(preview.volume_change, whole.volume_change[:n])
+    assert painted_before > 0  # the preview was drawn (nothing is before a motion) before the whole came
+    assert end == pytest.approx(whole.times[-1])  # the time range grew to the whole recording
+    assert session.motion is whole and session.frames.n_frames == whole.n_frames
+    assert window.worker.dialog is None  # closed at the preview: the window was usable from then on
+    assert energy_motions and all(m is whole for batch in energy_motions for m in batch.values())

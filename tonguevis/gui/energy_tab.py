@@ -142,8 +142,8 @@ class EnergyTab(QtWidgets.QWidget):
     def _on_simulated(self, event) -> None:
         """A recording of the app was simulated: add its production curves."""
         session = event.value
-        if session.motion is None or session.production_table is None:
-            return
+        if session.motion is None or session.production_table is None or "preview" in session.motion.metadata:
+            return  # a long recording's first seconds: its curves come with the whole motion
         try:
             self.add_motion(session.name, session.motion, session.production_table)
         except Exception as exc:  # the main views must not suffer from a tab's problem

@@ -74,6 +74,7 @@ def simulate_motion(
     landmarks: str = "speaker",
     progress: ProgressCallback | None = None,
     palate=None,
+    preview=None,
 ) -> Simulated:
     """Simulate ``recording`` on ``model`` (None: built from ``mesh_path``); returns a :class:`Simulated`.
 
@@ -83,6 +84,9 @@ def simulate_motion(
     user gave one, else found as every front end finds it (:func:`tonguevis.workflows.simulate_recording`).
     ``landmarks``: sensor nodes snapped to the speaker's layout ('speaker') or the paper's placement
     rule ('rule').  ``progress(done, total, message)`` may raise :class:`tonguevis.errors.Cancelled`.
+    ``preview(simulated)``: called once, on this thread, with a :class:`Simulated` of the recording's first
+    seconds as soon as they are final (:func:`tonguevis.sim.simulate`'s preview; a long recording is shown
+    while the rest simulates; not called for a short one, nor with a palate).
     """
     from tonguevis.workflows import simulate_recording
 
@@ -91,6 +95,12 @@ def simulate_motion(
     if model is None:
         model = build_model(mesh_path)
     options = {} if palate is None else {"palate": palate}
+    if preview is not None:
+        def first_seconds(motion) -> None:
+            preview(Simulated(model, motion, MotionFrames(motion), palate,
+                              shown_palate(recording, motion, model, palate)))
+
+        options["preview"] = first_seconds
     motion = simulate_recording(recording, model, modes=modes, warping=warping, landmarks=landmarks,
                                 rest=given_rest, progress=staged(progress, 0, 2, "simulating"), **options)
     shown = shown_palate(recording, motion, model, palate)

@@ -23,7 +23,6 @@ from tonguevis.errors import TonguevisError
 from tonguevis.gui.audio_panel import AudioPlot
 from tonguevis.gui.compare_actions import CompareMixin
 from tonguevis.gui.dialogs import SensorMapDialog, error_box
-from tonguevis.gui.elastic_label import ElasticLabel
 from tonguevis.gui.menus import MenusMixin
 from tonguevis.gui.modal_tab import ModalTab
 from tonguevis.gui.palate_actions import NO_PALATE, PalateMixin
@@ -86,9 +85,7 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         self.playback = PlaybackController(self.state, self)
         self.playback.status.connect(lambda text: self.state.set_status(text, self.playback))
         self.state.set_status("Open a recording (File ▸ Open, or drop a file here)")
-        # The views' frame of reference and the palate contact at the cursor: its length changes
-        # from frame to frame, and must not resize the window (nor the 3D views) while playing.
-        self.frame_status = ElasticLabel("", minimum_width=200)
+        self.frame_status = QLabel("")  # the views' frame of reference and the palate contact at the cursor
         self.frame_status.setStyleSheet("QLabel { border-left: 1px solid #b0b0b0; padding-left: 6px; }")
         self.frame_status.setToolTip("the 3D views' frame of reference (View ▸ Head frame / Jaw frame) and, at the "
                                      "cursor, the palate's penetration and contact area")
@@ -276,9 +273,9 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
             self._simulate(self.session)
 
     def show_session(self, session: Session) -> None:
-        """Show the recording at once (plots, audio), then simulate it."""
+        """Simulate the recording and show it at once (plots, audio) while it simulates."""
+        self._simulate(session)  # first: the job prepares while the views draw the recording
         self.state.set_session(session, source=self)
-        self._simulate(session)
 
     def _session_opened(self, event) -> None:
         """A recording was opened: the window's title, the time range, the sound, the productions."""
@@ -308,7 +305,8 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         """Simulate ``session`` in a job, against ``palate`` (default: the window's).
 
         The job returns the model it used and the motion; nothing is assigned until
-        :meth:`_on_simulated` runs on the GUI thread."""
+        :meth:`_on_simulated` runs on the GUI thread.  A long recording's first seconds come
+        first (:meth:`_on_preview`): the views show them while the rest simulates."""
         from tonguevis.gui.simulation import simulate_motion
 
         self._cancel_worker()
@@ -317,8 +315,9 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         recording, rest = session.recording, session.given_rest
         options = {"modes": self.modes, "warping": self.warping, "landmarks": self.landmarks, "palate": palate}
 
-        def work(progress):
-            return simulate_motion(recording, rest, model=model, mesh_path=mesh_path, progress=progress, **options)
+        def work(progress, partial):
+            return simulate_motion(recording, rest, model=model, mesh_path=mesh_path, progress=progress,
+                                   preview=partial, **options)
 
         def explain(message: str) -> str:
             if palate is None:
@@ -333,7 +332,21 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
                               label=f"Simulating {session.name}…", path=session.path, explain=explain,
                               on_failed=lambda _message: self.simulation_finished.emit(False),
                               on_cancelled=lambda: self.simulation_finished.emit(False),
-                              status=lambda text: self.state.set_status(text, self))
+                              status=lambda text: self.state.set_status(text, self),
+                              on_partial=lambda result: self._on_preview(session, result))
+
+    def _on_preview(self, session: Session, result) -> None:
+        """A long recording's first seconds, simulated (on the GUI thread): shown while the rest simulates
+        in the background (the job's dialog closes; its progress goes on in the status bar)."""
+        if self.state.role_of(session) is None:
+            return  # a newer recording was opened meanwhile
+        result.apply(session)
+        self.state.set_motion(session, self)
+        shown = result.motion.metadata["preview"]
+        self.state.set_status(
+            f"{session.name}: showing the first {result.motion.times[-1] - result.motion.times[0]:.0f} s "
+            f"({shown['frames']} of {shown['of']} frames) while the rest simulates; opening another recording "
+            f"stops it", self)
 
     def _on_simulated(self, session: Session, result, mesh_path) -> None:
         """The job's result, on the GUI thread: the model kept, the motion set on the session and announced."""

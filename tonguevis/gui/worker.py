@@ -36,10 +36,13 @@ class Job(QThread):
     Signals (delivered on the GUI thread): ``progressed(done, total, message)``,
     ``succeeded(result)``, ``failed(message)``, ``cancelled()``, and ``ended(outcome)``
     once the thread has finished (``outcome`` one of :data:`OUTCOMES`).  :meth:`cancel`
-    makes the next progress callback raise :class:`Cancelled`.
+    makes the next progress callback raise :class:`Cancelled`.  With ``partial=True`` the
+    function is also given ``partial(result)`` to hand over a first, incomplete result
+    (``partial_ready(result)``, on the GUI thread) while it goes on.
     """
 
     progressed = Signal(int, int, str)
+    partial_ready = Signal(object)
     succeeded = Signal(object)
     failed = Signal(str)
     cancelled = Signal()
@@ -49,12 +52,14 @@ class Job(QThread):
     #: signal is a queued cross-thread call the GUI thread must process.
     MIN_INTERVAL = 0.05
 
-    def __init__(self, function, parent=None, title: str = "job"):
+    def __init__(self, function, parent=None, title: str = "job", partial: bool = False):
         super().__init__(parent)
         self.function = function
+        self.partial = partial
         self.title = title
         self.outcome: str | None = None
         self.dialog = None
+        self.show_progress = None  # the dialog's progress slot
         self._cancel = False
         self._last = 0.0
         # A method of this object (which lives on the GUI thread): called there, after the thread ended.
@@ -80,7 +85,8 @@ class Job(QThread):
 
     def run(self) -> None:
         try:
-            result = self.function(progress=self._progress)
+            extra = {"partial": self.partial_ready.emit} if self.partial else {}
+            result = self.function(progress=self._progress, **extra)
         except Cancelled:
             self.outcome = "cancelled"
             self.cancelled.emit()
@@ -117,7 +123,8 @@ def run_job(parent, title: str, function: Callable[..., Any], on_done: Callable[
             label: str | None = None, path=None, explain: Callable[[str], str] | None = None,
             on_failed: Callable[[str], None] | None = None, on_cancelled: Callable[[], None] | None = None,
             on_ended: Callable[[str], None] | None = None, status: Callable[[str], None] | None = None,
-            dialog: bool = True, min_duration_ms: int = 300) -> Job:
+            dialog: bool = True, min_duration_ms: int = 300,
+            on_partial: Callable[[Any], None] | None = None) -> Job:
     """Run ``function(progress=...)`` in a :class:`Job` behind a window-modal progress dialog with Cancel.
 
     parent : the widget the dialog and the error dialog belong to (owns the job).
@@ -128,8 +135,11 @@ def run_job(parent, title: str, function: Callable[..., Any], on_done: Callable[
     on_failed(message), on_cancelled(), on_ended(outcome) : more reactions (after the dialog).
     status(text) : where "<title>: cancelled" goes (e.g. the app model's status line).
     dialog : False for no progress dialog (the caller shows progress from ``job.progressed``).
+    on_partial(result) : a first, incomplete result, on the GUI thread (``function`` is then called with
+        ``partial=`` too, see :class:`Job`); once it is in, the window is usable again: the modal
+        dialog closes and the progress goes on in ``status`` ("<title>: <message> (n %)").
     """
-    job = Job(function, parent, title)
+    job = Job(function, parent, title, partial=on_partial is not None)
     if dialog:
         from PySide6.QtCore import Qt
         from PySide6.QtWidgets import QProgressDialog
@@ -148,10 +158,14 @@ def run_job(parent, title: str, function: Callable[..., Any], on_done: Callable[
                 box.setLabelText(message)
 
         job.progressed.connect(show_progress)
+        job.show_progress = show_progress
         job.finished.connect(box.reset)
         job.dialog = box
     if on_done is not None:
         job.succeeded.connect(on_done)
+    if on_partial is not None:
+        job.partial_ready.connect(on_partial)
+        job.partial_ready.connect(lambda _result: _carry_on_in_the_background(job, title, status))
 
     def failed(message: str) -> None:
         show_job_error(parent, f"{title} failed", explain(message) if explain else message, path)
@@ -170,3 +184,15 @@ def run_job(parent, title: str, function: Callable[..., Any], on_done: Callable[
         job.ended.connect(on_ended)
     job.start()
     return job
+
+
+def _carry_on_in_the_background(job: Job, title: str, status: Callable[[str], None] | None) -> None:
+    """After a partial result: close the job's modal dialog (the window is usable) and report the
+    rest of its progress in ``status``, if given."""
+    if job.dialog is not None:
+        job.progressed.disconnect(job.show_progress)
+        job.dialog.reset()
+        job.dialog = None
+    if status is not None:
+        job.progressed.connect(lambda done, total, message: status(
+            f"{title}: {message or 'working'} ({100 * done // max(total, 1)} %)"))
