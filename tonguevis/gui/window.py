@@ -23,6 +23,7 @@ from tonguevis.errors import TonguevisError
 from tonguevis.gui.audio_panel import AudioPlot
 from tonguevis.gui.compare_actions import CompareMixin
 from tonguevis.gui.dialogs import SensorMapDialog, error_box
+from tonguevis.gui.elastic_label import ElasticLabel
 from tonguevis.gui.menus import MenusMixin
 from tonguevis.gui.modal_tab import ModalTab
 from tonguevis.gui.palate_actions import NO_PALATE, PalateMixin
@@ -85,7 +86,9 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         self.playback = PlaybackController(self.state, self)
         self.playback.status.connect(lambda text: self.state.set_status(text, self.playback))
         self.state.set_status("Open a recording (File ▸ Open, or drop a file here)")
-        self.frame_status = QLabel("")  # the views' frame of reference and the palate contact at the cursor
+        # The views' frame of reference and the palate contact at the cursor: its length changes
+        # from frame to frame, and must not resize the window (nor the 3D views) while playing.
+        self.frame_status = ElasticLabel("", minimum_width=200)
         self.frame_status.setStyleSheet("QLabel { border-left: 1px solid #b0b0b0; padding-left: 6px; }")
         self.frame_status.setToolTip("the 3D views' frame of reference (View ▸ Head frame / Jaw frame) and, at the "
                                      "cursor, the palate's penetration and contact area")
