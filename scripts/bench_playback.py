@@ -9,6 +9,10 @@ settle, then plays for a few seconds and counts the frames drawn.  Per frame:
   Render, wall time), and ``views_ms`` the share of each view (its renderer's
   Render); ``render_cpu_ms`` the CPU the process spent in it (every thread:
   Mesa's llvmpipe renders with several);
+  since the image views render off screen with no buffer swap, this is the
+  frame's submission: Mesa's threads rasterise it afterwards, while the GUI
+  thread goes on, and ``readback_ms`` is the wait for what is left of that
+  plus the copy of the pixels at the paint;
 - ``update_ms``: writing the frame's points, scalars and normals in place;
 - ``other_ms``: the rest of the frame (Qt events, the plots' cursors, the
   status line, the transport bar); ``plot_draws``: full matplotlib redraws
@@ -131,6 +135,15 @@ class Timings:
             timings.updates += 1
 
         scene.update = timed_update.__get__(scene)
+        plotter = window.view3d.plotter
+        read_image = getattr(plotter, "_read_image", None)  # the image views' read-back (not pyvistaqt's)
+        if read_image is not None:
+            def timed_read():
+                t = time.perf_counter()
+                read_image()
+                timings.readback += time.perf_counter() - t
+
+            plotter._read_image = timed_read
         render_window = self.render_window = window.view3d.plotter.render_window
         render_window.AddObserver("StartEvent", self._render_start)
         render_window.AddObserver("EndEvent", self._render_end)
@@ -147,7 +160,7 @@ class Timings:
         return self.window.findChildren(FigureCanvasQTAgg)
 
     def reset(self) -> None:
-        self.update = self.render = self.render_cpu = 0.0
+        self.update = self.render = self.render_cpu = self.readback = 0.0
         self.updates = self.renders = self.plot_draws = 0
         self.views = np.zeros(4)
         self.lags: list[float] = []
@@ -219,6 +232,8 @@ def main() -> int:
     parser.add_argument("--modes", type=int, default=100)
     parser.add_argument("--seconds", type=float, default=5.0, help="playback time measured")
     parser.add_argument("--profile", action="store_true", help="print where playback spends its time")
+    parser.add_argument("--profile-sort", default="cumulative", choices=("cumulative", "tottime"),
+                        help="order of the profile: with what each function calls, or its own time")
     parser.add_argument("--no-context", action="store_true", help="without the transparent jaw and palate")
     parser.add_argument("--no-tabs", action="store_true", help="without the Energy, Morph and Segmentation tabs")
     parser.add_argument("--finish-views", action="store_true",
@@ -316,7 +331,7 @@ def main() -> int:
         profiler.disable()
         import pstats
 
-        pstats.Stats(profiler).sort_stats("cumulative").print_stats(30)
+        pstats.Stats(profiler).sort_stats(args.profile_sort).print_stats(30)
     wall, cpu, x_cpu = time.perf_counter() - t0, time.process_time() - c0, cpu_seconds(xpid) - x0
     state.set_playing(False)
     load_after = os.getloadavg()
@@ -327,6 +342,7 @@ def main() -> int:
     frame_ms = 1e3 * wall / n
     render_ms = 1e3 * timings.render / n
     update_ms = 1e3 * timings.update / n
+    readback_ms = 1e3 * timings.readback / n
     views_ms = dict(zip(timings.view_names, np.round(1e3 * timings.views / n, 2).tolist()))
     lags = 1e3 * np.asarray(timings.lags) if timings.lags else np.zeros(1)
     results = {
@@ -338,7 +354,8 @@ def main() -> int:
         "views_finished": args.finish_views,
         "swap_ms": render_ms - float(sum(views_ms.values())),
         "update_ms": update_ms,
-        "other_ms": frame_ms - render_ms - update_ms,
+        "readback_ms": readback_ms,
+        "other_ms": frame_ms - render_ms - update_ms - readback_ms,
         "cpu_ms": 1e3 * cpu / n,
         "x_server_cpu_ms": 1e3 * x_cpu / n if xpid is not None else None,
         "fps_cpu_bound": 1000.0 / max(1e3 * cpu / n, 1e-9),
@@ -369,6 +386,7 @@ def main() -> int:
           + ", ".join(f"{k} {v:.1f}" for k, v in views_ms.items())
           + f", outside the views (blit, swap{'' if args.finish_views else ', rasterising'}) {results['swap_ms']:.1f}"
           + f"; {results['renders_per_frame']:.2f} renders per frame), buffer update {update_ms:.2f} ms, "
+            f"read-back at the paint (rasterising left + copy) {readback_ms:.1f} ms, "
             f"other (Qt, cursors, labels) {results['other_ms']:.1f} ms")
     print(f"  CPU per frame {results['cpu_ms']:.1f} ms (all threads) -> {results['fps_cpu_bound']:.1f} frames/s "
           f"if the process had the CPU it uses; the X server {results['x_server_cpu_ms'] or 0:.1f} ms CPU per frame; "
