@@ -68,11 +68,12 @@ def test_a_long_recording_shows_its_first_seconds_while_the_rest_simulates(qtbot
     from tonguevis.gui.tabs import add_feature_tabs
 
     add_feature_tabs(window)
-    seen = []
+    seen, ranges = [], []
 
     def on_motion(event):
         session = event.value
         seen.append((session.motion, window.view3d.renders, window.state.end))
+        ranges.append(dict(session.frames.clim))
 
     window.state.subscribe("motion", on_motion)
     energy_motions = []
@@ -90,3 +91,10 @@ def test_a_long_recording_shows_its_first_seconds_while_the_rest_simulates(qtbot
     assert session.motion is whole and session.frames.n_frames == whole.n_frames
     assert window.worker.dialog is None  # closed at the preview: the window was usable from then on
     assert energy_motions and all(m is whole for batch in energy_motions for m in batch.values())
+    # the preview's colour ranges from a small sample of its frames, the whole motion's from its own
+    from tonguevis.gui.frames import MotionFrames
+    from tonguevis.gui.simulation import PREVIEW_COLOUR_FRAMES
+
+    assert ranges[0] == MotionFrames(preview, colour_frames=PREVIEW_COLOUR_FRAMES).clim != \
+        MotionFrames(preview).clim
+    assert ranges[1] == session.frames.clim

@@ -95,6 +95,21 @@ def test_the_toggle_shows_every_channel_and_hides_them_again(panel, qtbot):
     assert panel.plot.lines["S0"][0].get_color() == colour  # a channel keeps its colour
 
 
+def test_a_motion_redraws_only_the_displacements(panel):
+    """The app model calls set_session again when the session's motion comes: positions, velocities
+    and accelerations stay as drawn; displacements (from the simulation's rest) are redrawn."""
+    session = panel.session
+    drawn = panel.plot.lines["TT"][0]
+    panel.set_session(session)
+    assert panel.plot.lines["TT"][0] is drawn
+    panel.set_kind("displacement")
+    drawn = panel.plot.lines["TT"][0]
+    panel.set_session(session)
+    assert panel.plot.lines["TT"][0] is not drawn
+    panel.set_session(None)
+    assert panel.session is None
+
+
 def test_displacements_from_rest_despite_a_channel_without_samples():
     """A dead port (S2, all NaN) must not push every sensor's rest to its first sample."""
     from tonguevis.gui.session import Session

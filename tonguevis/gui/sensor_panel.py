@@ -134,6 +134,10 @@ class SensorPanel(QWidget):
         self.kind.setCurrentIndex(list(SIGNAL_KINDS).index(kind))
 
     def set_session(self, session: Session | None) -> None:
+        if session is not None and session is self.session and self.kind.currentData() != "displacement":
+            # Its motion came (the app model calls again): only the displacements, from the simulation's
+            # rest, change; redrawing 30 minutes of traces took a second of the GUI thread each time.
+            return
         self.session = session
         self.sensor.blockSignals(True)
         self.sensor.clear()

@@ -20,6 +20,9 @@ from tonguevis.gui.session import Session
 
 log = logging.getLogger("tonguevis")
 
+#: Frames sampled for the colour ranges of a preview (the whole motion samples up to frames.COLOUR_FRAMES).
+PREVIEW_COLOUR_FRAMES = 200
+
 
 def build_model(mesh_path: str | os.PathLike | None = None):
     """The default tongue model, or one on the mesh at ``mesh_path``."""
@@ -97,7 +100,8 @@ def simulate_motion(
     options = {} if palate is None else {"palate": palate}
     if preview is not None:
         def first_seconds(motion) -> None:
-            preview(Simulated(model, motion, MotionFrames(motion), palate,
+            # Colour ranges from a sample of the first seconds: the whole motion brings its own.
+            preview(Simulated(model, motion, MotionFrames(motion, colour_frames=PREVIEW_COLOUR_FRAMES), palate,
                               shown_palate(recording, motion, model, palate)))
 
         options["preview"] = first_seconds
