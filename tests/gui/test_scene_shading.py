@@ -188,3 +188,27 @@ def test_closed_shells_are_culled_and_lit_from_outside(plotters):
     # The shell's side towards the main camera is lit, so not black.
     rgb = np.array(scene._context_views[MAIN]["jaw"].point_data["rgb"]).astype(int)
     assert rgb.max() > 100
+
+
+def test_the_closed_tongue_skips_its_far_side_whichever_way_it_is_wound(plotters):
+    """The opaque tongue is drawn without its inside (back faces, or front faces for triangles wound
+    inwards) and lit from outside: both windings give the same picture as drawing every face."""
+    pictures = []
+    for winding in ("outwards", "inwards", "all faces"):
+        plotter = pv.Plotter(off_screen=True, shape="1|3", splitting_position=0.72, window_size=(480, 300))
+        plotters.append(plotter)
+        scene = TongueScene(plotter)
+        tongue = pv.Sphere(radius=0.02, theta_resolution=24, phi_resolution=24)
+        faces = np.asarray(tongue.faces).reshape(-1, 4)[:, 1:]
+        scene.build(np.asarray(tongue.points), faces[:, ::-1] if winding == "inwards" else faces,
+                    clim={"displacement": (0.0, 1.0)})
+        actor = scene.surface_actors[MAIN]
+        culled = (actor.prop.GetBackfaceCulling(), actor.prop.GetFrontfaceCulling())
+        assert culled == {"outwards": (True, False), "inwards": (False, True), "all faces": (True, False)}[winding]
+        if winding == "all faces":
+            for each in scene.surface_actors:
+                each.prop.SetBackfaceCulling(False)
+        pictures.append(_render(plotter))
+    assert np.abs(pictures[0] - pictures[2]).max() == 0
+    assert np.abs(pictures[1] - pictures[2]).mean() < 0.5  # same light from outside (rounding only)
+    assert (pictures[0].sum(axis=-1) > 150).mean() > 0.05  # a lit tongue, not a dark one
