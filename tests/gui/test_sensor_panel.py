@@ -110,6 +110,45 @@ def test_a_motion_redraws_only_the_displacements(panel):
     assert panel.session is None
 
 
+def test_a_long_trace_is_drawn_as_its_envelope():
+    """Past MAX_TRACE_POINTS samples a trace is its lowest and highest value per bin: the same extremes,
+    gaps kept, a bounded number of points; a short one is drawn sample by sample."""
+    from tonguevis.gui.sensor_panel import MAX_TRACE_POINTS, TRACE_BINS, envelope_trace
+
+    rng = np.random.default_rng(1)
+    n = 3 * MAX_TRACE_POINTS + 17
+    times = np.arange(n) / 100.0
+    values = np.cumsum(rng.normal(size=n))
+    values[1000:1200] = np.nan  # a dropout wider than a bin
+    t, v = envelope_trace(times, values)
+    assert len(t) == len(v) == 2 * TRACE_BINS
+    assert np.nanmin(v) == np.nanmin(values) and np.nanmax(v) == np.nanmax(values)
+    assert np.all(np.diff(t) >= 0) and t[0] == times[0] and t[-1] == times[-1]
+    gap = (t > 10.2) & (t < 11.8)
+    assert gap.any() and np.isnan(v[gap]).all()
+    edges = np.linspace(0, n, TRACE_BINS + 1).astype(int)
+    k = 4000  # any bin: its two points are that bin's extremes
+    assert v[2 * k] == values[edges[k]:edges[k + 1]].min() and v[2 * k + 1] == values[edges[k]:edges[k + 1]].max()
+    short = np.arange(2 * TRACE_BINS, dtype=float)
+    assert envelope_trace(short, short)[1] is short
+
+
+def test_the_panel_draws_a_long_recording_as_envelopes(panel):
+    from tonguevis.gui.sensor_panel import MAX_TRACE_POINTS, TRACE_BINS
+    from tonguevis.gui.session import Session
+
+    n = MAX_TRACE_POINTS + 1
+    times = np.arange(n) / 100.0
+    wave = 0.005 * np.sin(times)[:, None] * [1.0, 0.5, 2.0]
+    long_rec = Recording(100.0, times, {"TT": wave, "TD": wave + 0.01}, metadata={"file": "long.tsv"})
+    panel.set_session(Session(long_rec))
+    for name in ("TT", "TD"):
+        for k, line in enumerate(panel.plot.lines[name]):
+            assert len(line.get_xdata()) == 2 * TRACE_BINS
+            assert np.max(line.get_ydata()) == pytest.approx(1e3 * long_rec.sensors[name][:, k].max())
+    assert len(panel.plot.lines["TT"][0].get_xdata()) < n
+
+
 def test_displacements_from_rest_despite_a_channel_without_samples():
     """A dead port (S2, all NaN) must not push every sensor's rest to its first sample."""
     from tonguevis.gui.session import Session

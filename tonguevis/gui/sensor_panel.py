@@ -26,6 +26,25 @@ NAMED_COLOURS = {"TT": "#c0392b", "TB": "#e67e22", "TD": "#2980b9", "TBK": "#1ab
                  "TR": "#8e44ad", "JAW": "#555555"}
 AXIS_NAMES = ("x (anterior)", "y (left)", "z (up)")
 OTHERS_LABEL = "show reference and other channels"
+#: Past this many samples a trace is drawn as its lowest and highest value in each of
+#: TRACE_BINS bins: the panel always shows the whole recording, a few hundred pixels wide, so
+#: the picture is the same; matplotlib kept four copies of every sample (30 minutes: 70 MB).
+MAX_TRACE_POINTS = 20000
+TRACE_BINS = 5000
+
+
+def envelope_trace(times: np.ndarray, values: np.ndarray, bins: int = TRACE_BINS) -> tuple[np.ndarray, np.ndarray]:
+    """(times, values) of a trace drawn as its lowest and highest value in each of ``bins`` bins
+    (two points a bin, at its first and last sample time; a bin with no valid value is a gap, NaN);
+    the samples themselves when there are at most 2 ``bins`` of them.  times (N,) s, values (N,)."""
+    n = len(times)
+    if n <= 2 * bins:
+        return times, values
+    edges = np.linspace(0, n, bins + 1).astype(np.int64)
+    low = np.fmin.reduceat(values, edges[:-1])  # fmin/fmax skip NaN; a bin of NaN only stays NaN
+    high = np.fmax.reduceat(values, edges[:-1])
+    t = np.column_stack([times[edges[:-1]], times[edges[1:] - 1]]).ravel()
+    return t, np.column_stack([low, high]).ravel()
 
 
 def sensor_colours(names) -> dict[str, str]:
@@ -55,7 +74,8 @@ class SensorPlot(TimePlot):
             ax.grid(True, lw=0.3, alpha=0.5)
             _shade_productions(ax, productions)
             for name, xyz in signals.items():
-                (line,) = ax.plot(times, xyz[:, k], lw=0.9, color=colours[name], label=name)
+                t, v = envelope_trace(times, xyz[:, k]) if len(times) > MAX_TRACE_POINTS else (times, xyz[:, k])
+                (line,) = ax.plot(t, v, lw=0.9, color=colours[name], label=name)
                 self.lines.setdefault(name, []).append(line)
         if len(times):
             self.axes[0].set_xlim(times[0], times[-1])
