@@ -102,7 +102,7 @@ def test_motion_frames_cache_stays_bounded_and_colours_come_from_a_sample(fake):
 
 
 def test_vertex_normals_point_out_of_a_box():
-    from tonguevis.gui.scene import VertexNormals
+    from tonguevis.render.surface_geometry import VertexNormals
 
     mesh = box_mesh()
     faces = mesh.boundary_faces()

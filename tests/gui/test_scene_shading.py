@@ -9,10 +9,9 @@ import pytest
 
 pv = pytest.importorskip("pyvista")
 
-from tonguevis.gui.scene import (  # noqa: E402
-    LIGHTS, MAIN, TONGUE_COLOUR, TONGUE_MATERIAL, TOP, TongueScene, is_closed, outward_normals, set_lights,
-)
+from tonguevis.gui.scene import LIGHTS, MAIN, TONGUE_COLOUR, TONGUE_MATERIAL, TOP, TongueScene, set_lights  # noqa: E402
 from tonguevis.render.shading import shade  # noqa: E402
+from tonguevis.render.surface_geometry import is_closed, outward_normals  # noqa: E402
 
 pytestmark = [pytest.mark.gui, pytest.mark.timeout(120)]
 

@@ -182,7 +182,8 @@ class ComparePanel(QWidget):
     def _build_surface(self, session) -> None:
         import pyvista as pv
 
-        from tonguevis.gui.scene import SENSOR_COLOUR, VertexNormals, faces_to_vtk
+        from tonguevis.gui.scene import SENSOR_COLOUR, faces_to_vtk
+        from tonguevis.render.surface_geometry import VertexNormals
         from tonguevis.gui.view3d import surface_faces
 
         frames = session.frames
