@@ -6,7 +6,8 @@ recording spent 14 s in the loop and then 10 s reconstructing every frame's surf
 for the per-frame figures (:func:`~tonguevis.sim.figures.frame_figures`).  Here the loop
 runs segment by segment in a thread of its own (a warp launch releases the GIL) while
 the calling thread measures the segments already integrated, with one BLAS thread so
-the two stay on their own cores; once the loop is done the figures left use every core.
+the two stay on their own cores (also for the segments measured after the loop is done:
+the figures do not depend on timing).
 Segments resume from the integrator's state, so q is bit for bit that of one launch
 and the figures those of :func:`frame_figures` on the whole q (a test checks both).
 
@@ -98,11 +99,11 @@ def integrate_and_measure(model, eigenvalues: np.ndarray, phi_s: np.ndarray, w_s
             if isinstance(item, BaseException):
                 raise item
             start, end = item
-            if thread.is_alive():
-                with single_threaded_blas():  # one core measures while the other integrates
-                    part = frame_figures(model, out.result.q[start:end], warping, "warp", workers=1)
-            else:
-                part = frame_figures(model, out.result.q[start:end], warping, "warp")
+            # One core measures while the other integrates; always so, also once the loop is
+            # done: float32 products split over other thread counts round differently, and the
+            # figures must not depend on how far the loop had got (batch and CLI agree bit for bit).
+            with single_threaded_blas():
+                part = frame_figures(model, out.result.q[start:end], warping, "warp", workers=1)
             out.figures.volume_change[start:end] = part.volume_change
             out.figures.largest_displacement[start:end] = part.largest_displacement
             out.done = end
