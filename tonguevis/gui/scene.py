@@ -22,7 +22,7 @@ import numpy as np
 import pyvista as pv
 
 from tonguevis.render.shading import shade
-from tonguevis.render.surface_geometry import VertexNormals, hidden_side, is_closed, outward_normals
+from tonguevis.render.surface_geometry import VertexNormals, hidden_side, outward_normals
 
 MAIN, TOP, FRONT, LATERAL = 0, 1, 2, 3
 VIEW_NAMES = {TOP: "top", FRONT: "front", LATERAL: "lateral (right side)"}
@@ -164,7 +164,7 @@ class TongueScene:
         self._tongue_views: dict[int, pv.PolyData] = {}
         self._context_views: dict[int, dict[str, pv.PolyData]] = {}
         self._context_normals: dict[str, np.ndarray] = {}
-        self._context_closed: dict[str, bool] = {}
+        self._context_hidden: dict[str, str | None] = {}  # name -> the faces a shell skips (None: open)
         self._shaded: dict[tuple, tuple] = {}  # (view, surface name) -> what its colours were computed from
         self._style = 0  # bumped when the colouring changes (mode, range, lookup table)
         self._lut = None
@@ -217,8 +217,8 @@ class TongueScene:
                       "default": pv.LookupTable(cmap=COLORMAP, n_values=256)}
         self._context_normals = {name: outward_normals(surface.points, _faces_of(surface))
                                  for name, surface in self.context.items()}
-        self._context_closed = {name: is_closed(_faces_of(surface)) for name, surface in self.context.items()}
-        context_hidden = {name: hidden_side(surface.points, _faces_of(surface)) for name, surface in self.context.items()}
+        self._context_hidden = {name: hidden_side(surface.points, _faces_of(surface))
+                                for name, surface in self.context.items()}
         self._tongue_views, self._context_views, self._shaded, self._colours = {}, {}, {}, None
         self.shaded_nodes = np.unique(np.asarray(faces, dtype=np.int64))
         points = np.asarray(points, dtype=np.float32)
@@ -264,7 +264,7 @@ class TongueScene:
                 shell.field_data["colour"] = np.asarray(pv.Color(colour).float_rgb)
                 context_actor = _add_lit_surface(plotter, shell, f"{name}{index}",
                                                  opacity=opacity if main else 0.8 * opacity,
-                                                 cull=context_hidden[name])
+                                                 cull=self._context_hidden[name])
                 context_actor.SetVisibility(self.context_visible)
                 self.context_actors.append(context_actor)
             if main:
@@ -436,14 +436,15 @@ class TongueScene:
             return
         for name, shell in self._context_views.get(index, {}).items():
             # A closed shell without highlights is lit the same wherever it is moved to.
-            moves = not self._context_closed[name] or CONTEXT_MATERIAL["specular"] > 0.0
+            closed = self._context_hidden[name] is not None
+            moves = not closed or CONTEXT_MATERIAL["specular"] > 0.0
             key = seen + ((self.context[name].GetMTime(),) if moves else ())
             if self._shaded.get((index, name)) == key:
                 continue
             colour = vtk_to_numpy(shell.GetFieldData().GetArray("colour"))
             shell.point_data["rgb"][:] = shade(
                 colour, self._context_normals[name], self.context[name].points, view, LIGHTS,
-                parallel=parallel, two_sided=not self._context_closed[name], **CONTEXT_MATERIAL)
+                parallel=parallel, two_sided=not closed, **CONTEXT_MATERIAL)
             self._shaded[(index, name)] = key
 
     def reset_cameras(self) -> None:
