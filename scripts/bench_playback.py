@@ -21,8 +21,8 @@ settle, then plays for a few seconds and counts the frames drawn.  Per frame:
   depend on how loaded the machine is (``fps_cpu_bound`` = 1000 / cpu_ms when
   the frame's work fits one core's worth of waiting);
 - ``lag_ms``: how far the frame shown trails the playback clock when it is
-  painted (mean, max): playback drops frames instead of delaying them, so
-  this stays about one frame and does not grow.
+  painted (mean, max; negative: ahead): playback drops frames instead of
+  delaying them, so this stays within about a frame and does not grow.
 
 The machine's load average is written with every figure: on a shared,
 loaded machine the wall-clock figures (fps, render_ms) are slower than on an
@@ -115,6 +115,25 @@ def cpu_seconds(pid: int | None) -> float:
         return 0.0
 
 
+def thread_cpu_seconds() -> dict[str, float]:
+    """CPU seconds (user + system) of each thread of this process, summed by thread name
+    (the GUI thread is the process's name; Mesa's rasterisers are ``llvmpipe-N``)."""
+    out: dict[str, float] = {}
+    tick = os.sysconf("SC_CLK_TCK")
+    for task in Path("/proc/self/task").iterdir():
+        try:
+            name = (task / "comm").read_text().strip()
+            fields = (task / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if task.name == str(os.getpid()):
+            name = "GUI thread"
+        elif name.startswith("llvmpipe"):
+            name = "llvmpipe"
+        out[name] = out.get(name, 0.0) + (int(fields[11]) + int(fields[12])) / tick
+    return out
+
+
 class Timings:
     """Wall and CPU time of the renders (per view too), the buffer updates and the plots' redraws."""
 
@@ -153,6 +172,14 @@ class Timings:
             renderer.AddObserver("EndEvent", lambda *_a, k=k: self._view_end(k))
         for plot in self.plots():
             plot.mpl_connect("draw_event", self._plot_drawn)
+        from PySide6.QtCore import QObject
+
+        class PaintWatch(QObject):
+            def eventFilter(watch, watched, event):  # noqa: N802, N805 (Qt name)
+                return timings.eventFilter(watched, event)
+
+        self._paint_watch = PaintWatch()
+        window.view3d.plotter.interactor.installEventFilter(self._paint_watch)
 
     def plots(self):
         from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
@@ -174,9 +201,17 @@ class Timings:
         self.render += time.perf_counter() - self._t
         self.render_cpu += time.process_time() - self._c
         self.renders += 1
-        playback = self.window.playback
-        if self.window.state.playing and playback.clock is not None:
-            self.lags.append(playback.clock.time() - self.window.view3d.cursor_time)
+
+    def eventFilter(self, _watched, event) -> bool:  # noqa: N802 (Qt name)
+        from PySide6.QtCore import QEvent
+
+        # The picture's lag is taken when the 3D views are painted: the clock then, against the
+        # time the painted frame was drawn for (drawn ahead during pipelined playback).
+        if event.type() == QEvent.Type.Paint:
+            playback, view3d = self.window.playback, self.window.view3d
+            if self.window.state.playing and playback.clock is not None:
+                self.lags.append(playback.clock.time() - getattr(view3d, "shown_time", view3d.cursor_time))
+        return False
 
     def _view_start(self, k: int) -> None:
         if self.finish_views:
@@ -305,6 +340,7 @@ def main() -> int:
     ticks0 = window.playback.ticks
     xpid = x_server_pid()
     t0, c0, x0 = time.perf_counter(), time.process_time(), cpu_seconds(xpid)
+    threads0 = thread_cpu_seconds()
     timings.reset()
     if event_times is not None:
         event_times.pop("_class").recording = True
@@ -331,8 +367,9 @@ def main() -> int:
         profiler.disable()
         import pstats
 
-        pstats.Stats(profiler).sort_stats(args.profile_sort).print_stats(30)
+        pstats.Stats(profiler).sort_stats(args.profile_sort).print_stats(int(os.environ.get("TONGUEVIS_BENCH_PROFILE_LINES", "30")))
     wall, cpu, x_cpu = time.perf_counter() - t0, time.process_time() - c0, cpu_seconds(xpid) - x0
+    threads1 = thread_cpu_seconds()
     state.set_playing(False)
     load_after = os.getloadavg()
     drawn = window.view3d.renders - start_frame
@@ -358,6 +395,8 @@ def main() -> int:
         "other_ms": frame_ms - render_ms - update_ms - readback_ms,
         "cpu_ms": 1e3 * cpu / n,
         "x_server_cpu_ms": 1e3 * x_cpu / n if xpid is not None else None,
+        "threads_cpu_ms": {name: round(1e3 * (threads1[name] - threads0.get(name, 0.0)) / n, 1)
+                           for name in threads1 if threads1[name] - threads0.get(name, 0.0) > 0},
         "fps_cpu_bound": 1000.0 / max(1e3 * cpu / n, 1e-9),
         "renders_per_frame": timings.renders / n,
         "plot_draws": timings.plot_draws,
@@ -391,7 +430,8 @@ def main() -> int:
     print(f"  CPU per frame {results['cpu_ms']:.1f} ms (all threads) -> {results['fps_cpu_bound']:.1f} frames/s "
           f"if the process had the CPU it uses; the X server {results['x_server_cpu_ms'] or 0:.1f} ms CPU per frame; "
           f"full plot redraws during playback: {timings.plot_draws}")
-    print(f"  shown frame behind the clock: mean {results['lag_ms']['mean']:.1f} ms, max {results['lag_ms']['max']:.1f} ms")
+    print("  CPU per frame by thread: " + ", ".join(f"{k} {v:.1f} ms" for k, v in results["threads_cpu_ms"].items()))
+    print(f"  painted frame behind the clock (negative: ahead): mean {results['lag_ms']['mean']:.1f} ms, max {results['lag_ms']['max']:.1f} ms")
     if args.screenshot is not None:
         # At a fixed time (the first syllable's closure), so that pictures of two versions compare.
         state.set_time(state.start + args.screenshot_time)

@@ -154,10 +154,9 @@ def _pixels(image) -> np.ndarray:
     return rows[:, : 3 * image.width()].reshape(image.height(), image.width(), 3).copy()
 
 
-def test_a_new_frame_renders_at_once_and_the_paint_shows_the_latest(qtbot):
-    """A frame change renders the views at once (Mesa rasterises it while the GUI thread goes on
-    with the plots), and the paint shows that render without rendering again; a second change
-    before the paint makes the paint render the newer frame, never show the stale one."""
+def _sphere_view(qtbot):
+    """An image view (320 x 240) of a white sphere on black, shown; returns (plotter, move) where
+    move(dx) puts the sphere dx to the right of the centre."""
     import pyvista as pv
     from PySide6.QtGui import QGuiApplication
 
@@ -179,6 +178,15 @@ def test_a_new_frame_renders_at_once_and_the_paint_shows_the_latest(qtbot):
     def move(dx: float) -> None:
         sphere.points[:] = rest + [dx, 0.0, 0.0]
 
+    return plotter, move
+
+
+def test_a_new_frame_renders_at_once_and_the_paint_shows_the_latest(qtbot):
+    """A frame change renders the views at once (Mesa rasterises it while the GUI thread goes on
+    with the plots), and the paint shows that render without rendering again; a second change
+    before the paint makes the paint render the newer frame, never show the stale one."""
+    plotter, move = _sphere_view(qtbot)
+
     renders, paints = plotter.renders, plotter.paints
     move(0.3)
     plotter.request_render()
@@ -199,4 +207,58 @@ def test_a_new_frame_renders_at_once_and_the_paint_shows_the_latest(qtbot):
     assert shown.shape == expected.shape
     assert np.abs(shown.astype(int) - expected).mean() < 0.5  # the sphere moved left
     assert np.abs(shown.astype(int) - shown_right).mean() > 5  # not where it was
+    plotter.close()
+
+
+def test_pipelined_frames_are_painted_one_request_later_and_never_wait(qtbot):
+    """Pipelined (playback), each request renders its frame and reads back the one before it,
+    which the paint then shows without rendering: the paint never waits for the rasteriser.
+    The tags say which frame is on screen; a camera move still paints at once, and ending the
+    pipeline paints the last frame asked for."""
+    plotter, move = _sphere_view(qtbot)
+    told = []
+    plotter.on_shown = told.append
+
+    def picture(dx: float) -> np.ndarray:
+        move(dx)
+        return np.asarray(plotter.screenshot(return_img=True))[..., :3].astype(int)
+
+    left, right = picture(-0.3), picture(0.3)
+    move(0.0)
+    plotter.request_render(tag="centre")
+    qtbot.waitUntil(lambda: plotter.shown_tag == "centre", timeout=5000)
+
+    plotter.set_pipelined(True)
+    renders, paints = plotter.renders, plotter.paints
+    move(-0.3)
+    plotter.request_render(tag="left")
+    assert plotter.renders == renders + 1  # rendered at once...
+    qtbot.wait(100)
+    assert plotter.shown_tag == "centre"  # ...and not read back: the screen keeps the last frame
+    move(0.3)
+    plotter.request_render(tag="right")
+    assert plotter.shown_tag == "left" and told[-1] == "left"  # the frame before is read back now
+    paints = plotter.paints
+    qtbot.waitUntil(lambda: plotter.paints > paints, timeout=5000)
+    assert plotter.renders == renders + 2  # the paint rendered nothing
+    shown = _pixels(plotter._image)
+    assert np.abs(shown - left).mean() < 0.5 < np.abs(shown - right).mean()
+
+    plotter.set_pipelined(False)  # playback stops: the last frame asked for is painted
+    qtbot.waitUntil(lambda: plotter.shown_tag == "right", timeout=5000)
+    assert np.abs(_pixels(plotter._image) - right).mean() < 0.5
+    assert told == ["centre", "left", "right"]
+
+    # A repaint asked for while pipelined (the widget's Render(), as after a camera change) paints
+    # the scene as it is now, at once, not the frame rendered before the change.
+    plotter.set_pipelined(True)
+    move(-0.3)
+    plotter.request_render(tag="left again")
+    plotter.camera.zoom(2.0)
+    renders = plotter.renders
+    plotter.Render()
+    qtbot.waitUntil(lambda: plotter.renders > renders, timeout=5000)
+    qtbot.waitUntil(lambda: plotter.shown_tag == "left again", timeout=5000)
+    zoomed = np.asarray(plotter.screenshot(return_img=True))[..., :3].astype(int)
+    assert np.abs(_pixels(plotter._image) - zoomed).mean() < 0.5
     plotter.close()

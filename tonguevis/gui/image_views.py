@@ -16,7 +16,10 @@ under llvmpipe).
 window, no swap), reads the frame back (one copy, ~1 ms) and paints it as an
 image.  A new frame is rendered when it is asked for (:meth:`~ImageInteractor.request_render`)
 and read back at the paint: in between, Mesa rasterises it on its threads while
-the GUI thread moves the plots' cursors and labels.  Qt draws the window in
+the GUI thread moves the plots' cursors and labels.  During playback the views
+are *pipelined* (:attr:`~ImageInteractor.pipelined`): each frame is read back at
+the next frame's request, a whole frame later, so no paint waits for Mesa (the
+caller renders each frame for the time it will be shown).  Qt draws the window in
 software as if there were no OpenGL at all, ``QWidget.grab`` sees the 3D views,
 and the pixels are VTK's, unchanged.
 Mouse and keys go to VTK's interactor as in VTK's ``QVTKRenderWindowInteractor``
@@ -147,8 +150,18 @@ class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
         self._first_time = False  # BasePlotter renders only once this is False
         self._pixels = vtkUnsignedCharArray()
         self._image: QImage | None = None
-        self._rendered = False  # rendered since the last paint (e.g. by the interactor): paint shows that
+        self._rendered = False  # rendered since the last read-back (e.g. by the interactor): paint shows that
+        self._dirty = False  # something asked to draw the scene anew (the interactor's camera, a resize)
         self._painting = False
+        #: While True (playback), a frame is read back at the next :meth:`request_render`, a frame
+        #: later, and painted then: the paint never waits for Mesa's rasterising.
+        self.pipelined = False
+        self._tag = None  # what the caller said the last requested frame is
+        #: The tag of the frame in the image painted, a callable told of each newly shown tag,
+        #: and one called after each paint.
+        self.shown_tag = None
+        self.on_shown = None
+        self.on_painted = None
         self.renders = self.paints = 0
         self._RenderWindow.AddObserver("EndEvent", self._on_rendered)
         self._resize_render_window()
@@ -195,17 +208,43 @@ class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
             window.SetSwapBuffers(0)
             window.ReleaseCurrent()
 
-    def request_render(self) -> None:
+    def request_render(self, tag=None) -> None:
         """The scene changed: render it now, so that it rasterises while the GUI thread goes on,
         and paint it at the next paint; a render done but not painted yet is stale, and the
-        paint renders again instead (one render per paint while the scene keeps changing)."""
+        paint renders again instead (one render per paint while the scene keeps changing).
+
+        When :attr:`pipelined`, the frame requested before this one (rasterised meanwhile) is
+        read back now and painted next, and this one renders for the next request: every
+        request renders, and each frame is painted one request after its own.
+        ``tag``: what this frame is (e.g. its time); :attr:`shown_tag` once it is painted."""
         if getattr(self, "_closed", False):
             return
+        if self.pipelined:
+            self.show_rendered()
+            self._tag = tag
+            self.render()
+            return
+        self._tag = tag
         if self._rendered:
             self._rendered = False
             QWidget.update(self)
             return
         self.render()
+
+    def show_rendered(self) -> None:
+        """Pipelined: read back the frame rendered last (if not yet) and paint it next."""
+        if getattr(self, "_closed", False) or not self._rendered:
+            return
+        self._read_image()
+        self._rendered = False
+        QWidget.update(self)
+
+    def set_pipelined(self, pipelined: bool) -> None:
+        """Pipeline the frames (playback) or paint each as soon as it is asked for; off, the
+        next paint shows the last frame requested."""
+        self.pipelined = bool(pipelined)
+        if not self.pipelined:
+            QWidget.update(self)
 
     def _on_rendered(self, *_args) -> None:
         # Our EGL context is released after each use (render, read-back, screenshot): left
@@ -213,7 +252,8 @@ class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
         # plotter) from being made current.
         self.renders += 1
         self._rendered = True
-        if not self._painting:
+        self._dirty = False
+        if not self._painting and not self.pipelined:
             QWidget.update(self)
 
     # -- Qt --------------------------------------------------------------------------------
@@ -233,6 +273,7 @@ class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
         self._resize_render_window()
         self._Iren.ConfigureEvent()
         self._rendered = False
+        self._dirty = True
         QWidget.update(self)
 
     def _read_image(self) -> None:
@@ -245,25 +286,39 @@ class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
         image = QImage(self._rows.data, w, h, 4 * w, QImage.Format.Format_RGBX8888)
         image.setDevicePixelRatio(w / max(self.width(), 1))
         self._image = image
+        if self._tag != self.shown_tag:
+            self.shown_tag = self._tag
+            if self.on_shown is not None:
+                self.on_shown(self._tag)
+
+    def _image_fits(self) -> bool:
+        if self._image is None or self._RenderWindow is None:
+            return False
+        return (self._image.width(), self._image.height()) == tuple(self._RenderWindow.GetSize())
 
     def paintEvent(self, _event) -> None:  # noqa: N802 (Qt name)
-        """Render the scene (unless it was rendered since the last paint) and draw the frame."""
+        """Render the scene (unless it was rendered since the last paint) and draw the frame;
+        pipelined, draw the frame read back at the last request (the newest rasterises on)."""
         if getattr(self, "_closed", False):
             return
-        self._painting = True
-        try:
-            if not self._rendered:
-                self._RenderWindow.Render()
-            self._read_image()
-            self._rendered = False
-        finally:
-            self._painting = False
+        if not (self.pipelined and not self._dirty and self._image_fits()):
+            self._painting = True
+            try:
+                if not self._rendered or self._dirty:  # e.g. the camera moved since the last render
+                    self._RenderWindow.Render()
+                self._read_image()
+                self._rendered = False
+            finally:
+                self._painting = False
         self.paints += 1
         painter = QPainter(self)
         painter.drawImage(QPoint(0, 0), self._image)
         painter.end()
+        if self.on_painted is not None:
+            self.on_painted()
 
     def Render(self) -> None:  # noqa: N802 (QVTKRenderWindowInteractor's name): a repaint renders
+        self._dirty = True
         QWidget.update(self)
 
     def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import logging
+import time
 
 import numpy as np
-from PySide6.QtCore import Signal
+from PySide6.QtCore import QElapsedTimer, Signal
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
 from tonguevis.appstate import COLOR_MODES, REFERENCE_FRAMES, AppState, interval_at
@@ -17,6 +18,10 @@ log = logging.getLogger("tonguevis")
 COLOUR_LABELS = {"displacement": "displacement magnitude", "energy": "elastic energy density",
                  "contact": "distance to palate", "plain": "plain",
                  "difference": "distance to B (compared recording)"}
+#: During playback the status line (frame of reference, palate contact) changes at most this
+#: often (s of wall time): no one reads a line rewritten 30 times a second, and each costs
+#: the palate distances of the frame.  A paused frame's line is always its own.
+DESCRIBE_INTERVAL_S = 0.1
 REFERENCE_LABELS = {"head": "head frame (jaw moving, palate fixed)", "jaw": "jaw frame (jaw's motion removed)"}
 
 
@@ -174,11 +179,25 @@ class View3D(QWidget):
             lambda _i: state.set_reference(self.reference.currentData(), self))
         self.reset.clicked.connect(self.reset_camera)
         self.cursor_time = state.time
+        #: The recording time (s) of the picture on screen: during playback each frame is drawn
+        #: for the time it will be shown at, a frame interval ahead (see :meth:`show_time`).
+        self.shown_time = state.time
+        self._frame_clock = QElapsedTimer()
+        self._frame_interval = 0.0  # wall seconds between playback's frames (running mean)
+        self._latency = 0.0  # wall seconds from a frame's clock reading to its paint (running mean)
+        self._time_read = None  # time.perf_counter() when the last frame's time came
+        self._described_at = -np.inf  # time.perf_counter() of the last status line made in playback
+        interactor = self.plotter.interactor
+        self._pipelined_views = hasattr(interactor, "set_pipelined")
+        if self._pipelined_views:
+            interactor.on_shown = self._on_shown
+            interactor.on_painted = self._on_painted
         self.drawn = None  # the FrameDrawing shown (tests read it)
         #: name -> hook(i, drawn) called with each new frame before it is painted (the compare
         #: view colours A's surface by the distance to B there).
         self.frame_hooks: dict = {}
         state.subscribe("time", self._on_time)
+        state.subscribe("playing", self._on_playing)
         state.subscribe("color", self._on_colour)
         state.subscribe("reference", self._on_reference)
 
@@ -201,13 +220,56 @@ class View3D(QWidget):
     def _on_time(self, event) -> None:
         self.show_time(event.value)
 
+    def _on_playing(self, event) -> None:
+        """Playback pipelines the views' frames (each read back a frame after its render, so
+        no paint waits for the rasteriser); when it stops, the exact time is drawn at once."""
+        if not self._pipelined_views:
+            return
+        self.plotter.interactor.set_pipelined(event.value)
+        self._frame_interval = self._latency = 0.0
+        self._time_read = None
+        self._described_at = -np.inf
+        self._frame_clock.start()
+        if not event.value:
+            self.frame = -1  # drawn for a time ahead: draw the time playback stopped at
+            self.show_time(self.state.time)
+
+    def _lead(self) -> float:
+        """Recording seconds from the clock's time now to the paint of the frame drawn now: one
+        interval between playback's frames (the frame is painted at the next one), plus the time
+        from a frame's clock reading to its paint (running means of the last few; at most 0.1 s
+        and 0.05 s of wall time)."""
+        self._time_read = time.perf_counter()
+        dt = min(self._frame_clock.restart() * 1e-3, 0.1)
+        self._frame_interval = dt if self._frame_interval == 0.0 else 0.7 * self._frame_interval + 0.3 * dt
+        return (self._frame_interval + self._latency) * self.state.speed
+
+    def _on_painted(self) -> None:
+        if self._time_read is None or not self.state.playing:
+            return
+        latency = min(time.perf_counter() - self._time_read, 0.05)
+        self._latency = latency if self._latency == 0.0 else 0.7 * self._latency + 0.3 * latency
+        self._time_read = None
+
+    def _on_shown(self, tag) -> None:
+        if tag is None:
+            return
+        self.shown_time, line = tag
+        if line is not None:
+            self.described.emit(line)
+
     def show_time(self, t: float) -> None:
         self.cursor_time = t
         frames = getattr(self.session, "frames", None)
         if frames is None:
             return
+        pipelined = self._pipelined_views and self.state.playing
+        if pipelined:
+            t = min(t + self._lead(), self.state.playback_bounds()[1])
         i = frames.frame_at(t)
         if i == self.frame:
+            if pipelined:
+                self.plotter.interactor.show_rendered()  # e.g. slow playback: the last frame is due
             return
         self.frame = i
         reference = self.state.reference
@@ -217,15 +279,22 @@ class View3D(QWidget):
                           frame_text(frames, i, self.session.productions, drawn.caption), render=False,
                           context_offsets=drawn.context_offsets)
         self.scene.set_view_labels(f" · {drawn.caption.split(':')[0]}")
-        self.described.emit(contact_line(self.session, i, reference))
+        line = None
+        if not pipelined:
+            self.described.emit(contact_line(self.session, i, reference))
+        elif time.perf_counter() - self._described_at >= DESCRIBE_INTERVAL_S:
+            self._described_at = time.perf_counter()
+            line = contact_line(self.session, i, reference)
         for hook in list(self.frame_hooks.values()):
             hook(i, drawn)
         # One render per frame: the image view renders now and paints later (the frame
-        # rasterises meanwhile); pyvistaqt's paintGL always renders, so there a repaint is asked.
+        # rasterises meanwhile; pipelined, its description is told when it is shown);
+        # pyvistaqt's paintGL always renders, so there a repaint is asked.
         request = getattr(self.plotter.interactor, "request_render", None)
         if request is not None:
-            request()
+            request(tag=(t, line))
         else:
+            self.shown_time = t
             self.plotter.interactor.update()
         self.renders += 1
 
