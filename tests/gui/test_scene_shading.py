@@ -66,14 +66,17 @@ def test_vertex_lighting_matches_vtk_lighting_the_same_surface():
     assert brightness.max() - brightness.min() > 200
 
 
-def test_shade_against_a_per_vertex_loop():
-    """The vectorised lighting equals the equation written out for one vertex at a time."""
-    rng = np.random.default_rng(3)
-    n = 50
+def _random_surface(rng, n: int):
+    """(n, 3) random unit normals, points within ~1 cm of the origin, and base colours."""
     normals = rng.normal(size=(n, 3))
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    points = rng.normal(size=(n, 3)) * 0.01
-    base = rng.random((n, 3))
+    return normals, rng.normal(size=(n, 3)) * 0.01, rng.random((n, 3))
+
+
+def test_shade_against_a_per_vertex_loop():
+    """The vectorised lighting equals the equation written out for one vertex at a time."""
+    n = 50
+    normals, points, base = _random_surface(np.random.default_rng(3), n)
     angle = 0.4
     view = np.eye(4)
     view[:3, :3] = [[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]]
@@ -99,6 +102,29 @@ def test_shade_against_a_per_vertex_loop():
                         colour = colour + material["specular"] * intensity * max(reflected @ eye, 0.0) ** 15.0
                 expected = np.clip(np.rint(255 * colour), 0, 255)
                 np.testing.assert_array_equal(fast[i], expected)
+
+
+def test_shade_many_views_at_once_equals_one_at_a_time():
+    """Lighting a stack of views (perspective and orthographic mixed) in one pass gives each
+    view the colours it gets alone."""
+    n = 200
+    normals, points, base = _random_surface(np.random.default_rng(5), n)
+    views = []
+    for angle, distance in ((0.4, -0.2), (1.3, -0.3), (-2.0, -0.25)):
+        view = np.eye(4)
+        view[:3, :3] = [[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]]
+        view[2, 3] = distance
+        views.append(view)
+    parallel = [False, True, False]
+    material = dict(ambient=0.1, diffuse=0.9, specular=0.3, specular_power=15.0)
+    for two_sided in (False, True):
+        together = shade(base, normals, points, np.array(views), LIGHTS, parallel=parallel,
+                         two_sided=two_sided, **material)
+        assert together.shape == (3, n, 3)
+        for k, view in enumerate(views):
+            alone = shade(base, normals, points, view, LIGHTS, parallel=parallel[k], two_sided=two_sided, **material)
+            np.testing.assert_array_equal(together[k], alone)
+        assert np.abs(together[0].astype(int) - together[2]).max() > 50  # the views differ
 
 
 @pytest.fixture

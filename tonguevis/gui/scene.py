@@ -411,29 +411,28 @@ class TongueScene:
         self._colours = (key, (colours, normals, points))
         return self._colours[1]
 
+    def _camera_state(self, index: int) -> tuple:
+        """(world-to-view matrix (4, 4), parallel projection) of view ``index``'s camera."""
+        camera = self.plotter.renderers[index].GetActiveCamera()
+        return np.array(camera.GetViewTransformMatrix().GetData()).reshape(4, 4), bool(camera.GetParallelProjection())
+
     def shade_view(self, index: int) -> None:
         """Light view ``index``'s tongue and shells for its camera, where anything they depend on
-        changed (called as the view starts rendering)."""
+        changed (called as the view starts rendering).  The tongue moves every frame: the first
+        view to render lights every view's tongue whose light is out of date, in one pass."""
         if self.surface is None or index not in self._tongue_views or index >= len(self.surface_actors):
             return  # not built yet (a view may render while build() adds its actors)
-        from vtkmodules.util.numpy_support import vtk_to_numpy
-
-        camera = self.plotter.renderers[index].GetActiveCamera()
-        view = _matrix(camera.GetViewTransformMatrix())
-        parallel = bool(camera.GetParallelProjection())
+        view, parallel = self._camera_state(index)
         # The camera's own MTime changes at every render (its clipping range is reset): the
         # view matrix is what the lighting depends on.
         seen = (view.tobytes(), parallel, self._style)
-        key = seen + (self.surface.GetMTime(),)
-        if self._shaded.get((index, "tongue")) != key and self.surface_actors[index].GetVisibility():
-            colours, normals, points = self._tongue_state()
-            rgb = self._tongue_views[index].GetPointData().GetArray("rgb")
-            vtk_to_numpy(rgb)[self.shaded_nodes] = shade(colours, normals, points, view, LIGHTS,
-                                                         parallel=parallel, **TONGUE_MATERIAL)
-            rgb.Modified()
-            self._shaded[(index, "tongue")] = key
+        if self._shaded.get((index, "tongue")) != seen + (self.surface.GetMTime(),) \
+                and self.surface_actors[index].GetVisibility():
+            self._shade_tongues()
         if not self.context_visible:
             return
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+
         for name, shell in self._context_views.get(index, {}).items():
             # A closed shell without highlights is lit the same wherever it is moved to.
             closed = self._context_hidden[name] is not None
@@ -446,6 +445,32 @@ class TongueScene:
                 colour, self._context_normals[name], self.context[name].points, view, LIGHTS,
                 parallel=parallel, two_sided=not closed, **CONTEXT_MATERIAL)
             self._shaded[(index, name)] = key
+
+    def _shade_tongues(self) -> None:
+        """Light the tongue in every view whose colours are out of date (all at once)."""
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+
+        mtime = self.surface.GetMTime()
+        stale, views, parallels, keys = [], [], [], []
+        for index in self._tongue_views:
+            if index >= len(self.surface_actors) or not self.surface_actors[index].GetVisibility():
+                continue
+            view, parallel = self._camera_state(index)
+            key = (view.tobytes(), parallel, self._style, mtime)
+            if self._shaded.get((index, "tongue")) != key:
+                stale.append(index)
+                views.append(view)
+                parallels.append(parallel)
+                keys.append(key)
+        if not stale:
+            return
+        colours, normals, points = self._tongue_state()
+        lit = shade(colours, normals, points, np.array(views), LIGHTS, parallel=parallels, **TONGUE_MATERIAL)
+        for k, index in enumerate(stale):
+            rgb = self._tongue_views[index].GetPointData().GetArray("rgb")
+            vtk_to_numpy(rgb)[self.shaded_nodes] = lit[k]
+            rgb.Modified()
+            self._shaded[(index, "tongue")] = keys[k]
 
     def reset_cameras(self) -> None:
         """Put every view back to its standard direction, fitted to the scene."""
@@ -494,11 +519,6 @@ def _add_lit_surface(plotter, surface: pv.PolyData, name: str, opacity: float = 
     actor.prop.SetFrontfaceCulling(cull == "front")
     plotter.add_actor(actor, reset_camera=False, name=name, pickable=False)
     return actor
-
-
-def _matrix(vtk_matrix) -> np.ndarray:
-    """A vtkMatrix4x4 as a (4, 4) array."""
-    return np.array([[vtk_matrix.GetElement(r, c) for c in range(4)] for r in range(4)])
 
 
 def _contact_lut(clim: tuple[float, float]) -> "pv.LookupTable":
