@@ -62,6 +62,7 @@ class TimePlot(FigureCanvasQTAgg):
         self.overlay = CursorOverlay(self)
         self._time_axes: list = []
         self._drawn = False  # axes transforms valid (set after a draw)
+        self._columns: list = []  # the time axes' pixel geometry at the last draw (see _axis_columns)
         self._dragging = False
         self._unsubscribe = [state.subscribe("time", self._on_time)]
         self.mpl_connect("draw_event", self._on_draw)
@@ -72,6 +73,8 @@ class TimePlot(FigureCanvasQTAgg):
     def set_time_axes(self, axes: list) -> None:
         """Axes whose x is time (s): they get a cursor and seek on click/drag."""
         self._time_axes = list(axes)
+        if self._drawn:
+            self._columns = self._axis_columns()
         self._place_cursors()
 
     def close_plot(self) -> None:
@@ -86,23 +89,30 @@ class TimePlot(FigureCanvasQTAgg):
 
     def _on_draw(self, _event) -> None:
         self._drawn = True
+        self._columns = self._axis_columns()
         self._place_cursors()
 
-    def cursor_columns(self) -> list[tuple[int, int, int]]:
-        """(x, top, bottom) widget pixels of the cursor in each time axis (none outside the axis)."""
-        if not self._drawn:
-            return []
+    def _axis_columns(self) -> list[tuple[float, float, float, float, int, int]]:
+        """Per time axis, as drawn: (x0, x1) its pixel extent, (a, b) time -> pixel x = a t + b
+        (widget pixels), (top, bottom) widget pixels.  Taken at each draw, so the cursors match
+        the picture on screen until the next draw, and placing them costs no transform."""
         ratio = self.device_pixel_ratio or 1.0
         height = self.figure.bbox.height
         out = []
         for ax in self._time_axes:
             box = ax.bbox
-            x_px = ax.transData.transform((self.cursor_time, 0.0))[0]
-            if not box.x0 - 0.5 <= x_px <= box.x1 + 0.5:
-                continue
-            out.append((int(round(x_px / ratio)), int(round((height - box.y1) / ratio)),
-                        int(round((height - box.y0) / ratio))))
+            x_a, x_b = ax.transData.transform([(0.0, 0.0), (1.0, 0.0)])[:, 0]
+            out.append(((box.x0 - 0.5) / ratio, (box.x1 + 0.5) / ratio, (x_b - x_a) / ratio, x_a / ratio,
+                        int(round((height - box.y1) / ratio)), int(round((height - box.y0) / ratio))))
         return out
+
+    def cursor_columns(self) -> list[tuple[int, int, int]]:
+        """(x, top, bottom) widget pixels of the cursor in each time axis (none outside the axis)."""
+        if not self._drawn:
+            return []
+        t = self.cursor_time
+        return [(int(round(a * t + b)), top, bottom) for x0, x1, a, b, top, bottom in self._columns
+                if x0 <= a * t + b <= x1]
 
     def _place_cursors(self) -> None:
         self.overlay.set_columns(self.cursor_columns())
