@@ -158,9 +158,10 @@ class Timings:
         read_image = getattr(plotter, "_read_image", None)  # the image views' read-back (not pyvistaqt's)
         if read_image is not None:
             def timed_read():
-                t = time.perf_counter()
+                t, c = time.perf_counter(), time.thread_time()
                 read_image()
                 timings.readback += time.perf_counter() - t
+                timings.readback_cpu += time.thread_time() - c
 
             plotter._read_image = timed_read
         render_window = self.render_window = window.view3d.plotter.render_window
@@ -187,7 +188,7 @@ class Timings:
         return self.window.findChildren(FigureCanvasQTAgg)
 
     def reset(self) -> None:
-        self.update = self.render = self.render_cpu = self.readback = 0.0
+        self.update = self.render = self.render_cpu = self.readback = self.readback_cpu = 0.0
         self.updates = self.renders = self.plot_draws = 0
         self.views = np.zeros(4)
         self.lags: list[float] = []
@@ -235,6 +236,7 @@ def install_event_timer() -> dict:
 
     times: dict = {}
     nested: list[float] = []  # time of the events nested in each event being handled
+    nested_cpu: list[float] = []  # and the GUI thread's CPU time in them
 
     class TimingApplication(QApplication):
         recording = False
@@ -245,14 +247,16 @@ def install_event_timer() -> dict:
             kind = event.type()
             key = (getattr(kind, "name", str(kind)), type(receiver).__name__)
             nested.append(0.0)
-            t = time.perf_counter()
+            nested_cpu.append(0.0)
+            t, c = time.perf_counter(), time.thread_time()
             out = super().notify(receiver, event)
-            spent = time.perf_counter() - t
-            inner = nested.pop()
+            spent, spent_cpu = time.perf_counter() - t, time.thread_time() - c
+            inner, inner_cpu = nested.pop(), nested_cpu.pop()
             if nested:
                 nested[-1] += spent
-            total, own, count = times.get(key, (0.0, 0.0, 0))
-            times[key] = (total + spent, own + spent - inner, count + 1)
+                nested_cpu[-1] += spent_cpu
+            total, own, own_cpu, count = times.get(key, (0.0, 0.0, 0.0, 0))
+            times[key] = (total + spent, own + spent - inner, own_cpu + spent_cpu - inner_cpu, count + 1)
             return out
 
     TimingApplication(sys.argv[:1])
@@ -360,9 +364,11 @@ def main() -> int:
     if event_times is not None:
         top = sorted(event_times.items(), key=lambda kv: -kv[1][1])[:20]
         per = 1e3 / max(window.view3d.renders - start_frame, 1)
-        print("Qt events during playback (ms per drawn frame: own time, with nested events; count):")
-        for (kind, receiver), (total, own, count) in top:
-            print(f"  {kind:<28} {receiver:<32} {per * own:8.2f} ms {per * total:8.2f} ms  {count}")
+        print("Qt events during playback (ms per drawn frame: own time, the GUI thread's CPU in it, with nested "
+              "events; count):")
+        for (kind, receiver), (total, own, own_cpu, count) in top:
+            print(f"  {kind:<28} {receiver:<32} {per * own:8.2f} ms {per * own_cpu:8.2f} ms CPU {per * total:8.2f} ms"
+                  f"  {count}")
     if profiler is not None:
         profiler.disable()
         import pstats
@@ -392,6 +398,7 @@ def main() -> int:
         "swap_ms": render_ms - float(sum(views_ms.values())),
         "update_ms": update_ms,
         "readback_ms": readback_ms,
+        "readback_cpu_ms": 1e3 * timings.readback_cpu / n,
         "other_ms": frame_ms - render_ms - update_ms - readback_ms,
         "cpu_ms": 1e3 * cpu / n,
         "x_server_cpu_ms": 1e3 * x_cpu / n if xpid is not None else None,
@@ -425,7 +432,7 @@ def main() -> int:
           + ", ".join(f"{k} {v:.1f}" for k, v in views_ms.items())
           + f", outside the views (blit, swap{'' if args.finish_views else ', rasterising'}) {results['swap_ms']:.1f}"
           + f"; {results['renders_per_frame']:.2f} renders per frame), buffer update {update_ms:.2f} ms, "
-            f"read-back at the paint (rasterising left + copy) {readback_ms:.1f} ms, "
+            f"read-back (rasterising left + copy) {readback_ms:.1f} ms ({results['readback_cpu_ms']:.1f} ms CPU), "
             f"other (Qt, cursors, labels) {results['other_ms']:.1f} ms")
     print(f"  CPU per frame {results['cpu_ms']:.1f} ms (all threads) -> {results['fps_cpu_bound']:.1f} frames/s "
           f"if the process had the CPU it uses; the X server {results['x_server_cpu_ms'] or 0:.1f} ms CPU per frame; "
