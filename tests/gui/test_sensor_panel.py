@@ -159,3 +159,56 @@ def test_displacements_from_rest_despite_a_channel_without_samples():
     assert np.abs(displacement["TT"][still]).max() < 1e-6  # rest = the still second, not the first sample
     assert np.all(np.isnan(displacement["S2"]))
     assert list(displacement)[-1] == "REF1"  # references last
+
+
+def test_the_plot_paints_what_matplotlib_drew_and_its_cursor(panel, qtbot, monkeypatch):
+    """The plot's paint (from a copy of the figure made once per draw) shows what matplotlib's
+    own paint shows, pixel for pixel (at the screen's depth), the cursor overlay the time, and
+    a new draw replaces the copy."""
+    from PySide6.QtCore import QPoint, QRect
+    from PySide6.QtGui import QImage, QRegion
+
+    from tonguevis.gui.timeplot import TimePlot
+
+    plot = panel.plot
+    qtbot.waitUntil(lambda: plot._drawn, timeout=5000)
+
+    def painted(matplotlib_paint: bool = False) -> np.ndarray:
+        with monkeypatch.context() as patch:
+            if matplotlib_paint:
+                patch.setattr(TimePlot, "_figure_picture", lambda self: None)
+            image = plot.grab().toImage().convertToFormat(QImage.Format.Format_RGB888)
+        rows = np.frombuffer(image.constBits(), dtype=np.uint8).reshape(image.height(), image.bytesPerLine())
+        return rows[:, : 3 * image.width()].reshape(image.height(), image.width(), 3).astype(int)
+
+    plot.overlay.hide()
+    before = painted()
+    np.testing.assert_array_equal(before, painted(matplotlib_paint=True))
+    assert before.std() > 10  # a figure with lines and labels, not a blank
+    plot.axes[0].set_facecolor("#c0e0ff")
+    plot.draw()
+    after = painted()
+    assert np.abs(after - before).sum() > 0  # the new draw, not the old copy
+    np.testing.assert_array_equal(after, painted(matplotlib_paint=True))
+
+    def rendered(region=None) -> np.ndarray:
+        image = QImage(plot.size(), QImage.Format.Format_RGB32)
+        image.fill(0)
+        plot.render(image, QPoint(0, 0), QRegion(region if region is not None else plot.rect()))
+        return np.frombuffer(image.constBits(), dtype=np.uint32).reshape(image.height(), -1)[:, : image.width()].copy()
+
+    # A cursor's strip repaints alone, with the figure's own pixels there (QWidget.render puts
+    # the region's corner at the target's origin).
+    strip = QRect(plot.width() // 2 - 2, 0, 5, plot.height())
+    whole, part = rendered(), rendered(strip)
+    np.testing.assert_array_equal(part[:, : strip.width()], whole[:, strip.left(): strip.right() + 1])
+    assert (part[:, strip.width():] & 0xFFFFFF == 0).all()  # nothing painted outside it
+    plot.overlay.show()
+    panel.state.set_time(1.5)
+    columns = plot.cursor_columns()
+    assert columns
+    with_cursor = painted()
+    x, top, bottom = columns[0]
+    middle = (top + bottom) // 2
+    assert np.abs(with_cursor[middle, x] - after[middle, x]).sum() > 60  # the red line
+    np.testing.assert_array_equal(with_cursor[:, : x - 3], after[:, : x - 3])  # nothing else changed

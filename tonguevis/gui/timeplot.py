@@ -6,15 +6,18 @@ Every time plot (sensor panel, waveform, spectrogram, modal map) derives from
 are painted by a transparent Qt overlay from the axes' cached pixel
 transforms, so moving them costs no matplotlib drawing at all (a blit of the
 whole figure cost tens of milliseconds per plot per frame under software
-rendering); only the two thin strips of the old and new line repaint.
+rendering); only the two thin strips of the old and new line repaint, from a
+copy of the figure's picture made once per draw (matplotlib's own paint
+converts the strip from its buffer at every paint).
 """
 
 from __future__ import annotations
 
 from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
 from matplotlib.figure import Figure
-from PySide6.QtCore import QRect, Qt
-from PySide6.QtGui import QColor, QPainter, QPen
+import numpy as np
+from PySide6.QtCore import QPoint, QRect, Qt
+from PySide6.QtGui import QColor, QImage, QPainter, QPen
 from PySide6.QtWidgets import QSizePolicy, QWidget
 
 from tonguevis.appstate import AppState, Event
@@ -63,6 +66,7 @@ class TimePlot(FigureCanvasQTAgg):
         self._time_axes: list = []
         self._drawn = False  # axes transforms valid (set after a draw)
         self._columns: list = []  # the time axes' pixel geometry at the last draw (see _axis_columns)
+        self._picture: QImage | None = None  # the figure as drawn last, in the screen's pixel format
         self._dragging = False
         self._unsubscribe = [state.subscribe("time", self._on_time)]
         self.mpl_connect("draw_event", self._on_draw)
@@ -89,6 +93,7 @@ class TimePlot(FigureCanvasQTAgg):
 
     def _on_draw(self, _event) -> None:
         self._drawn = True
+        self._picture = None
         self._columns = self._axis_columns()
         self._place_cursors()
 
@@ -120,6 +125,42 @@ class TimePlot(FigureCanvasQTAgg):
     def _on_time(self, event: Event) -> None:
         self.cursor_time = event.value
         self._place_cursors()
+
+    def _figure_picture(self) -> QImage | None:
+        """The Agg buffer of the last draw as an opaque QImage (made once per draw), or None
+        when the buffer is not the canvas's size (e.g. between a resize and its draw)."""
+        renderer = getattr(self, "renderer", None)
+        if renderer is None:
+            return None
+        width, height = self.get_width_height(physical=True)
+        if self._picture is None or (self._picture.width(), self._picture.height()) != (width, height):
+            rgba = np.asarray(self.buffer_rgba())
+            if rgba.shape[:2] != (height, width):
+                return None
+            # The figure's face is opaque, so its pixels are too: no alpha to premultiply.
+            picture = QImage(rgba.data, width, height, 4 * width, QImage.Format.Format_RGBX8888)
+            self._picture = picture.convertToFormat(QImage.Format.Format_RGB32)  # a copy, in the screen's format
+            self._picture.setDevicePixelRatio(self.device_pixel_ratio or 1.0)
+        return self._picture
+
+    def paintEvent(self, event) -> None:  # noqa: N802 (Qt name)
+        """Paint the damaged part from the picture of the last draw (matplotlib's paint for
+        anything else)."""
+        self._draw_idle()  # a pending draw happens first, as in matplotlib's paint
+        picture = self._figure_picture()
+        if picture is None:
+            super().paintEvent(event)
+            return
+        rect = event.rect()
+        ratio = picture.devicePixelRatio()
+        source = QRect(int(rect.left() * ratio), int(rect.top() * ratio),
+                       int(np.ceil(rect.width() * ratio)), int(np.ceil(rect.height() * ratio)))
+        painter = QPainter(self)
+        try:
+            painter.drawImage(QPoint(rect.left(), rect.top()), picture, source)
+            self._draw_rect_callback(painter)
+        finally:
+            painter.end()
 
     # -- seeking ----------------------------------------------------------------
     def _seek(self, event) -> bool:
