@@ -262,3 +262,48 @@ def test_pipelined_frames_are_painted_one_request_later_and_never_wait(qtbot):
     zoomed = np.asarray(plotter.screenshot(return_img=True))[..., :3].astype(int)
     assert np.abs(_pixels(plotter._image) - zoomed).mean() < 0.5
     plotter.close()
+
+
+def test_playback_draws_each_frame_for_the_time_it_is_shown_and_the_status_line_at_ten_hertz(qtbot, window):
+    """While playing, the 3D views draw each frame for the time it will be painted at (ahead
+    of the clock by about a frame, since it is painted a frame later), and the status line is
+    made at most ten times a second; once stopped, the picture and the status line are those of
+    the time playback stopped at, exactly."""
+    from tonguevis.gui.drawing import contact_line
+    from tonguevis.gui.view3d import DESCRIBE_INTERVAL_S
+
+    session = show_and_simulate(qtbot, window, demo_session())
+    state, view3d = window.state, window.view3d
+    state.set_time(5.2)
+    qtbot.wait(200)
+    plotter = view3d.plotter
+    if not hasattr(plotter, "set_pipelined"):
+        pytest.skip("the views are pipelined when they are image views (X11)")
+    requests, lines = [], []
+    original = plotter.request_render
+
+    def recorded(tag=None):
+        requests.append((tag[0], state.time))
+        original(tag=tag)
+
+    plotter.request_render = recorded
+    view3d.described.connect(lines.append)
+    started = time.perf_counter()
+    state.set_playing(True)
+    qtbot.waitUntil(lambda: state.time > 6.5, timeout=15000)
+    elapsed = time.perf_counter() - started
+    playing_lines = len(lines)
+    state.set_playing(False)
+    plotter.request_render = original
+    qtbot.wait(200)
+
+    leads = np.array([drawn - clock for drawn, clock in requests[:-1]])  # the last: after the stop
+    assert len(leads) > 5
+    assert (leads >= 0).all() and 0.005 < np.median(leads) < 0.15, leads
+    assert requests[-1][0] == requests[-1][1] == state.time  # the stop time, not ahead
+    assert 2 <= playing_lines <= elapsed / DESCRIBE_INTERVAL_S + 2, (playing_lines, elapsed)
+    assert len(requests) > 1.5 * playing_lines  # frames drawn more often than the line is made
+    i = session.frames.frame_at(state.time)
+    assert window.frame_status.text() == contact_line(session, i, state.reference)
+    assert view3d.shown_time == state.time
+    assert np.allclose(view3d.scene.surface.points, session.frames.points[i] + session.motion.jaw_offset[i])
