@@ -170,3 +170,33 @@ def test_b_without_productions_is_compared_on_absolute_time_and_says_so(qtbot, w
     assert panel.comparison.mode == "absolute" and "absolute time" in panel.note
     window.state.set_time(1.0)
     assert "on absolute time" in panel.caption.text()
+
+
+@pytest.mark.parametrize("layout", ["ghost", "side"])
+def test_during_playback_b_is_drawn_for_the_frame_a_draws(qtbot, pair, layout):
+    """Playback draws A a frame ahead of the clock (for the moment it is painted): B, as a ghost
+    in A's views or in its own view, is drawn for A's frame in every render, never for the clock."""
+    window, a, b, panel = pair
+    panel.set_layout(layout)
+    state, view3d = window.state, window.view3d
+    state.set_time(float(a.productions[0][0]))
+    qtbot.wait(200)
+    seen = []
+    times_a = a.frames.times
+
+    def rendered(*_args) -> None:
+        if state.playing:
+            seen.append((panel.frame_b, panel.matched_frame(float(times_a[view3d.frame])), state.time,
+                         float(times_a[view3d.frame])))
+
+    render_window = (view3d.plotter if layout == "ghost" else panel.plotter).render_window
+    observer = render_window.AddObserver("StartEvent", rendered)
+    state.set_playing(True)
+    qtbot.waitUntil(lambda: state.time > a.productions[0][0] + 0.8, timeout=15000)
+    state.set_playing(False)
+    render_window.RemoveObserver(observer)
+    assert len(seen) > 5
+    assert all(shown == matched for shown, matched, _, _ in seen), seen
+    if hasattr(view3d.plotter, "set_pipelined"):  # image views: A is drawn ahead of the clock
+        assert np.median([drawn - clock for _, _, clock, drawn in seen]) > 0.0
+    assert panel.frame_b == panel.matched_frame(float(times_a[a.frames.frame_at(state.time)]))

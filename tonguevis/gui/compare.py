@@ -139,8 +139,12 @@ class ComparePanel(QWidget):
         self.layout_box.currentIndexChanged.connect(lambda _i: self.set_layout(self.layout_box.currentData()))
         self.time_box.currentIndexChanged.connect(lambda _i: self.set_time_mode(self.time_box.currentData()))
         self.close_button.clicked.connect(lambda: state.set_session(None, "compare", self))
-        for name in ("time", "reference", "color"):
-            state.subscribe(name, lambda _event: self.show_time(self.state.time))
+        # B follows the frame A draws (A's frame hook, called as A draws each frame, also for a new
+        # frame of reference or colouring): during playback A draws each frame ahead of the clock
+        # for the moment it is painted, and B (its ghost in A's views, or its own view, pipelined
+        # as A's) is drawn for the same moment.
+        view_a.frame_hooks["compare"] = lambda i, _drawn: self.show_frame(i)
+        state.subscribe("playing", self._on_playing)
         state.subscribe("session", self._on_sessions)
         state.subscribe("motion", self._on_sessions)
         self.setVisible(False)
@@ -306,15 +310,28 @@ class ComparePanel(QWidget):
             self._last_difference = (i, j, values)
         return self._last_difference[2]
 
+    def _on_playing(self, event) -> None:
+        interactor = self.plotter.interactor
+        if hasattr(interactor, "set_pipelined"):
+            interactor.set_pipelined(event.value)
+
     def show_time(self, t_a: float) -> None:
         """Show B at the moment matched with A's time ``t_a``."""
+        if self.comparison is None or self._surface is None or not self.isVisible():
+            return
+        self.show_frame(self.session_a.frames.frame_at(t_a))
+        if self.layout_mode == "ghost":  # A's views draw the ghost: draw them anew
+            self.view_a.plotter.interactor.Render()
+
+    def show_frame(self, i: int) -> None:
+        """Show B at the moment matched with A's frame ``i``."""
         if self.comparison is None or self._surface is None or not self.isVisible():
             return
         from tonguevis.gui.drawing import draw_frame
 
         session_a, session_b = self.session_a, self.session_b
-        i = session_a.frames.frame_at(t_a)
-        j = self.comparison.frame_b(float(session_a.frames.times[i]))
+        t_a = float(session_a.frames.times[i])
+        j = self.comparison.frame_b(t_a)
         reference = self.state.reference
         drawn = draw_frame(session_b, j, reference, "plain")
         self._surface.points[:] = drawn.points
@@ -330,9 +347,12 @@ class ComparePanel(QWidget):
         self.frame_b = j
         self.caption.setText(self._caption(session_a, i, session_b, j))
         if self.layout_mode == "side":
-            self.plotter.interactor.update()
-        else:
-            self.view_a.plotter.interactor.update()
+            request = getattr(self.plotter.interactor, "request_render", None)
+            if request is not None:
+                request(tag=t_a)
+            else:
+                self.plotter.interactor.update()
+        # The ghost is in A's views, which render after their frame hooks.
         self.renders += 1
 
     def _caption(self, session_a, i: int, session_b, j: int) -> str:
