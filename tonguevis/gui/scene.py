@@ -177,6 +177,10 @@ class TongueScene:
             # transparency costs extra full-screen passes (3x the frame under software GL),
             # and two convex-ish context shells need no exact ordering.
             renderer.SetUseOIT(False)
+            # Every prop is in view: VTK's frustum culler only brought each moving prop's pipeline
+            # and bounds up to date before every render (1-2.7 of the four views' 9-11 ms of
+            # draw calls, measured on the demo under software GL).
+            renderer.GetCullers().RemoveAllItems()
             set_lights(renderer)
             renderer.AddObserver("StartEvent", lambda *_a, index=index: self.shade_view(index))
 
