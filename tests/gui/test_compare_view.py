@@ -85,8 +85,16 @@ def test_ghost_draws_b_translucent_in_each_of_a_views(qtbot, pair):
     panel.set_layout("ghost")
     renderers = window.view3d.plotter.renderers
     assert len(panel._ghosts) == len(renderers) == 4
+    from tonguevis.render.surface_geometry import hidden_side
+    from tonguevis.gui.view3d import surface_faces
+
+    # B's tongue is closed: the ghost is its near wall only (both walls, blended in triangle
+    # order, showed the triangles as patches).
+    hidden = hidden_side(np.asarray(b.frames.points[0]), surface_faces(b.motion.model))
+    assert hidden in ("back", "front")
     for renderer, ghost in zip(renderers, panel._ghosts):
         assert renderer.HasViewProp(ghost) and ghost.GetVisibility() and ghost.prop.opacity < 0.5
+        assert (ghost.prop.GetBackfaceCulling(), ghost.prop.GetFrontfaceCulling()) == (hidden == "back", hidden == "front")
     assert not panel.plotter.interactor.isVisible()
     window.state.set_time(6.0)
     j = panel.frame_b

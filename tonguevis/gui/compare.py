@@ -260,13 +260,22 @@ class ComparePanel(QWidget):
         self.rebuild()
 
     def _add_ghosts(self) -> None:
+        from tonguevis.render.surface_geometry import hidden_side
+
         plotter = self.view_a.plotter
+        # The ghost is B's closed tongue seen from outside: drawn without its far side, one
+        # translucent layer everywhere (its two walls, blended in triangle order, showed the
+        # triangles as patches).
+        faces = np.asarray(self._surface.faces).reshape(-1, 4)[:, 1:]
+        hidden = hidden_side(np.asarray(self._surface.points), faces)
         for index in range(len(plotter.renderers)):
             plotter.subplot(*_subplot_index(plotter, index))
             actor = plotter.add_mesh(self._surface, color=GHOST_COLOUR, opacity=GHOST_OPACITY, name=f"ghost_b{index}",
                                      reset_camera=False, show_scalar_bar=False, scalars=None)
             actor.mapper.scalar_visibility = False
             actor.prop.interpolation = "gouraud"
+            actor.prop.SetBackfaceCulling(hidden == "back")
+            actor.prop.SetFrontfaceCulling(hidden == "front")
             self._ghosts.append(actor)
         plotter.subplot(*_subplot_index(plotter, 0))
 
