@@ -148,7 +148,8 @@ def _scene(plotters, context=True):
     tongue = pv.Sphere(radius=0.02, theta_resolution=24, phi_resolution=24)
     faces = np.asarray(tongue.faces).reshape(-1, 4)[:, 1:]
     shells = {"jaw": pv.Sphere(radius=0.035, center=(0, 0, -0.01)).triangulate()} if context else {}
-    scene.build(np.asarray(tongue.points), faces, context=shells, clim={"displacement": (0.0, 1.0)})
+    scene.build(np.asarray(tongue.points), faces, context=shells,
+                clim={"displacement": (0.0, 1.0), "contact": (0.0, 10.0)})
     return plotter, scene, np.asarray(tongue.points)
 
 
@@ -237,3 +238,23 @@ def test_the_closed_tongue_skips_its_far_side_whichever_way_it_is_wound(plotters
     assert np.abs(pictures[0] - pictures[2]).max() == 0
     assert np.abs(pictures[1] - pictures[2]).mean() < 0.5  # same light from outside (rounding only)
     assert (pictures[0].sum(axis=-1) > 150).mean() > 0.05  # a lit tongue, not a dark one
+
+
+def test_contact_colours_say_inside_and_no_palate_above_in_their_own_colours(plotters):
+    """Distance to the palate: a node inside the palate (below the range) is magenta, one with no
+    palate above (NaN) neutral grey, the others on the red-to-blue map; the lit colours start
+    from these (the lookup table's special colours are brought up to date before mapping)."""
+    from tonguevis.gui.scene import INSIDE_COLOUR, NO_PALATE_COLOUR
+
+    plotter, scene, points = _scene(plotters, context=False)
+    scene.set_mode("contact")
+    values = np.full(len(points), 5.0, dtype=np.float32)
+    nodes = scene.shaded_nodes
+    values[nodes[0]], values[nodes[1]], values[nodes[2]] = np.nan, -1.0, 0.1
+    scene.update(points, values, render=False)
+    colours = scene.tongue_colours()
+    np.testing.assert_allclose(colours[0], pv.Color(NO_PALATE_COLOUR).float_rgb, atol=1 / 255)
+    np.testing.assert_allclose(colours[1], pv.Color(INSIDE_COLOUR).float_rgb, atol=1 / 255)
+    red = colours[2]
+    assert red[0] > 0.6 and red[2] < 0.3  # touching: red
+    np.testing.assert_allclose(colours[3], np.array(scene.lookup_table.map_value(5.0)[:3]), atol=1 / 255)

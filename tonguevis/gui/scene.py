@@ -43,10 +43,11 @@ CONTEXT_COLOUR = "#e8e2d0"
 SPEAKER_PALATE_STYLE = ("#8fc1e3", 0.3)
 COLORMAP = "plasma"
 #: Distance to the palate: red where the tongue touches it, blue far below; magenta inside it;
-#: the tongue's own colour where no palate lies above (outside a traced palate's footprint).
+#: a neutral light grey where no palate lies above (outside a traced palate's footprint): the
+#: tongue's own pink, lit from the side, read as the dark red of contact.
 CONTACT_COLORMAP = "RdYlBu"
 INSIDE_COLOUR = "#ff00ff"
-NO_PALATE_COLOUR = TONGUE_COLOUR
+NO_PALATE_COLOUR = "#c8c8c8"
 #: One flat colour, the middle of the old gradient (#20242c to #3b4252): a gradient background
 #: is drawn per pixel in every view (a sixth of a frame under software OpenGL), a flat one is a clear.
 BACKGROUND = "#2b303a"
@@ -408,6 +409,9 @@ class TongueScene:
             from vtkmodules.util.numpy_support import numpy_to_vtk
 
             values = np.ascontiguousarray(vtk_to_numpy(data.GetArray("value"))[nodes])
+            # MapScalars reads the "no palate above" (NaN) and "inside" (below range) colours from
+            # entries that only Build() brings up to date after they are set.
+            self._lut.Build()
             mapped = self._lut.MapScalars(numpy_to_vtk(values), vtk.VTK_COLOR_MODE_MAP_SCALARS, -1, vtk.VTK_RGB)
             colours = vtk_to_numpy(mapped).reshape(len(nodes), 3) / 255.0
         normals = vtk_to_numpy(data.GetArray("Normals"))[nodes]
