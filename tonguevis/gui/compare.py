@@ -28,6 +28,7 @@ import numpy as np
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
+from tonguevis.gui.elastic_label import ElasticLabel
 from tonguevis.errors import TonguevisError
 
 log = logging.getLogger("tonguevis")
@@ -111,7 +112,7 @@ class ComparePanel(QWidget):
         self._last_difference = None
         self._observed_camera = None  # the vtkCamera whose moves repaint both views
         self._camera_observer = None
-        self.title = QLabel("")
+        self.title = ElasticLabel("", minimum_width=120)  # file names: cut, not a wider window
         self.layout_box = QComboBox()
         for key, text in LAYOUTS.items():
             self.layout_box.addItem(text, key)

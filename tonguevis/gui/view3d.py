@@ -11,6 +11,7 @@ from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QVBox
 
 from tonguevis.appstate import COLOR_MODES, REFERENCE_FRAMES, AppState, interval_at
 from tonguevis.gui.drawing import CONTACT_RANGE_MM, contact_line, draw_frame
+from tonguevis.gui.elastic_label import ElasticLabel
 from tonguevis.gui.frames import SCALARS
 from tonguevis.gui.scene import SPEAKER_PALATE_STYLE, TongueScene
 
@@ -162,7 +163,9 @@ class View3D(QWidget):
         self.reference.setToolTip("Head frame: the tongue and the jaw move with the jaw, the palate is fixed (as seen\n"
                                   "from outside). Jaw frame: the jaw's motion removed, as the tongue is simulated.")
         self.reset = QPushButton("Reset camera")
-        self.message = QLabel("")
+        # The model's description (nodes, modes, sensors, palate) is as long as the names in
+        # it: cut at the window's edge rather than widening the window past the screen.
+        self.message = ElasticLabel("", minimum_width=120)
         bar = QHBoxLayout()
         bar.addWidget(QLabel("Colour by"))
         bar.addWidget(self.colour)
