@@ -331,3 +331,27 @@ def test_the_status_bar_says_how_believable_the_motion_is(qtbot, window):
     p = window.session.motion.metadata["plausibility"]
     assert "far-field amplification" in message and "sensor misfit" in message
     assert f"{p['amplification']:.2f}" in message and f"{p['volume_change_max_percent']:.2f} %" in message
+
+
+def test_the_window_fits_a_laptop_screen_with_every_tab(qtbot, window):
+    """With a recording open and every feature tab, the window can be made 1366 px wide (a common
+    laptop screen): the views' combo boxes are narrower than their longest entries (shown whole
+    in their lists), and the model's description is cut rather than widening the window."""
+    from tonguevis.gui.tabs import add_feature_tabs
+
+    add_feature_tabs(window)
+    show_and_simulate(qtbot, window, demo_session())
+    qtbot.wait(100)
+    for combo in (window.view3d.colour, window.view3d.reference):
+        longest = max(combo.fontMetrics().horizontalAdvance(combo.itemText(k)) for k in range(combo.count()))
+        assert combo.minimumSizeHint().width() < longest, combo.currentText()
+        combo.showPopup()  # the list shows the entries whole
+        qtbot.wait(50)
+        assert combo.view().window().width() >= longest
+        combo.hidePopup()
+    message = window.view3d.message
+    assert message.text() and message.minimumSizeHint().width() < message.fontMetrics().horizontalAdvance(message.text())
+    assert window.minimumSizeHint().width() <= 1366, window.minimumSizeHint()
+    window.resize(1366, 768)
+    qtbot.wait(100)
+    assert window.width() <= 1366

@@ -162,6 +162,13 @@ class View3D(QWidget):
             self.reference.addItem(REFERENCE_LABELS[frame], frame)
         self.reference.setToolTip("Head frame: the tongue and the jaw move with the jaw, the palate is fixed (as seen\n"
                                   "from outside). Jaw frame: the jaw's motion removed, as the tongue is simulated.")
+        # The combos' long entries (e.g. "head frame (jaw moving, palate fixed)") are cut in the
+        # closed box and shown whole in the list: the views' bar does not set a minimum window
+        # width wider than a laptop's screen.
+        for combo in (self.colour, self.reference):
+            combo.setSizeAdjustPolicy(QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
+            combo.setMinimumContentsLength(14)
+            combo.setToolTip(combo.toolTip() or "the 3D views' colouring")
         self.reset = QPushButton("Reset camera")
         # The model's description (nodes, modes, sensors, palate) is as long as the names in
         # it: cut at the window's edge rather than widening the window past the screen.
