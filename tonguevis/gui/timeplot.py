@@ -146,7 +146,9 @@ class TimePlot(FigureCanvasQTAgg):
     def paintEvent(self, event) -> None:  # noqa: N802 (Qt name)
         """Paint the damaged part from the picture of the last draw (matplotlib's paint for
         anything else)."""
-        self._draw_idle()  # a pending draw happens first, as in matplotlib's paint
+        # A pending draw happens first, as in matplotlib's own paint (whose helper this is; its
+        # timer draws anyway should a matplotlib version not have it).
+        getattr(self, "_draw_idle", lambda: None)()
         picture = self._figure_picture()
         if picture is None:
             super().paintEvent(event)
