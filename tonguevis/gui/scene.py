@@ -434,9 +434,7 @@ class TongueScene:
         # The camera's own MTime changes at every render (its clipping range is reset): the
         # view matrix is what the lighting depends on.
         seen = (view.tobytes(), parallel, self._style)
-        if self._shaded.get((index, "tongue")) != seen + (self.surface.GetMTime(),) \
-                and self.surface_actors[index].GetVisibility():
-            self._shade_tongues()
+        self._shade_tongues()  # nothing to do when the first view to render lit them all
         if not self.context_visible:
             return
         from vtkmodules.util.numpy_support import vtk_to_numpy
