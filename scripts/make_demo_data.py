@@ -23,8 +23,9 @@ The jaw translates (opening 5-9 mm for /a/), the head sways slightly (rigid,
 Audio: a glottal pulse train through formant resonators (source-filter), a
 noise burst at each stop release, timed on the simulated tongue-tip release.
 
-The true times of every production (tongue-tip release to release, §3.2 of
-Yang et al. 2013) go to ``data/demo_truth.json``; tests hold the segmentation
+The true times of every production (release to release, §3.2 of Yang et al.
+2013, on the consonant's articulator: the dorsum for /k/, the tip otherwise; the
+release where it has come down 20 % of the way from the closure to the vowel) go to ``data/demo_truth.json``; tests hold the segmentation
 to them.  The output is deterministic (fixed seeds).
 
 Run: ``python scripts/make_demo_data.py [--out data]``.
@@ -268,8 +269,9 @@ def crossings(t: np.ndarray, v: np.ndarray, falling: bool) -> np.ndarray:
     return t[idx] + a[idx] / (a[idx] - b[idx]) * (t[idx + 1] - t[idx])
 
 
-def true_productions(trains, acoustic, t_fine, v_fine):
-    """Release-to-release productions of every train from the noise-free tip velocity."""
+def tip_maxima(trains, acoustic, t_fine, v_fine):
+    """Productions from the noise-free tip maxima: the times the audio is made from (its bursts sit at the
+    tip's highest point; kept so that the committed sound does not change)."""
     releases = crossings(t_fine, v_fine, falling=True)
     vowels = crossings(t_fine, v_fine, falling=False)
     rows = []
@@ -285,6 +287,46 @@ def true_productions(trains, acoustic, t_fine, v_fine):
                 raise RuntimeError(f"train {number} production {index}: {len(vowel)} vowel minima")
             rows.append({"train": number, "index": index, "start": float(release), "end": float(stop),
                          "release": float(release), "vowel": float(vowel[0])})
+    return rows
+
+
+#: The articulator whose closure opens each syllable: the place of its consonant.
+CLOSING = {"t": "TT", "l": "TT", "r": "TT", "k": "TD"}
+#: A release is where the closing articulator has come down this fraction of the way to the vowel.
+RELEASE_FRACTION = 0.20
+
+
+def true_productions(trains, acoustic, t_fine, z_fine):
+    """Release-to-release productions of every train from the noise-free closing articulator.
+
+    z_fine : its height (mm) at t_fine.  closure : its highest point (velocity zero
+    crossing); vowel : the lowest point that follows; release : the first time after the
+    closure at which it has come down 20 % of the way to the vowel (the rule of the
+    shared hand labels); a production runs from its release to the next one (the last of
+    a train to the train's acoustic end).
+    """
+    v_fine = np.gradient(z_fine, t_fine)
+    closures = crossings(t_fine, v_fine, falling=True)
+    vowels = crossings(t_fine, v_fine, falling=False)
+    rows = []
+    for number, (train, (_, end)) in enumerate(zip(trains, acoustic), start=1):
+        first, last = train["syllables"][0][0], train["return"] + 0.1
+        mine = closures[(closures > first) & (closures < last)]
+        if len(mine) != SYLLABLES_PER_TRAIN:
+            raise RuntimeError(f"train {number}: {len(mine)} closures, expected {SYLLABLES_PER_TRAIN}")
+        found = []
+        for index, closure in enumerate(mine):
+            bound = mine[index + 1] if index + 1 < len(mine) else end + 0.5
+            vowel = vowels[(vowels > closure) & (vowels < bound)]
+            if len(vowel) != 1:
+                raise RuntimeError(f"train {number} production {index + 1}: {len(vowel)} vowel minima")
+            top, bottom = np.interp([closure, vowel[0]], t_fine, z_fine)
+            falling = (t_fine > closure) & (z_fine <= top - RELEASE_FRACTION * (top - bottom))
+            found.append((float(closure), float(t_fine[np.argmax(falling)]), float(vowel[0])))
+        for index, (closure, release, vowel) in enumerate(found, start=1):
+            stop = found[index][1] if index < len(found) else end
+            rows.append({"train": number, "index": index, "start": release, "end": float(stop),
+                         "release": release, "closure": closure, "vowel": vowel})
     return rows
 
 
@@ -373,12 +415,12 @@ def synthesize(speaker: str, syllable: str, n_trains: int = TRAINS) -> tuple[Rec
     n = int(round(duration * SENSOR_RATE))
     times = np.arange(n) / SENSOR_RATE
     t_fine = np.arange(int(round(duration * FINE_RATE))) / FINE_RATE
-    _, v_fine = head_frame_motion(speaker, events, t_fine)
-    # Acoustic spans depend on releases; releases do not depend on the audio.
+    fine, v_fine = head_frame_motion(speaker, events, t_fine)
+    # Acoustic spans depend on the tip maxima; they do not depend on the audio.
     provisional = [(0.0, tr["return"] + 0.05) for tr in trains]
-    productions = true_productions(trains, provisional, t_fine, v_fine)
-    samples, acoustic = synthesize_audio(speaker, syllable, trains, productions, duration, rng)
-    productions = true_productions(trains, acoustic, t_fine, v_fine)
+    samples, acoustic = synthesize_audio(speaker, syllable, trains, tip_maxima(trains, provisional, t_fine, v_fine),
+                                         duration, rng)
+    productions = true_productions(trains, acoustic, t_fine, fine[CLOSING[syllable[0]]][:, 2])
     positions, _ = head_frame_motion(speaker, events, times)
     rotation, shift = head_motion(times, rng)
     sensors = {}
@@ -481,7 +523,7 @@ from a source-filter synthesis aligned with the gestures.
   TL=3, TR=4, JAW=5, REF2=6, REF3=7) with the rest positions. Read a file with
   `read_recording("data/spk1_ta.tsv", sensor_map="data/sensor_map.json")`.
 - `demo_truth.json`: the true trains and productions (release to release, §3.2 of Yang et al.
-  2013) of every file, in seconds.
+  2013, on the consonant's articulator) of every file, in seconds, with each closure.
 """
 
 
@@ -517,8 +559,10 @@ def main(argv=None) -> int:
     truth = {
         "synthetic": True,
         "note": "SYNTHETIC data made by scripts/make_demo_data.py (gestural model + source-filter audio); "
-                "not a recording of a person. Times in seconds; productions run from one tongue-tip "
-                "release to the next (the last of a train to the train's acoustic end).",
+                "not a recording of a person. Times in seconds; productions run from one release "
+                "to the next (the last of a train to the train's acoustic end), on the consonant's articulator "
+                "(TD for /k/, TT otherwise); a release is where it has come down 20 % of the way from its closure "
+                "(highest point) to the vowel (lowest point).",
         "sensor_rate_hz": SENSOR_RATE, "audio_rate_hz": AUDIO_RATE, "noise_mm": NOISE_MM,
         "speakers": {name: SPEAKERS[name]["description"] for name in speakers},
         "files": {},

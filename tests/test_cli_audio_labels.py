@@ -114,18 +114,29 @@ def test_syllables_textgrid_holds_the_productions_for_praat(tmp_path, capsys):
     out = tmp_path / "ta.TextGrid"
     code, printed, err = run(capsys, "syllables", DEMO, "--textgrid", out)
     assert code == 0, err
-    assert f"wrote {out} (tiers: productions, events)" in printed
+    landmark_tiers = ("GONS", "PVEL", "NONS", "MAXC", "NOFFS", "PVEL2", "GOFFS", "VTARG")
+    assert f"wrote {out} (tiers: productions, events, {', '.join(landmark_tiers)})" in printed
     rec = open_recording(DEMO)
     table = find_recording_productions(rec)
     grid = textgrid.openTextgrid(str(out), includeEmptyIntervals=False)
-    assert grid.tierNames == ("productions", "events")
+    assert grid.tierNames == ("productions", "events") + landmark_tiers
     intervals = grid.getTier("productions").entries
-    assert [e.label for e in intervals] == [f"{p.train}.{p.index}" for p in table]
+    assert [e.label for e in intervals] == ["ta"] * len(table)  # the syllable, from the file name
     np.testing.assert_allclose([(e.start, e.end) for e in intervals], [(p.start, p.end) for p in table], atol=1e-9)
     points = grid.getTier("events").entries
     expected = sorted([(p.release, "release") for p in table] + [(p.vowel, "vowel") for p in table])
     assert [e.label for e in points] == [what for _, what in expected]
     np.testing.assert_allclose([e.time for e in points], [t for t, _ in expected], atol=1e-6)
+    # one point per production in each landmark tier, named by its production, in lp_findgest's order
+    keys = ("gons", "pvel", "nons", "maxc", "noffs", "pvel2", "goffs", "vowel")
+    for key, name in zip(keys, landmark_tiers):
+        marks = grid.getTier(name).entries
+        assert [e.label for e in marks] == [f"{p.train}.{p.index}" for p in table]
+        np.testing.assert_allclose([e.time for e in marks], [m.times[key] for m in table.landmarks], atol=1e-6)
+    for m, p in zip(table.landmarks, table):
+        t = m.times
+        assert t["gons"] < t["pvel"] < t["nons"] <= t["maxc"] <= t["noffs"] < t["pvel2"] < t["goffs"]
+        assert t["maxc"] == p.closure and t["maxc"] < p.release < t["vowel"] == p.vowel
     # it spans the sound, from 0 s, so it lines up with the WAV in Praat
     assert grid.minTimestamp == 0.0 and grid.maxTimestamp == pytest.approx(rec.audio.duration, abs=0.02)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ta.TextGrid"]  # atomic: no temporary left
@@ -142,7 +153,8 @@ def test_syllables_textgrid_keeps_the_recordings_own_tiers(tmp_path, capsys):
     assert code == 0, err
     labels = read_textgrid(out)
     assert Label(0.5, 1.5, "hello", "words") in labels
-    assert {lab.tier for lab in labels} == {"words", "productions", "events"}
+    assert {lab.tier for lab in labels} == {"words", "productions", "events", "GONS", "PVEL", "NONS", "MAXC",
+                                            "NOFFS", "PVEL2", "GOFFS", "VTARG"}
 
 
 # ------------------------------------------------------------------ --productions-from
@@ -168,10 +180,11 @@ def test_syllables_productions_from_a_tier_beside_the_recording(tmp_path, capsys
     assert "from the label tier 'syll'" in out
     with open(table, newline="") as fh:
         rows = list(csv.DictReader(fh))
-    assert [(int(r["train"]), int(r["index"]), float(r["start"]), float(r["end"])) for r in rows] == [
+    assert [(int(r["train"]), int(r["index"]), float(r["start_s"]), float(r["end_s"])) for r in rows] == [
         (1, 1, 0.6, 1.0), (1, 2, 1.0, 1.4), (2, 1, 2.2, 2.6)]
+    assert [r["label"] for r in rows] == ["ta", "ta", "ka"]  # the labels carried into the table
     # vowels: the tip's lowest point inside each interval (cos(4πt) is lowest at 0.75, 1.25, 2.25 s)
-    assert [float(r["vowel"]) for r in rows] == pytest.approx([0.75, 1.25, 2.25], abs=0.011)
+    assert [float(r["vowel_s"]) for r in rows] == pytest.approx([0.75, 1.25, 2.25], abs=0.011)
 
 
 def test_productions_from_an_explicit_textgrid_and_a_missing_tier(tmp_path, capsys):
@@ -183,7 +196,7 @@ def test_productions_from_an_explicit_textgrid_and_a_missing_tier(tmp_path, caps
     code, out, err = run(capsys, "syllables", rec_path, "--labels", grid,
                          "--productions-from", "syll")
     assert code == 0, err
-    assert "productions shown: every non-empty interval (3)" in out
+    assert "productions shown: every labelled interval (3)" in out
     code, _, err = run(capsys, "syllables", rec_path, "--labels", grid,
                        "--productions-from", "syllables")
     assert code == 2
@@ -289,7 +302,8 @@ def test_textgrid_without_productions_still_has_both_tiers(tmp_path):
     from tonguevis.preprocess.productions import ProductionTable
 
     out = tmp_path / "none.TextGrid"
-    assert write_productions_textgrid(out, ProductionTable(), _train_recording()) == ["productions", "events"]
+    assert write_productions_textgrid(out, ProductionTable(), _train_recording()) == [
+        "productions", "events", "GONS", "PVEL", "NONS", "MAXC", "NOFFS", "PVEL2", "GOFFS", "VTARG"]
     grid = textgrid.openTextgrid(str(out), includeEmptyIntervals=False)
     assert type(grid.getTier("events")).__name__ == "PointTier"
     assert type(grid.getTier("productions")).__name__ == "IntervalTier"

@@ -47,25 +47,32 @@ def open_recording(path: str | os.PathLike, sensors: dict | str | os.PathLike | 
     return read_recording(path, sensor_map=sensors, audio=audio, labels=labels, **options)
 
 
-def find_recording_productions(recording: Recording, tip: str = "TT", keep=(2, 3, 4), trains=None,
-                               head_correction: bool = True, tier: str | None = None):
+def find_recording_productions(recording: Recording, articulator: str | None = None, keep=(2, 3, 4), trains=None,
+                               head_correction: bool = True, tier: str | None = None, syllable: str | None = None,
+                               labelled: bool = True, tip: str | None = None):
     """The CV productions (a :class:`~tonguevis.preprocess.ProductionTable`) of ``recording``.
 
     Head motion is removed first (:func:`head_corrected`; ``head_correction=False``
-    keeps the positions as recorded), then :func:`tonguevis.preprocess.find_productions`
-    with ``tip``, ``keep`` (1-based positions per train; None: all) and ``trains``.
-    tier : take the productions from this label tier instead (every non-empty
-        interval, ``keep`` and ``trains`` unused; see
-        :func:`tonguevis.preprocess.labelled.productions_from_tier`); a missing tier
-        raises RecordingError listing the tiers.
+    keeps the positions as recorded).  Labels win: with ``tier`` the productions are
+    that label tier's intervals; without it, a ``productions`` tier in the recording's
+    TextGrid (the one ``tonguevis syllables --textgrid`` and the app write beside it) is
+    used when ``labelled`` is true.  Otherwise :func:`tonguevis.preprocess.find_productions`
+    finds them with ``articulator`` (None: chosen from ``syllable`` or the data), ``keep``
+    (1-based positions per train of three or more; None: all) and ``trains``.
+    A missing ``tier`` raises RecordingError listing the tiers; ``tip`` is the old name
+    of ``articulator``.
     """
-    from tonguevis.preprocess.labelled import productions_from_tier
+    from tonguevis.io.textgrid import tier_names
+    from tonguevis.preprocess.labelled import PRODUCTIONS_TIER, productions_from_tier
     from tonguevis.preprocess.productions import find_productions
 
     rec = head_corrected(recording) if head_correction else recording
+    articulator = articulator or tip
+    if tier is None and labelled and PRODUCTIONS_TIER in tier_names(rec.labels):
+        tier = PRODUCTIONS_TIER
     if tier is not None:
-        return productions_from_tier(rec, tier, tip=tip)
-    return find_productions(rec, tip=tip, keep=keep, trains=trains)
+        return productions_from_tier(rec, tier, articulator=articulator, syllable=syllable)
+    return find_productions(rec, articulator=articulator, keep=keep, trains=trains, syllable=syllable)
 
 
 def simulate_recording(recording: Recording, model=None, *, modes: int = 100, warping: bool = True,

@@ -29,6 +29,7 @@ def syllable_train_recording(syllables=5, trains=3, rate=100.0, with_audio=True,
                              noise=5e-5, period=0.26):
     """A tongue tip raised once per syllable (Gaussian bumps), trains separated by rest.
 
+    syllables : per train, or a list of counts, one per train.
     TT z = A * sum_k exp(-(t - r_k)^2 / (2 sigma^2)) with sigma = 50 ms: the
     bumps barely overlap, so the maxima (releases) sit at r_k and the minima
     (vowels) midway between.  Audio: a 150 Hz tone from 50 ms before the first
@@ -37,8 +38,9 @@ def syllable_train_recording(syllables=5, trains=3, rate=100.0, with_audio=True,
     """
     rng = np.random.default_rng(seed)
     amp, sigma = 0.008, 0.05
-    starts = [3.0 + k * (syllables * period + 1.5) for k in range(trains)]
-    releases = [[t0 + k * period for k in range(syllables)] for t0 in starts]
+    counts = list(syllables) if isinstance(syllables, (list, tuple)) else [syllables] * trains
+    starts = 3.0 + np.concatenate([[0.0], np.cumsum([c * period + 1.5 for c in counts[:-1]])])
+    releases = [[t0 + k * period for k in range(c)] for t0, c in zip(starts, counts)]
     duration = releases[-1][-1] + 1.5
     n = int(round(duration * rate))
     t = np.arange(n) / rate
@@ -56,3 +58,24 @@ def syllable_train_recording(syllables=5, trains=3, rate=100.0, with_audio=True,
             samples[m] += 0.3 * np.sin(2 * np.pi * 150 * ta[m])
         audio = Audio(samples=samples, rate=arate)
     return recording({"TT": tip}, rate=rate, audio=audio), releases, spans
+
+
+def bump_release_times(releases, sigma: float = 0.05, fraction: float = 0.2) -> list[list[float]]:
+    """Where the noise-free tip of :func:`syllable_train_recording` has come down ``fraction``
+    of the way from each bump's top to the lowest point before the next bump (or 0.4 s on):
+    the release as tonguevis and the shared hand labels define it, from a 0.1 ms grid."""
+    centres = np.concatenate(releases)
+    t = np.arange(0.0, centres[-1] + 1.0, 1e-4)
+    z = np.exp(-((t[:, None] - centres[None, :]) ** 2) / (2 * sigma**2)).sum(axis=1)
+    out = []
+    for train in releases:
+        row = []
+        for k, top in enumerate(train):
+            stop = train[k + 1] if k + 1 < len(train) else top + 0.4
+            span = (t >= top) & (t <= stop)
+            peak = np.argmax(np.where(span, z, -np.inf))
+            low = z[span].min()
+            falling = (t > t[peak]) & (z <= z[peak] - fraction * (z[peak] - low))
+            row.append(float(t[np.argmax(falling)]))
+        out.append(row)
+    return out

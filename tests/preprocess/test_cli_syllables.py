@@ -15,7 +15,11 @@ def test_syllables_on_the_demo(capsys, tmp_path):
     body = [line for line in text.splitlines() if line[:5].strip().isdigit()]
     assert len(body) == 15 and all(line.split()[1] in {"2", "3", "4"} for line in body)
     rows = list(csv.DictReader(out_csv.open()))
-    assert len(rows) == 15 and set(rows[0]) == {"train", "index", "start", "end", "release", "vowel"}
+    header = text.splitlines()[[i for i, line in enumerate(text.splitlines()) if line[:5].strip().isdigit()][0] - 1]
+    # units in every time column, the same names on screen and on disk
+    assert list(rows[0]) == header.split() == ["train", "index", "label", "articulator", "start_s", "end_s",
+                                               "release_s", "closure_s", "vowel_s", "duration_ms", "clarity"]
+    assert len(rows) == 15 and {r["label"] for r in rows} == {"ta"} and {r["articulator"] for r in rows} == {"TT"}
 
 
 def test_syllables_all_and_kinematic_fallback(capsys, tmp_path):
@@ -33,4 +37,4 @@ def test_syllables_errors_in_one_line(capsys, tmp_path):
     lone.write_bytes((DATA_DIR / "spk1_ta.tsv").read_bytes())
     assert main(["syllables", str(lone)]) == 2
     err = capsys.readouterr().err
-    assert "tongue-tip" in err and err.count("\n") == 1
+    assert "tongue-tip (TT)" in err and "x.tsv" in err and err.count("\n") == 1

@@ -77,3 +77,32 @@ def test_workflow_takes_productions_from_a_tier_instead_of_finding_them():
     assert [(p.start, p.end) for p in table] == [(0.2, 0.9), (0.9, 1.8), (2.1, 2.9)]
     with pytest.raises(RecordingError, match="tiers: syll, words, events"):
         find_recording_productions(rec, tier="phones")
+
+
+def test_silence_labels_are_skipped_and_labels_carried():
+    words = [Label(0.0, 0.2, "sp", "words"), Label(0.2, 0.9, "the", "words"), Label(0.9, 1.1, "<p:>", "words"),
+             Label(1.1, 1.8, "birch", "words"), Label(1.8, 2.0, "SIL", "words"), Label(2.0, 2.4, "pau", "words"),
+             Label(2.4, 2.9, "canoe", "words")]
+    table = productions_from_tier(recording(words), "words")
+    assert [p.label for p in table] == ["the", "birch", "canoe"]
+    assert [p.name for p in table] == ["1.1 the", "2.1 birch", "3.1 canoe"]  # silences split the trains
+    assert "3 labelled intervals" in table.notes[0] and "4 silence or empty intervals skipped" in table.notes[0]
+    only_silence = [Label(0.0, 1.0, "sil", "words"), Label(1.0, 2.0, "sp", "words")]
+    with pytest.raises(RecordingError, match="only silence labels"):
+        productions_from_tier(recording(only_silence), "words")
+
+
+def test_our_own_train_index_texts_are_not_labels():
+    labels = [Label(0.2, 0.9, "1.1", "productions"), Label(0.9, 1.8, "1.2", "productions")]
+    assert [p.label for p in productions_from_tier(recording(labels), "productions")] == ["", ""]
+
+
+def test_a_productions_tier_beside_the_recording_wins(tmp_path):
+    from tonguevis.workflows import find_recording_productions
+
+    labels = [Label(0.2, 0.9, "ta", "productions"), Label(1.2, 1.8, "ta", "productions")]
+    rec = recording(labels)
+    table = find_recording_productions(rec)
+    assert [(p.start, p.end, p.label) for p in table] == [(0.2, 0.9, "ta"), (1.2, 1.8, "ta")]
+    found = find_recording_productions(rec, labelled=False, keep=None)  # found from the motion instead
+    assert [p.start for p in found] != [0.2, 1.2] and found.articulator_reason != "labelled"

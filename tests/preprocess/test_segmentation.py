@@ -1,11 +1,11 @@
-"""Trains from audio or kinematics; productions from tongue-tip velocity zero crossings."""
+"""Trains from audio or kinematics; productions from the articulator's closures and releases."""
 
 import csv
 
 import numpy as np
 import pytest
 
-from tests.preprocess._synthetic import recording, syllable_train_recording
+from tests.preprocess._synthetic import bump_release_times, recording, syllable_train_recording
 from tonguevis.errors import RecordingError
 from tonguevis.preprocess import ProductionTable, find_productions, find_trains
 from tonguevis.preprocess.trains import active_spans, audio_envelope
@@ -50,24 +50,29 @@ def test_trains_from_kinematics_without_audio():
 
 
 def test_productions_release_to_release():
-    rec, releases, spans = syllable_train_recording(noise=1e-4)
+    rec, tops, spans = syllable_train_recording(noise=1e-4)
+    releases = bump_release_times(tops)
     table = find_productions(rec, keep=None)
-    assert len(table) == 15 and table.counts == [5, 5, 5] and not table.notes
+    assert len(table) == 15 and table.counts == [5, 5, 5] and not table.notes and table.clear
     found = table.as_array()
-    truth_starts = np.concatenate(releases)
-    np.testing.assert_allclose(found[:, 2], truth_starts, atol=0.01)  # within one frame
+    np.testing.assert_allclose(found[:, 2], np.concatenate(releases), atol=0.01)  # within one frame
     np.testing.assert_array_equal(found[:, 2], found[:, 4])  # start is the release
+    # the closure is the top of the bump, before the release
+    np.testing.assert_allclose([p.closure for p in table], np.concatenate(tops), atol=0.015)
+    assert all(p.closure < p.release for p in table)
     for p in table:
         r = releases[p.train - 1]
         expected_end = r[p.index] if p.index < 5 else spans[p.train - 1][1]
         assert p.end == pytest.approx(expected_end, abs=0.015)
         if p.index < 5:  # the vowel lies midway between two bumps
-            assert p.vowel == pytest.approx((r[p.index - 1] + r[p.index]) / 2, abs=0.02)
+            top = tops[p.train - 1]
+            assert p.vowel == pytest.approx((top[p.index - 1] + top[p.index]) / 2, abs=0.02)
         assert p.start < p.vowel <= p.end
 
 
 def test_default_keeps_the_second_to_fourth():
-    rec, releases, _ = syllable_train_recording()
+    rec, tops, _ = syllable_train_recording()
+    releases = bump_release_times(tops)
     table = find_productions(rec)
     assert [(p.train, p.index) for p in table] == [(t, i) for t in (1, 2, 3) for i in (2, 3, 4)]
     np.testing.assert_allclose([p.start for p in table], [r[i] for r in releases for i in (1, 2, 3)],
@@ -77,7 +82,13 @@ def test_default_keeps_the_second_to_fourth():
 def test_a_short_train_is_reported():
     rec, _, _ = syllable_train_recording(syllables=4, trains=1)
     table = find_productions(rec, keep=None)
-    assert table.counts == [4] and len(table.notes) == 1 and "4 productions" in table.notes[0]
+    assert table.counts == [4] and len(table) == 4
+    # one train alone: nothing to compare its length with; the paper's rule still applies to it
+    assert [p.index for p in find_productions(rec)] == [2, 3, 4]
+    rec, _, _ = syllable_train_recording(syllables=[5, 4, 5], trains=3)
+    table = find_productions(rec, keep=None)
+    assert table.counts == [5, 4, 5]
+    assert [n for n in table.notes if "train 2" in n and "4 productions, the other trains 5" in n]
 
 
 def test_csv_round_trip(tmp_path):
@@ -88,24 +99,27 @@ def test_csv_round_trip(tmp_path):
     with open(path, newline="") as handle:
         rows = list(csv.DictReader(handle))
     assert [int(r["index"]) for r in rows] == [2, 3, 4]
-    assert float(rows[0]["start"]) == pytest.approx(table[0].start, abs=1e-4)
+    assert float(rows[0]["start_s"]) == pytest.approx(table[0].start, abs=1e-4)
+    assert rows[0]["label"] == "" and rows[0]["articulator"] == "TT"
     assert list(tmp_path.iterdir()) == [path]  # no temporary file left behind
     assert isinstance(table, ProductionTable)
 
 
-def test_missing_tip_raises():
-    rec = recording({"TD": np.zeros((100, 3))})
+def test_no_articulator_raises():
+    rec = recording({"JAW": np.zeros((100, 3))})
     with pytest.raises(RecordingError, match="tongue-tip"):
         find_productions(rec)
+    with pytest.raises(RecordingError, match="no sensor 'TT'"):
+        find_productions(recording({"TD": np.zeros((100, 3))}), articulator="TT")
 
 
 def test_short_gaps_in_the_tip_do_not_lose_productions():
-    rec, releases, _ = syllable_train_recording(trains=2)
-    rec.sensors["TT"][[int(releases[0][2] * 100) + 8, int(releases[1][1] * 100) + 5]] = np.nan
-    rec.sensors["TT"][int(releases[1][3] * 100) + 6: int(releases[1][3] * 100) + 9] = np.nan
+    rec, tops, _ = syllable_train_recording(trains=2)
+    rec.sensors["TT"][[int(tops[0][2] * 100) + 8, int(tops[1][1] * 100) + 5]] = np.nan
+    rec.sensors["TT"][int(tops[1][3] * 100) + 6: int(tops[1][3] * 100) + 9] = np.nan
     table = find_productions(rec, keep=None)
     assert table.counts == [5, 5]
-    np.testing.assert_allclose([p.start for p in table], np.concatenate(releases), atol=0.015)
+    np.testing.assert_allclose([p.start for p in table], np.concatenate(bump_release_times(tops)), atol=0.015)
 
 
 def test_noise_only_gives_no_productions_and_no_crash():

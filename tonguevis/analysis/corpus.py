@@ -285,10 +285,10 @@ def entry_curves(entry: CorpusEntry, rec, motion, keep=(2, 3, 4), window: str = 
     from tonguevis.workflows import find_recording_productions
 
     if window == "release":
-        table = find_recording_productions(rec, keep=keep, tier=tier)
+        table = find_recording_productions(rec, keep=keep, tier=tier, syllable=entry.syllable or None)
         spans = list(table)
     elif window == "vowel":
-        table = find_recording_productions(rec, keep=None, tier=tier)
+        table = find_recording_productions(rec, keep=None, tier=tier, syllable=entry.syllable or None)
         spans = [w for w in vowel_windows(table) if keep is None or tier is not None or w.index in keep]
     else:
         raise EnergyError(f"window must be 'release' or 'vowel', got {window!r}")

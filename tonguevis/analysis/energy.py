@@ -116,7 +116,8 @@ def production_curves(
 
     motion : a :class:`~tonguevis.sim.Motion` (uses ``times`` and ``energy``).
     productions : objects with ``train``, ``index``, ``start``, ``end`` (s), e.g.
-        a :class:`~tonguevis.preprocess.ProductionTable` or :func:`vowel_windows`.
+        a :class:`~tonguevis.preprocess.ProductionTable` or :func:`vowel_windows`;
+        a production's ``label`` is the curve's syllable when ``syllable`` is empty.
     A production keeps the frames with start <= t <= end; one with fewer than
     two frames inside the motion raises :class:`EnergyError`.
     """
@@ -134,7 +135,7 @@ def production_curves(
                 f"holds {len(frames)} frame(s) of a motion spanning {times[0]:.3f}-{times[-1]:.3f} s")
         t = times[frames]
         curves.append(EnergyCurve(
-            recording=recording, speaker=speaker, syllable=syllable, trial=int(trial),
+            recording=recording, speaker=speaker, syllable=syllable or getattr(p, "label", ""), trial=int(trial),
             train=int(p.train), index=int(p.index), times=t, time_s=t - start,
             time_norm=(t - start) / (end - start), energy=energy[frames], frames=frames,
             start=start, end=end,

@@ -5,8 +5,10 @@ Per recording and gathered for the corpus (``DIR/<table>.parquet``):
 * ``energy``: the long format of ``tonguevis energy`` (one row per frame of
   each production curve, the same columns; floats at full precision).
 * ``productions``: one row per production (train, index, times in s, the
-  1-based ``number`` that ``tonguevis segment --production`` takes) and its
-  energy curve's peak (J), time of peak, area (J·s), mean (J).
+  1-based ``number`` that ``tonguevis segment --production`` takes), its
+  energy curve's peak (J), time of peak, area (J·s), mean (J), and its gesture
+  landmarks (label, articulator, clarity, closure, each landmark's time and position,
+  peak speeds, durations: the columns of ``tonguevis syllables --gestures``).
 * ``simulation``: one row per recording: rest, alignment, plausibility figures.
 * ``segmentation``: one row per partition of each segmented production.
 * ``validation``: one row per held-out sensor: RMSE (mm) and correlation per method.
@@ -24,6 +26,8 @@ from typing import Any
 import numpy as np
 
 from tonguevis.analysis.energy import CSV_COLUMNS
+from tonguevis.preprocess.gesture_table import COLUMNS as GESTURE_COLUMNS
+from tonguevis.preprocess.gesture_table import gesture_rows
 
 TABLES = ("simulation", "energy", "productions", "segmentation", "validation")
 #: The table(s) each step writes.
@@ -33,6 +37,9 @@ VALIDATION_METHODS = ("model", "linear", "static", "kinematic")
 
 _LABELS = [("recording", "string"), ("file", "string"), ("speaker", "string"), ("syllable", "string"),
            ("trial", "int64")]
+#: The gesture landmarks of each production (tonguevis.preprocess.gesture_table), less what the table has.
+_GESTURE_COLUMNS = [(c, {"str": "string", "int": "int64", "float": "float64"}[k])
+                    for c, k in GESTURE_COLUMNS.items() if c not in ("production", "train", "index", "release_s", "vowel_s")]
 _COLUMNS: dict[str, list[tuple[str, str]]] = {
     "energy": [(c, {"recording": "string", "production": "string", "speaker": "string", "syllable": "string",
                     "trial": "int64", "train": "int64", "index": "int64", "frame": "int64"}.get(c, "float64"))
@@ -42,7 +49,7 @@ _COLUMNS: dict[str, list[tuple[str, str]]] = {
         ("start_s", "float64"), ("end_s", "float64"), ("release_s", "float64"), ("vowel_s", "float64"),
         ("duration_s", "float64"), ("window", "string"), ("curve_start_s", "float64"), ("curve_end_s", "float64"),
         ("peak_J", "float64"), ("peak_time_s", "float64"), ("peak_time_norm", "float64"), ("area_Js", "float64"),
-        ("mean_J", "float64")],
+        ("mean_J", "float64")] + _GESTURE_COLUMNS,
     "simulation": _LABELS + [
         ("format", "string"), ("frames", "int64"), ("duration_s", "float64"), ("rate_hz", "float64"),
         ("modes", "int64"), ("warping", "bool_"), ("landmarks", "string"), ("sensor_stiffness", "float64"),
@@ -137,11 +144,12 @@ def energy_table(curves):
 def production_rows(entry, file: str, table, curves, window: str) -> list[dict]:
     """One row per production of ``table`` with its curve's statistics (None when it has no curve)."""
     by_key = {(c.train, c.index): c for c in curves}
+    gestures = {(g["train"], g["index"]): g for g in gesture_rows(table)}
     rows = []
     for number, p in enumerate(table, start=1):
-        row = {**_labels(entry, file), "production": f"{p.train}.{p.index}", "number": number,
-               "train": p.train, "index": p.index, "start_s": p.start, "end_s": p.end, "release_s": p.release,
-               "vowel_s": p.vowel, "duration_s": p.end - p.start, "window": window}
+        row = {**gestures.get((p.train, p.index), {}), **_labels(entry, file), "production": f"{p.train}.{p.index}",
+               "number": number, "train": p.train, "index": p.index, "start_s": p.start, "end_s": p.end,
+               "release_s": p.release, "vowel_s": p.vowel, "duration_s": p.end - p.start, "window": window}
         curve = by_key.get((p.train, p.index))
         if curve is not None:
             stats = curve.stats()
