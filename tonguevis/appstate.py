@@ -32,6 +32,7 @@ of several slots changed, where there are several):
 ``session``       a recording was opened (or closed: None) in slot ``key``, one of
                   :data:`SESSION_ROLES` ("primary": the one the views show; "compare": a second one)
 ``motion``        the session in slot ``key`` has its simulated motion now (value: the session)
+``productions``   the productions of the session in slot ``key`` were corrected (value: the session)
 ``motions``       the motions the analyses can use changed (value: {name: Motion})
 ``morph_ends``    the morph's ``key`` end (one of :data:`MORPH_ENDS`) is ``(recording name, time_s)``
 ``tongue_model``  the tongue model every simulation uses (value: the model or None: built on need)
@@ -59,7 +60,7 @@ SESSION_ROLES = ("primary", "compare")
 #: The morph's ends: t = 0 and t = 1.
 MORPH_ENDS = ("source", "target")
 EVENT_NAMES = ("time", "playing", "speed", "loop", "range", "selection", "color", "reference",
-               "session", "motion", "motions", "morph_ends", "tongue_model", "status")
+               "session", "motion", "productions", "motions", "morph_ends", "tongue_model", "status")
 
 
 @dataclass(frozen=True)
@@ -295,6 +296,16 @@ class AppState:
         role = self.role_of(session)
         if role is not None:
             self._emit("motion", session, source, role)
+        return role
+
+    def set_productions(self, session: Any, table: Any, source: Any = None) -> str | None:
+        """``session``'s productions are now ``table`` (a ProductionTable, e.g. corrected by hand):
+        set on the session (``session.set_production_table``), then a ``productions`` event keyed
+        by its role.  A session no longer open is ignored: returns its role, or None."""
+        role = self.role_of(session)
+        if role is not None:
+            session.set_production_table(table)
+            self._emit("productions", session, source, role)
         return role
 
     def follow_session(self, callback: Callable[[Any], None], role: str = "primary") -> Callable[[], None]:

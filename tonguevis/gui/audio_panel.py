@@ -1,4 +1,5 @@
-"""The sound: waveform and spectrogram with the shared cursor, and the label tiers under them."""
+"""The sound: waveform and spectrogram with the shared cursor, the productions and their
+gesture landmarks over them, and the label tiers under them."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from scipy.signal import spectrogram
 from tonguevis.appstate import AppState
 from tonguevis.gui.label_tiers import draw_tiers, fit_texts, tiers
 from tonguevis.gui.timeplot import TimePlot
+from tonguevis.render.production_marks import mark_landmarks, shade_productions
 
 #: Waveform drawn as a min/max envelope over this many bins (fast at any length).
 ENVELOPE_BINS = 3000
@@ -65,7 +67,9 @@ class AudioPlot(TimePlot):
         self.n_tiers = 0
         self._tier_texts: list = []
         self._time_range = (0.0, 1.0)
+        self._marks: list = []  # the productions' artists, replaced when they are corrected
         self._layout(0)
+        state.subscribe("productions", self._on_productions)
 
     def _layout(self, n_tiers: int) -> None:
         """(Re)make the axes: waveform, spectrogram and, when there are tiers, their rows."""
@@ -84,9 +88,10 @@ class AudioPlot(TimePlot):
     def time_axes(self) -> list:
         return [ax for ax in (self.wave_ax, self.spec_ax, self.tiers_ax) if ax is not None]
 
-    def show_audio(self, audio, time_range: tuple[float, float], productions=(), labels=()) -> None:
-        """Draw ``audio`` over ``time_range`` (s), production starts as dashed lines and the
-        label tiers of ``labels`` (a list of :class:`~tonguevis.io.Label`) in rows below."""
+    def show_audio(self, audio, time_range: tuple[float, float], productions=(), labels=(), landmarks=()) -> None:
+        """Draw ``audio`` over ``time_range`` (s), the productions (shaded, starts dashed) with
+        their ``landmarks`` (GestureLandmarks) along the waveform's top, and the label tiers of
+        ``labels`` (a list of :class:`~tonguevis.io.Label`) in rows below."""
         labels = list(labels or ())
         n_tiers = len(tiers(labels))
         if n_tiers != self.n_tiers:
@@ -116,12 +121,8 @@ class AudioPlot(TimePlot):
                                 extent=(audio.offset + st[0], audio.offset + st[-1], f[keep][0] / 1e3,
                                         f[keep][-1] / 1e3), interpolation="nearest")
             self.spec_ax.set_ylabel("frequency\n(kHz)", fontsize=8)
-        starts = [start for start, _end in productions]
-        for ax in (self.wave_ax, self.spec_ax) if starts else ():  # one artist per axes, however many productions
-            from matplotlib.collections import LineCollection
-
-            ax.add_collection(LineCollection([[(t, 0.0), (t, 1.0)] for t in starts], colors="#2980b9", linewidths=0.6,
-                                             linestyles="--", transform=ax.get_xaxis_transform()), autolim=False)
+        self._marks = []
+        self.show_productions(productions, landmarks, draw=False)
         bottom = self.spec_ax
         if self.tiers_ax is not None:
             self._tier_texts = draw_tiers(self.tiers_ax, labels, self._time_range)
@@ -131,6 +132,24 @@ class AudioPlot(TimePlot):
         self.wave_ax.set_xlim(*time_range)
         self.set_time_axes(self.time_axes)
         self.draw_idle()
+
+    def show_productions(self, productions, landmarks=(), draw: bool = True) -> None:
+        """Replace the productions' marks: shaded spans over the waveform and spectrogram, the
+        gesture landmarks along the waveform's top."""
+        for artist in self._marks:
+            artist.remove()
+        self._marks = []
+        for ax in (self.wave_ax, self.spec_ax):
+            self._marks += shade_productions(ax, productions, alpha=0.08)
+        if landmarks:
+            self._marks += mark_landmarks(self.wave_ax, landmarks, size=5.0)
+        if draw:
+            self.draw_idle()
+
+    def _on_productions(self, event) -> None:
+        if event.key == "primary":
+            table = event.value.production_table
+            self.show_productions(event.value.productions, list(getattr(table, "landmarks", []) or []))
 
     def _fit_tier_texts(self) -> None:
         """Hide the interval texts wider than their interval at the plot's present width."""

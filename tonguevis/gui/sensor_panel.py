@@ -1,8 +1,11 @@
 """Sensor panel: x, y and z of the tongue sensors over time (§6.1).
 
 Switchable between raw position, displacement from rest, velocity and
-acceleration; the productions of the syllable segmentation are shaded and
-the selected sensor is drawn bold.  Head references, the jaw and channels
+acceleration; the productions of the syllable segmentation are shaded, their
+gesture landmarks marked on the articulator's vertical trace, and the selected
+sensor is drawn bold.  With "edit productions" on, dragging a production's
+boundary moves it and the buttons add a production at the cursor, delete the one
+under it, and save them beside the recording (a TextGrid every command then uses).  Head references, the jaw and channels
 the sensor map leaves unnamed are hidden unless asked for: a reference
 120 mm away would flatten the tongue's traces, since each axis scales to
 what it shows.  Click or drag to seek.
@@ -13,12 +16,14 @@ from __future__ import annotations
 from itertools import cycle
 
 import numpy as np
-from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
 from tonguevis.appstate import AppState
+from tonguevis.errors import TonguevisError
 from tonguevis.gui.session import SIGNAL_KINDS, Session, tongue_sensors
 from tonguevis.gui.timeplot import TimePlot
+from tonguevis.render.production_marks import mark_landmarks, shade_productions
 
 SENSOR_COLOURS = ["#b8860b", "#ff69b4", "#6b8e23", "#4682b4", "#a0522d", "#2c3e50", "#7f8c8d", "#9370db"]
 #: Fixed colours of the canonical sensors, so a sensor keeps its colour across recordings.
@@ -53,17 +58,30 @@ def sensor_colours(names) -> dict[str, str]:
     return {name: NAMED_COLOURS.get(name) or next(others) for name in names}
 
 
+#: A press this close (pixels) to a production's boundary grabs it while editing.
+GRAB_PIXELS = 6
+
+
 class SensorPlot(TimePlot):
+    #: (production index, "start" or "end", time_s): a boundary was dragged there while editing
+    boundary_moved = Signal(int, str, float)
+
     def __init__(self, state: AppState, parent=None):
         super().__init__(state, parent, height=4.0)
         self.axes = self.figure.subplots(3, 1, sharex=True)
         self.lines: dict[str, list] = {}
+        self.productions: list[tuple[float, float]] = []
+        self.editing = False
+        self._grabbed: tuple[int, str] | None = None
         self.set_time_axes(list(self.axes))
         state.subscribe("selection", lambda e: self._highlight())
 
     def show_signals(self, times: np.ndarray, signals: dict[str, np.ndarray], label: str, unit: str,
-                     productions: list[tuple[float, float]], colours: dict[str, str] | None = None) -> None:
-        """Plot ``signals`` ({name: (N, 3)}); each axis's y range fits them (autoscaled)."""
+                     productions: list[tuple[float, float]], colours: dict[str, str] | None = None,
+                     landmarks=(), articulator: str | None = None) -> None:
+        """Plot ``signals`` ({name: (N, 3)}); each axis's y range fits them (autoscaled); the
+        productions shaded and their ``landmarks`` (GestureLandmarks) on ``articulator``'s z trace."""
+        self.productions = [tuple(map(float, p)) for p in productions]
         self.lines = {}
         colours = colours or sensor_colours(list(signals))
         for k, ax in enumerate(self.axes):
@@ -72,11 +90,15 @@ class SensorPlot(TimePlot):
             ax.set_ylabel(f"{AXIS_NAMES[k]}\n{unit}", fontsize=8)
             ax.tick_params(labelsize=7)
             ax.grid(True, lw=0.3, alpha=0.5)
-            _shade_productions(ax, productions)
+            shade_productions(ax, productions)
             for name, xyz in signals.items():
                 t, v = envelope_trace(times, xyz[:, k]) if len(times) > MAX_TRACE_POINTS else (times, xyz[:, k])
                 (line,) = ax.plot(t, v, lw=0.9, color=colours[name], label=name)
                 self.lines.setdefault(name, []).append(line)
+        if landmarks and articulator in signals:  # where the constriction is: the vertical trace
+            mark_landmarks(self.axes[2], landmarks, times, signals[articulator][:, 2], legend=True)
+        elif landmarks:
+            mark_landmarks(self.axes[2], landmarks, legend=True)
         if len(times):
             self.axes[0].set_xlim(times[0], times[-1])
         self.axes[-1].set_xlabel("time (s)", fontsize=8)
@@ -87,6 +109,31 @@ class SensorPlot(TimePlot):
         self._highlight(draw=False)
         self.draw_idle()
 
+    # -- editing the productions' boundaries ------------------------------------------
+    def boundary_near(self, event) -> tuple[int, str] | None:
+        """(index, "start"/"end") of the production boundary within GRAB_PIXELS of a mouse event."""
+        if event.inaxes not in self._time_axes or event.x is None:
+            return None
+        ratio = self.device_pixel_ratio or 1.0
+        best, where = GRAB_PIXELS * ratio, None
+        for index, (start, end) in enumerate(self.productions):
+            for side, t in (("start", start), ("end", end)):
+                distance = abs(event.inaxes.transData.transform((t, 0.0))[0] - event.x)
+                if distance <= best:
+                    best, where = distance, (index, side)
+        return where
+
+    def _on_press(self, event) -> None:
+        if self.editing and event.button == 1:
+            self._grabbed = self.boundary_near(event)
+        super()._on_press(event)
+
+    def _on_release(self, event) -> None:
+        grabbed, self._grabbed = self._grabbed, None
+        super()._on_release(event)
+        if grabbed is not None and event.xdata is not None and event.inaxes in self._time_axes:
+            self.boundary_moved.emit(grabbed[0], grabbed[1], float(event.xdata))
+
     def _highlight(self, draw: bool = True) -> None:
         selected = self.state.selection
         for name, lines in self.lines.items():
@@ -95,23 +142,6 @@ class SensorPlot(TimePlot):
                 line.set_alpha(1.0 if selected in (None, name) else 0.45)
         if draw:
             self.draw_idle()
-
-
-def _shade_productions(ax, productions) -> None:
-    """Shade each production (alternating colours) and dash its start: two artists per axes
-    whatever their number (one per production made a 30-minute recording take minutes to draw)."""
-    from matplotlib.collections import LineCollection, PolyCollection
-
-    if not len(productions):
-        return
-    spans = np.asarray(productions, dtype=np.float64).reshape(-1, 2)
-    band = ax.get_xaxis_transform()  # x in seconds, y from the bottom (0) to the top (1) of the axes
-    boxes = [[(a, 0.0), (a, 1.0), (b, 1.0), (b, 0.0)] for a, b in spans]
-    colours = ["#3498db" if j % 2 else "#95a5a6" for j in range(len(spans))]
-    ax.add_collection(PolyCollection(boxes, facecolors=colours, alpha=0.12, linewidths=0, transform=band),
-                      autolim=False)
-    ax.add_collection(LineCollection([[(a, 0.0), (a, 1.0)] for a in spans[:, 0]], colors="#7f8c8d", linewidths=0.6,
-                                     linestyles="--", transform=band), autolim=False)
 
 
 class SensorPanel(QWidget):
@@ -130,17 +160,37 @@ class SensorPanel(QWidget):
         self.others.setToolTip("Head references, the jaw, lips and channels the sensor map leaves unnamed;\n"
                                "hidden by default so that the axes fit the tongue's motion")
         self.plot = SensorPlot(state, self)
+        self.edit = QCheckBox("edit productions")
+        self.edit.setToolTip("drag a production's boundary to move it; add a production at the cursor, delete "
+                             "the one under it, and save them beside the recording as a TextGrid that every "
+                             "tonguevis command then uses")
+        self.add_button = QPushButton("Add at cursor")
+        self.delete_button = QPushButton("Delete at cursor")
+        self.save_button = QPushButton("Save productions")
+        self.save_button.setToolTip("write NAME.TextGrid beside the recording (its own tiers kept)")
         controls = QHBoxLayout()
         controls.addWidget(QLabel("Show"))
         controls.addWidget(self.kind)
         controls.addWidget(QLabel("Highlight"))
         controls.addWidget(self.sensor)
         controls.addStretch(1)
+        options = QHBoxLayout()  # own row: beside the combos it widens the tab
+        options.addWidget(self.others)
+        options.addStretch(1)
+        for widget in (self.edit, self.add_button, self.delete_button, self.save_button):
+            options.addWidget(widget)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(2, 2, 2, 2)
         layout.addLayout(controls)
-        layout.addWidget(self.others, 0, Qt.AlignmentFlag.AlignLeft)  # own row: beside the combos it widens the tab
+        layout.addLayout(options)
         layout.addWidget(self.plot, 1)
+        self.edit.toggled.connect(self._on_edit_toggled)
+        self.add_button.clicked.connect(self.add_production)
+        self.delete_button.clicked.connect(self.delete_production)
+        self.save_button.clicked.connect(self.save_productions)
+        self.plot.boundary_moved.connect(self.move_boundary)
+        self._on_edit_toggled(False)
+        state.subscribe("productions", self._on_productions)
         self.kind.currentIndexChanged.connect(lambda _i: self.refresh())
         self.others.toggled.connect(lambda _on: self.refresh())
         self.sensor.currentIndexChanged.connect(lambda _i: state.select(self.sensor.currentData(), source=self))
@@ -188,7 +238,83 @@ class SensorPanel(QWidget):
         signals = self.session.signals(kind)
         colours = sensor_colours(list(signals))  # of every channel: the same whether the others show or not
         shown = {name: signals[name] for name in self.shown(signals)}
-        self.plot.show_signals(self.session.recording.times, shown, label, unit, self.session.productions, colours)
+        table = self.session.production_table
+        self.plot.show_signals(self.session.recording.times, shown, label, unit, self.session.productions, colours,
+                               landmarks=list(getattr(table, "landmarks", []) or []),
+                               articulator=getattr(table, "articulator", None))
+        self._update_edit_buttons()
+
+    # -- corrections of the productions ----------------------------------------------
+    def _on_edit_toggled(self, on: bool) -> None:
+        self.plot.editing = on
+        self._update_edit_buttons()
+
+    def _update_edit_buttons(self) -> None:
+        editor = self.session.production_editor if self.session is not None else None
+        on = self.edit.isChecked() and self.session is not None
+        self.add_button.setEnabled(on)
+        self.delete_button.setEnabled(on and editor is not None and len(editor.table) > 0)
+        self.save_button.setEnabled(editor is not None and editor.edited)
+
+    def _editor(self):
+        """The session's production editor; one with no production when none were found."""
+        from tonguevis.preprocess.productions import ProductionTable
+
+        if self.session.production_table is None:
+            self.session.set_production_table(ProductionTable())
+        return self.session.production_editor
+
+    def _apply(self, change, what: str) -> bool:
+        """Run ``change(editor)``; announce the new table, or show why it could not be done."""
+        from tonguevis.gui.dialogs import error_box
+
+        if self.session is None:
+            return False
+        editor = self._editor()
+        try:
+            table = change(editor)
+        except (TonguevisError, IndexError) as exc:
+            self.last_dialog = error_box(self, f"Cannot {what}", str(exc), self.session.path)
+            self.state.set_status(f"Cannot {what}: {exc}", self)
+            return False
+        self.state.set_productions(self.session, table, self)
+        self.state.set_status(f"{what}: {len(table)} productions (not saved: Save productions writes them)", self)
+        return True
+
+    def move_boundary(self, index: int, side: str, time: float) -> bool:
+        return self._apply(lambda e: e.move_boundary(index, side, time), f"move the {side} of production {index + 1}")
+
+    def add_production(self) -> bool:
+        return self._apply(lambda e: e.add(self.state.time), f"add a production at {self.state.time:.3f} s")
+
+    def delete_production(self) -> bool:
+        editor = self._editor()
+        index = editor.index_at(self.state.time)
+        if index is None:
+            self.state.set_status(f"no production at {self.state.time:.3f} s to delete", self)
+            return False
+        return self._apply(lambda e: e.delete(index), f"delete production {index + 1}")
+
+    def save_productions(self, path=None) -> bool:
+        """Write the productions beside the recording (or to ``path``); a dialog on failure."""
+        from tonguevis.gui.dialogs import error_box
+
+        if self.session is None or self.session.production_editor is None:
+            return False
+        editor = self.session.production_editor
+        try:
+            written = editor.save(path)
+        except (TonguevisError, OSError) as exc:
+            self.last_dialog = error_box(self, "Cannot save productions", str(exc), self.session.path)
+            return False
+        self.state.set_status(f"saved {len(editor.table)} productions to {written} (every tonguevis command now "
+                              "uses them)", self)
+        self._update_edit_buttons()
+        return True
+
+    def _on_productions(self, event) -> None:
+        if event.key == "primary" and event.value is self.session:
+            self.refresh()
 
     def _on_selection(self, event) -> None:
         index = self.sensor.findData(event.value)

@@ -74,11 +74,12 @@ def production_intervals(productions: Any) -> list[tuple[float, float]]:
 
 
 def find_production_table(recording: Recording):
-    """The recording's CV productions (a ProductionTable), or None when none can be found (logged)."""
+    """Every CV production of the recording (a ProductionTable: a ``productions`` tier of its
+    TextGrid, else found), or None when none can be found (logged)."""
     from tonguevis.workflows import find_recording_productions
 
     try:
-        return find_recording_productions(recording)
+        return find_recording_productions(recording, keep=None)
     except TonguevisError as exc:
         log.warning("no productions found: %s", exc)
         return None
@@ -128,6 +129,26 @@ class Session:
             raise RecordingError("the recording has no samples", self.path)
         period = float(np.median(np.diff(times))) if len(times) > 1 else 1.0 / self.recording.rate
         return float(times[0]), float(times[-1]), period
+
+    def set_production_table(self, table) -> None:
+        """Its productions are now ``table`` (a ProductionTable, or None)."""
+        self.production_table = table
+        self.productions = production_intervals(table)
+
+    @property
+    def production_editor(self):
+        """A :class:`~tonguevis.preprocess.editing.ProductionEditor` of its productions (made on
+        first use, anew when the table was replaced by other means), or None without productions."""
+        from tonguevis.preprocess.editing import ProductionEditor
+
+        if self.production_table is None:
+            return None
+        editor = self.__dict__.get("_editor")
+        if editor is None or editor.table is not self.production_table:
+            editor = ProductionEditor(self.recording, self.production_table, self.path)
+            self.__dict__["_editor"] = editor
+        editor.path = self.path  # saved beside the recording where it is now
+        return editor
 
     def signals(self, kind: str) -> dict[str, np.ndarray]:
         """{sensor: (N, 3)} in the unit of ``SIGNAL_KINDS[kind]`` (cached)."""
@@ -230,8 +251,10 @@ def load_session(path: str | os.PathLike, sensor_map: dict | str | None = None, 
 
 
 def make_session(recording: Recording, path=None) -> Session:
-    """A session of ``recording`` with its productions found (when it has a tongue tip)."""
-    table = find_production_table(recording) if "TT" in recording.sensors else None
+    """A session of ``recording`` with its productions found (when it has a tongue tip, dorsum or lips)."""
+    from tonguevis.preprocess.articulators import available
+
+    table = find_production_table(recording) if available(recording) else None
     return Session(recording, None if path is None else Path(path), production_intervals(table), table)
 
 

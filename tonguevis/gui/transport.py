@@ -45,6 +45,8 @@ class TransportBar(QWidget):
         state.subscribe("range", lambda e: self._on_range())
         state.subscribe("speed", self._on_speed)
         state.subscribe("loop", lambda e: self._on_loop_changed(e.value))
+        state.subscribe("productions", lambda e: self.set_productions(e.value.productions) if e.key == "primary"
+                        else None)
 
     def set_productions(self, productions: list[tuple[float, float]]) -> None:
         self.productions = list(productions)

@@ -290,8 +290,9 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         self.state.set_range(start, end, period, self)
         self.playback.set_audio(session.recording.audio)
         self.transport.set_productions(session.productions)
+        table = session.production_table
         self.audio.show_audio(session.recording.audio, (start, end), session.productions,
-                              session.recording.labels)
+                              session.recording.labels, list(getattr(table, "landmarks", []) or []))
         self.show_rest(session)
 
     def _motion_ready(self, event) -> None:
