@@ -115,3 +115,46 @@ def test_real_exports_read_with_the_paper_layout_and_our_axes(name, seconds, pro
         assert rec.valid_fraction(n) == 1.0
         step = np.linalg.norm(np.diff(rec.sensors[n], axis=0), axis=1)
         assert step.max() < 0.01  # no jumps: under 1 m/s (the fastest real step: 7 mm in 10 ms)
+
+
+SENSOR_HEADER = (["timestamp", "Placeholder1", "Placeholder2"]
+                 + ["Sensor", "Status", "X", "Y", "Z", "Qw", "Qx", "Qy", "Qz"] * 3 + ["Counter"])
+
+
+def _sensor_row(t_ms, tt_file, td_file, slot10, counter):
+    """One Sensor-layout row: TT (Id 4), TD (Id 5), the unused slot (Id 10), a counter; X, Y, Z as the file holds them."""
+    row = [f"{t_ms:g}", "0", "0"]
+    for sensor_id, xyz in ((4, tt_file), (5, td_file), (10, slot10)):
+        row += [str(sensor_id), "55", *(repr(float(v)) for v in xyz), "1", "0", "0", "0"]
+    return "\t".join(row + [str(counter)])
+
+
+def test_rows_repeating_the_previous_timestamp_are_merged_not_a_crash(tmp_path, capsys):
+    # The older Sensor layout: some rows repeat the previous row's timestamp, differing only in
+    # the unused slot (huge garbage, or now and then a small number) and the trailing counter.
+    times = 20.0 * np.arange(60)  # ms
+    tt = np.column_stack([2 * np.sin(times / 200), 10 + 0 * times, 0 * times])  # the file's X, Y, Z
+    lines, counter = ["\t".join(SENSOR_HEADER)], 0
+    repeated = set(range(3, 60, 4))
+    for k, t in enumerate(times):
+        lines.append(_sensor_row(t, tt[k], tt[k] - [0, 30, 0], [3e28, -1e28, 2e28], counter))
+        counter += 1
+        if k in repeated:  # the same time again: the unused slot now reads a plausible number
+            lines.append(_sensor_row(t, tt[k], tt[k] - [0, 30, 0], [1.0, 2.0, 3.0], counter))
+            counter += 1
+    path = tmp_path / "repeated_times.tsv"
+    path.write_bytes(("\r\n".join(lines) + "\r\n").encode("ascii"))
+
+    rec = read_recording(path)
+    check_recording(rec)
+    res = rec.metadata["resampled"]
+    assert res["rows"] == 60 + len(repeated) and res["repeated_time_rows_merged"] == len(repeated)
+    assert res["distinct_samples"] == 60
+    assert np.all(np.diff(rec.times) > 0) and rec.times[-1] == pytest.approx(times[-1] / 1000)
+    # The file's X, Y, Z are Unity's y, z, x: Unity (x right, y up, z forward) -> ours.
+    unity = tt[:, [2, 0, 1]]
+    np.testing.assert_allclose(rec.sensors["TT"][::2], 1e-3 * unity @ AXES_UNITY.T, atol=1e-9)
+
+    from tonguevis.cli import main
+    assert main(["info", str(path)]) == 0
+    assert f"{len(repeated)} repeating the previous row's timestamp, merged into it" in capsys.readouterr().out

@@ -57,6 +57,18 @@ def _gaps(dropped) -> str:
     return f"{missing} frame(s) missing in {len(dropped)} gap(s): {shown}{more}"
 
 
+def _resampling(resampled) -> list[str]:
+    """The ``resampled:`` line of a recording put on a uniform clock by its reader (Opti-Speech), else none."""
+    if not isinstance(resampled, dict):
+        return []
+    merged = resampled.get("repeated_time_rows_merged", 0)
+    rows = f"{resampled.get('rows', '?')} rows"
+    if merged:
+        rows += f" ({merged} repeating the previous row's timestamp, merged into it)"
+    return [f"resampled:      {rows}, {resampled.get('distinct_samples', '?')} distinct samples, onto "
+            f"{resampled.get('rate_hz', 0):g} Hz ({resampled.get('method', '?')})"]
+
+
 def describe(rec) -> list[str]:
     """The lines ``tonguevis info`` prints for a recording."""
     from tonguevis.io.registry import FORMATS
@@ -72,6 +84,7 @@ def describe(rec) -> list[str]:
         f"length unit:    {meta.get('original_unit', '?')} in the file (metres inside tonguevis)",
         f"frame:          {meta.get('frame', '?')}",
         f"dropped frames: {_gaps(meta.get('dropped_frames', []))}",
+        *_resampling(meta.get("resampled")),
         f"sensors ({len(rec.sensors)}):    name, valid samples, mean position x, y, z in mm",
     ]
     width = max((len(n) for n in rec.sensors), default=4)

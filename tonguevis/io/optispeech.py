@@ -27,7 +27,11 @@ TL, TD, TBK, JAW, REF1-3, PROBE), so a user needs no sensor map.
 
 **Clock.** The timestamp (ms) is Unity's frame time: steps of 1-45 ms, and
 rows that merely repeat the previous sample (a Unity frame with no new Wave
-sample).  The reader drops repeated rows, then resamples the distinct samples
+sample).  Older Sensor-layout exports also write such a frame as a second row
+with the **same timestamp** (differing only in an unused slot and a counter):
+those rows are merged into the first row of their time, each sensor keeping
+its first valid sample (``metadata['resampled']['repeated_time_rows_merged']``
+says how many).  The reader drops repeated rows, then resamples the distinct samples
 onto a uniform ``rate`` clock (default 100 Hz, the NDI Wave's own rate, so
 frame-based filters mean what they mean for Wave exports) by monotone cubic
 (PCHIP) interpolation per sensor; a gap between distinct samples longer than
@@ -165,6 +169,14 @@ def read_optispeech(path, rate: float = DEFAULT_RATE, max_gap: float = DEFAULT_M
         ids[name] = marker
     if not raw_pos:
         raise RecordingError("no sensor holds a valid sample", path)
+    n_rows = len(times)
+    times, merged = _merge_repeated_times(times, [*raw_pos.values(), *raw_q.values()])
+    raw_pos = dict(zip(raw_pos, merged[:len(raw_pos)]))
+    raw_q = dict(zip(raw_q, merged[len(raw_pos):]))
+    repeated_time_rows = n_rows - len(times)
+    if repeated_time_rows:
+        log.info("%s: %d of %d rows repeat the previous row's timestamp; merged into it (each sensor keeps "
+                 "the first valid sample of that time)", path, repeated_time_rows, n_rows)
 
     stacked = np.stack(list(raw_pos.values()), axis=1)  # (N, S, 3)
     same = np.all((stacked[1:] == stacked[:-1]) | (np.isnan(stacked[1:]) & np.isnan(stacked[:-1])), axis=(1, 2))
@@ -186,7 +198,8 @@ def read_optispeech(path, rate: float = DEFAULT_RATE, max_gap: float = DEFAULT_M
         "orientation_kind": "quaternion_wxyz",
         "resampled": {
             "rate_hz": float(rate), "method": "pchip", "max_gap_s": float(max_gap),
-            "rows": int(len(times)), "distinct_samples": int(keep.sum()),
+            "rows": int(n_rows), "repeated_time_rows_merged": int(repeated_time_rows),
+            "distinct_samples": int(keep.sum()),
             "median_step_ms": float(1e3 * np.median(steps)), "max_step_ms": float(1e3 * steps.max()),
         },
         "dropped_frames": [],
@@ -194,9 +207,31 @@ def read_optispeech(path, rate: float = DEFAULT_RATE, max_gap: float = DEFAULT_M
         "truncated": not ended,
     }
     log.info("%s: %d distinct samples of %d rows (median step %.0f ms) resampled to %g Hz", path,
-             keep.sum(), len(times), 1e3 * np.median(steps), rate)
+             keep.sum(), n_rows, 1e3 * np.median(steps), rate)
     return Recording(rate=float(rate), times=grid, sensors=sensors, orientations=orientations,
                      metadata=metadata)
+
+
+def _merge_repeated_times(times: np.ndarray, arrays: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Rows of a sorted clock ``times`` (s) that repeat the previous row's time, merged into the first row of it.
+
+    Older Sensor-layout exports write a Unity frame that saw no new Wave sample as a
+    second row with the same timestamp (only an unused slot and a counter differ).
+    Each (N, k) array keeps, per time, its first row whose values are all finite
+    (NaN when none is).  Returns the distinct times and the merged arrays.
+    """
+    first = np.concatenate([[True], np.diff(times) > 0])
+    if first.all():
+        return times, arrays
+    group = np.cumsum(first) - 1
+    merged = []
+    for values in arrays:
+        out = values[first].copy()
+        for row in np.flatnonzero(~first):
+            if not np.all(np.isfinite(out[group[row]])) and np.all(np.isfinite(values[row])):
+                out[group[row]] = values[row]
+        merged.append(out)
+    return times[first], merged
 
 
 def _resample(t: np.ndarray, values: np.ndarray, grid: np.ndarray, max_gap: float) -> np.ndarray:
