@@ -40,7 +40,9 @@ def read_mesh(path: str | os.PathLike, unit: str | None = None, axes: str | None
     path : TetGen ``.node``/``.ele`` (or their stem), ``.npz``, or a meshio format.
     unit : ``"m"``, ``"cm"`` or ``"mm"``; None guesses: extent > 1 means millimetres.
     axes : explicit axis mapping such as ``"-x,-z,-y"`` (see
-        :mod:`tonguevis.mesh.axes`), applied after the unit conversion.
+        :mod:`tonguevis.mesh.axes`), applied after the unit conversion; or
+        ``"auto"``: found from the mesh's shape (:func:`tonguevis.mesh.orientation.find_axes`),
+        logged, and MeshError when the shape does not tell; None keeps the file's axes.
 
     Raises :class:`MeshError` naming the file for anything unreadable or unusable.
     """
@@ -71,10 +73,28 @@ def read_mesh(path: str | os.PathLike, unit: str | None = None, axes: str | None
     points = points * UNIT_SCALE[unit]
 
     tets = checked_tets(points, tets, source, id_offset)
+    if axes is not None and str(axes).strip().lower() == "auto":
+        axes = _found_axes(TetMesh(points, tets, dict(metadata)), source)
+        metadata["axes_found"] = True
     if axes is not None:
         points, tets = apply_axes(points, tets, axes)
         metadata["axes"] = axes
     return TetMesh(points, tets, metadata)
+
+
+def _found_axes(mesh: TetMesh, source) -> str:
+    """The axis mapping of ``mesh`` found from its shape; MeshError when the shape does not tell."""
+    from tonguevis.mesh.orientation import find_axes
+
+    fit = find_axes(mesh)
+    if not fit.decided:
+        raise MeshError(f"cannot tell the mesh's axes from its shape (best mapping {fit.axes!r} fits only "
+                        f"{fit.margin:.2f} times better than the next); give them, e.g. axes='-x,-z,-y' "
+                        "(--axes=-x,-z,-y), new x anterior, y left, z up", source)
+    log.info("%s: axes %s found from the shape (fits %.1f times better than the next mapping, "
+             "%.1f times better than the file's own axes)", source, fit.axes, fit.margin,
+             fit.identity_misfit / fit.misfit)
+    return fit.axes
 
 
 def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray]:

@@ -74,8 +74,9 @@ def prepare_targets(
         (checked), or None: :func:`choose_rest_interval` finds it (the longest
         still interval, else the stillest window) over the driving sensors.
     landmarks : "rule" keeps the model's placement-rule nodes (comparable
-        across speakers, as the paper); "speaker" snaps each sensor to the
-        dorsal-surface node nearest its own aligned rest position.
+        across speakers, as the paper); "speaker" gives each sensor a dorsal-surface
+        node near its own aligned rest position, a different node for each sensor
+        (:func:`assign_sensor_nodes`).
     """
     from tonguevis import preprocess as pp
 
@@ -121,11 +122,7 @@ def prepare_targets(
     aligned_rest = transform.apply(source)
     alignment_rms = float(np.sqrt(np.mean(np.sum((aligned_rest - target) ** 2, axis=1))))
     if landmarks == "speaker":
-        candidates = model.dorsal_nodes
-        dist = np.linalg.norm(model.mesh.points[candidates][None] - aligned_rest[:, None], axis=2)
-        nodes = candidates[np.argmin(dist, axis=1)]
-        if len(np.unique(nodes)) < len(nodes):
-            raise SimulationError(f"two sensors snapped to the same node ({dict(zip(names, nodes.tolist()))})", file)
+        nodes = assign_sensor_nodes(aligned_rest, model.mesh.points, model.dorsal_nodes)
     else:
         nodes = rule_nodes
     positions = np.stack([rec.sensors[n] for n in names], axis=1)  # (F, S, 3)
@@ -137,6 +134,38 @@ def prepare_targets(
     return PreparedTargets(
         names, nodes, displacement, transform, ignored, rest, midsagittal, alignment_rms, aligned_rest, jaw_offset
     )
+
+
+def assign_sensor_nodes(positions: np.ndarray, points: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """(S,) distinct node ids, one per sensor, from ``candidates``, nearest as a whole.
+
+    positions : (S, 3) sensors' aligned rest positions (m); points : (n, 3) mesh nodes (m);
+    candidates : (C,) node ids allowed (the dorsal surface), C >= S.
+
+    An assignment (scipy's ``linear_sum_assignment``) minimising the sum of the
+    squared sensor-node distances over one-to-one choices: where each sensor's
+    own nearest node differs, that is what it gets; where two sensors share a
+    nearest node (sensors closer together than the mesh's edges, or a mesh in a
+    coarse region), the pair takes the two nodes that cost least together,
+    never one node for two sensors (which the simulation cannot drive).
+    """
+    from scipy.optimize import linear_sum_assignment
+    from scipy.spatial import cKDTree
+
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    candidates = np.asarray(candidates, dtype=np.int64).reshape(-1)
+    if candidates.size < len(positions):
+        raise SimulationError(f"{len(positions)} sensors need as many distinct surface nodes, the mesh has "
+                              f"{candidates.size}")
+    # Only the few nearest candidates of each sensor can win: keep the cost matrix small.
+    k = min(candidates.size, 4 * len(positions))
+    _, near = cKDTree(points[candidates]).query(positions, k=k)
+    pool = np.unique(near)
+    cost = np.sum((positions[:, None, :] - points[candidates[pool]][None]) ** 2, axis=2)
+    rows, cols = linear_sum_assignment(cost)
+    nodes = np.empty(len(positions), dtype=np.int64)
+    nodes[rows] = candidates[pool[cols]]
+    return nodes
 
 
 def working_tongue_sensors(recording: Recording) -> list[str]:

@@ -76,12 +76,21 @@ class TongueModel:
 
         ``landmarks`` may be a Landmarks object, a JSON path, or a dict of
         overrides (``{"TT": 12, "anchors": [...]}``) on top of the automatic ones.
+        ``read_options`` go to :func:`~tonguevis.mesh.read_mesh` (``unit``, ``axes``;
+        ``axes="auto"`` finds the mesh's axes from its shape).
+
+        Automatic landmarks need the mesh in our frame (x anterior, y left, z up):
+        a mesh read without ``axes`` whose shape matches our tongue clearly better
+        turned (:func:`~tonguevis.mesh.orientation.find_axes`) is refused with
+        the mapping that fits, instead of placing the sensors on its side or floor.
         """
         from tonguevis.mesh import find_landmarks, read_landmarks, read_mesh
 
         if not isinstance(mesh, TetMesh):
             mesh = read_mesh(mesh, **read_options)
         if landmarks is None or isinstance(landmarks, dict):
+            if mesh.metadata.get("axes") is None:
+                _check_our_frame(mesh)
             landmarks = find_landmarks(mesh, overrides=landmarks)
         elif isinstance(landmarks, (str, os.PathLike)):
             landmarks = read_landmarks(landmarks)
@@ -279,3 +288,19 @@ class TongueModel:
             f"TongueModel({self.mesh.n_nodes} nodes, {self.mesh.n_tets} tets, "
             f"{len(self.anchors)} anchors, sensors {sorted(self.landmarks.sensors)})"
         )
+
+
+def _check_our_frame(mesh: TetMesh) -> None:
+    """MeshError when ``mesh`` clearly lies in another frame than ours, naming the mapping that fits."""
+    from tonguevis.errors import MeshError
+    from tonguevis.mesh.orientation import find_axes
+
+    fit = find_axes(mesh)
+    if fit.in_our_frame:
+        return
+    raise MeshError(
+        f"the mesh does not lie in our frame (x anterior, y left, z up): turned by the axis mapping "
+        f"{fit.axes!r} its shape matches a tongue {fit.identity_misfit / fit.misfit:.1f} times better than as "
+        f"it is, and the sensors and anchors would land on its side or floor. Read it with "
+        f"axes={fit.axes!r} (command line: --axes={fit.axes}), or axes='auto' to take the mapping found",
+        mesh.metadata.get("source"))
