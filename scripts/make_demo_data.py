@@ -487,6 +487,9 @@ def sensor_map_document() -> dict:
                        "(x anterior, y left, z up), origin at the upper incisor edge; the tongue tip "
                        f"itself rests at {TIP.tolist()}.",
         "format": "ndi_wave",
+        "axes": "x,y,z",
+        "axes_note": "the files' X, Y, Z are already ours (x anterior, y left, z up): readers take 'axes' as "
+                     "their axes= option, so no command warns that the positions are in the device's frame",
         "sensors": dict(NDI_IDS),
         "placement": {
             "REF1": "6DOF head reference behind the left ear", "TT": "midline, 10 mm behind the tongue tip",

@@ -82,3 +82,36 @@ def test_a_sensor_map_beside_the_file_is_used_unless_one_is_given(tmp_path):
     (tmp_path / "sensor_map.json").write_text(json.dumps({"TT": "S1"}))
     assert sorted(read_recording(path).sensors) == ["S2", "TT"]
     assert sorted(read_recording(path, sensor_map={}).sensors) == ["S1", "S2"]
+
+
+def test_a_map_states_the_files_axes_so_no_command_guesses_them(tmp_path, capsys):
+    """Issue 27, item 4: an ``"axes"`` entry of sensor_map.json is the reader's axes=; the demo states its own."""
+    from tonguevis.cli import main
+    from tonguevis.io.recording import unstated_axes_note
+    from tonguevis.paths import DATA_DIR
+
+    demo = read_recording(DATA_DIR / "spk1_ta.tsv")  # its sensor_map.json says "axes": "x,y,z"
+    assert demo.metadata["frame"] == "tonguevis" and unstated_axes_note(demo) is None
+    assert main(["info", str(DATA_DIR / "spk1_ta.tsv")]) == 0
+    assert "axes" not in capsys.readouterr().out
+
+    rec = make_recording(names=("S1", "S2"), audio_rate=None)
+    write_recording(rec, tmp_path / "take.tsv")
+    device = read_recording(tmp_path / "take.tsv")
+    assert device.metadata["frame"] == "device" and "does not state its axes" in unstated_axes_note(device)
+    assert unstated_axes_note(device, short=True).startswith("axes not stated")  # the app's status bar
+    assert main(["info", str(tmp_path / "take.tsv")]) == 0
+    assert capsys.readouterr().out.count("does not state its axes") == 1  # once, on the frame line
+
+    (tmp_path / "sensor_map.json").write_text(json.dumps({"sensors": {"TT": 1}, "axes": "-y,x,z"}))
+    stated = read_recording(tmp_path / "take.tsv")
+    assert stated.metadata["frame"] == "tonguevis" and unstated_axes_note(stated) is None
+    device_tt = device.sensors["S1"]
+    np.testing.assert_allclose(stated.sensors["TT"], np.column_stack([-device_tt[:, 1], device_tt[:, 0],
+                                                                      device_tt[:, 2]]), atol=1e-12)
+    # The reader option given on the command line wins over the map's.
+    assert read_recording(tmp_path / "take.tsv", axes="x,y,z").sensors["TT"] == pytest.approx(device_tt)
+
+    (tmp_path / "sensor_map.json").write_text(json.dumps({"sensors": {"TT": 1}, "axes": "up,left,front"}))
+    with pytest.raises(RecordingError, match=r"sensor_map.json.*'axes' 'up,left,front' is not an axis mapping"):
+        read_recording(tmp_path / "take.tsv")

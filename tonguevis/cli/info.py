@@ -71,6 +71,7 @@ def _resampling(resampled) -> list[str]:
 
 def describe(rec) -> list[str]:
     """The lines ``tonguevis info`` prints for a recording."""
+    from tonguevis.io.recording import unstated_axes_note
     from tonguevis.io.registry import FORMATS
 
     meta = rec.metadata
@@ -82,7 +83,7 @@ def describe(rec) -> list[str]:
         f"samples:        {rec.n_samples} ({rec.duration:.3f} s"
         + (f", {rec.times[0]:.3f} to {rec.times[-1]:.3f} s)" if rec.n_samples else ")"),
         f"length unit:    {meta.get('original_unit', '?')} in the file (metres inside tonguevis)",
-        f"frame:          {meta.get('frame', '?')}",
+        f"frame:          {meta.get('frame', '?')}" + (f" ({note})" if (note := unstated_axes_note(rec)) else ""),
         f"dropped frames: {_gaps(meta.get('dropped_frames', []))}",
         *_resampling(meta.get("resampled")),
         f"sensors ({len(rec.sensors)}):    name, valid samples, mean position x, y, z in mm",

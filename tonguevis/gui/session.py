@@ -184,6 +184,7 @@ class Session:
         the ``palate`` it was simulated against and the one the views show (see the class doc)."""
         from tonguevis.workflows import rest_of
 
+        from tonguevis.io.recording import unstated_axes_note
         from tonguevis.sim.plausibility import plausibility_line
 
         self.motion, self.frames, self.rest = motion, frames, rest_of(motion)
@@ -191,6 +192,7 @@ class Session:
         self.notes = [plausibility_line(motion.metadata)] if "plausibility" in motion.metadata else []
         if "contact" in motion.metadata:
             self.notes.append(contact_note(motion))
+        self.notes += [note] if (note := unstated_axes_note(self.recording, short=True)) else []
         self._signals.pop("displacement", None)  # displacements are from this rest now
 
     def _rest(self, names: list[str]) -> dict[str, np.ndarray]:

@@ -121,3 +121,21 @@ class Recording:
         """A copy with sensors renamed ``old -> new`` (others keep their names)."""
         rename = lambda d: {mapping.get(k, k): v for k, v in d.items()}  # noqa: E731
         return replace(self, sensors=rename(self.sensors), orientations=rename(self.orientations))
+
+
+def unstated_axes_note(recording: Recording, short: bool = False) -> str | None:
+    """What to tell the user when ``recording``'s positions are in the device's own axes (else None).
+
+    Readers of formats that do not say how their axes lie (NDI Wave, Carstens,
+    EST_Track without ``axes=``) set ``metadata['frame'] = 'device'``; tonguevis
+    then takes the device's x as anterior, y as left and z as up.  ``short``: the
+    few words of the app's status bar; else the sentence of ``tonguevis info``.
+    """
+    if recording.metadata.get("frame") != "device":
+        return None
+    if short:
+        return "axes not stated in the file: taken as x anterior, y left, z up"
+    return ("the file does not state its axes: the positions are in the recording device's own frame, taken as "
+            "x anterior, y left, z up. If the tongue comes out turned, state them with -O axes=... (e.g. "
+            "-O axes=-y,x,z), an \"axes\" entry in the sensor_map.json beside the file, or convert the file "
+            "(tonguevis convert FILE OUT.csv -O axes=...)")

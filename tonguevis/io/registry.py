@@ -10,6 +10,7 @@ Carstens channel number ...) into the default name the reader gives it.
 
 from __future__ import annotations
 
+import inspect
 import logging
 import os
 import struct
@@ -145,6 +146,7 @@ def read_recording(
         names it; unmapped channels keep the reader's default names.  When
         None and a ``sensor_map.json`` lies beside the file (as in a corpus
         folder), that map is used; pass ``{}`` to read the raw channel names.
+        A map file's ``"axes"`` entry is the reader's ``axes=`` unless that is given.
     format : force a format by name instead of detecting it.
     audio : None/True (the file's own audio, else a WAV with the same stem
         beside it or in the Carstens ``wav`` folder), a WAV path, or False
@@ -174,6 +176,12 @@ def read_recording(
         sensor_map = path.parent / SENSOR_MAP_BESIDE
         log.info("%s: using the sensor map %s beside it", path, sensor_map)
     mapping = load_sensor_map(sensor_map) if sensor_map else None
+    if mapping is not None and mapping.axes is not None and "axes" not in format_options:
+        if "axes" in inspect.signature(fmt.read).parameters:
+            format_options = {**format_options, "axes": mapping.axes}
+        else:
+            log.info("%s: the sensor map's axes %r do not apply to %s files (their reader places the axes itself)",
+                     path, mapping.axes, fmt.name)
     try:
         rec = fmt.read(path, **format_options)
     except RecordingError:

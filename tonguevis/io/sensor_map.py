@@ -7,6 +7,11 @@ head references ``REF1``, ``REF2``, ...  Channel values: an NDI Wave Id (``3``),
 a Carstens channel number counted from 1, an EST_Track coil prefix or number,
 an MVIEW ``NAME``, a BVH ROOT name, or simply the default sensor name the reader
 gives (``"S3"``, ``"CH5"``).  Presets ship in ``tonguevis/presets/*.json``.
+
+A map's JSON file may also state the file's **axes** (``"axes": "-y,x,z"``, the
+readers' ``axes=`` option: which signed file axis becomes our x anterior, y
+left, z up; ``"x,y,z"`` when the file is in our frame already), so that a
+corpus folder says once how its recordings lie and no command warns about it.
 """
 
 from __future__ import annotations
@@ -34,9 +39,11 @@ class SensorMap(dict):
     references) as optional; every other entry must exist in the file.
     """
 
-    def __init__(self, mapping=(), optional=()):
+    def __init__(self, mapping=(), optional=(), axes=None):
         super().__init__(mapping)
         self.optional = frozenset(optional)
+        #: The files' axis mapping into ours (the readers' ``axes=``), or None when the map does not state it.
+        self.axes = axes
 
 
 def preset_names() -> list[str]:
@@ -62,10 +69,12 @@ def load_sensor_map(spec: dict | str | os.PathLike) -> SensorMap:
     """A sensor map from a dict, a JSON file path or a preset name ('paper', 'haskins', 'mngu0').
 
     A JSON file holds either the map itself or ``{"sensors": {...},
-    "optional": [names that may be absent], ...}`` (the presets' layout, whose
-    other keys are documentation).
+    "optional": [names that may be absent], "axes": "-y,x,z", ...}`` (the
+    presets' layout, whose other keys are documentation); ``axes`` (see the
+    module docstring) is checked here and kept in ``SensorMap.axes``.
     """
     optional: list = []
+    axes = getattr(spec, "axes", None)
     if isinstance(spec, dict):
         mapping = spec
         optional = list(getattr(spec, "optional", ()))
@@ -89,10 +98,19 @@ def load_sensor_map(spec: dict | str | os.PathLike) -> SensorMap:
             optional = data.get("optional", [])
             if not isinstance(optional, list):
                 raise RecordingError("'optional' must be a list of sensor names", path)
+            axes = data.get("axes")
+            if axes is not None:
+                from tonguevis.io._common import parse_axes
+
+                try:
+                    parse_axes(axes)
+                except (RecordingError, TypeError, ValueError) as exc:
+                    raise RecordingError(f"'axes' {axes!r} is not an axis mapping such as \"-y,x,z\" ({exc})",
+                                         path) from None
         source = str(path)
     if not isinstance(mapping, dict):
         raise RecordingError(f"{source}: a sensor map must be an object name -> channel")
-    out = SensorMap(optional=[o for o in optional if isinstance(o, str)])
+    out = SensorMap(optional=[o for o in optional if isinstance(o, str)], axes=axes)
     for name, channel in mapping.items():
         if not isinstance(name, str) or not name:
             raise RecordingError(f"{source}: sensor name {name!r} is not a non-empty string")

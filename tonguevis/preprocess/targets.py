@@ -95,11 +95,9 @@ def prepare_targets(
             f"too few tongue sensors to drive the model: found {names or 'none'} of "
             f"{', '.join(TONGUE_SENSORS)} (recording sensors: {', '.join(recording.sensor_names)}); "
             + how_to_map(recording), file)
-    if recording.metadata.get("frame") == "device":
-        logger.warning(
-            "%s: positions are in the recording device's frame, whose axes the file does not say; the alignment "
-            "takes x as anterior, y left, z up. If the tongue comes out turned, convert the file with the axes "
-            "given (tonguevis convert FILE OUT.csv -O axes=...)", file)
+    if recording.metadata.get("frame") == "device":  # said once, plainly, by `tonguevis info` and the app
+        logger.info("%s: positions in the device's frame (axes not stated): taken as x anterior, y left, z up",
+                    file)
     if not isinstance(rest, RestChoice):
         rest = choose_rest_interval(recording, sensors=names, given=rest)
     rest_interval = rest.interval
