@@ -60,9 +60,9 @@ def main(argv: list[str] | None = None) -> int:
 
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser()
-    if not argv:
-        argv = ["view"]
     args = parser.parse_args(argv)
+    if args.command is None:  # `tonguevis` or `tonguevis -v` alone: the app on the demo
+        args = parser.parse_args([*argv, "view"])
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING,
         format="tonguevis: %(levelname)s: %(message)s",
