@@ -83,10 +83,17 @@ def simulate_recording(recording: Recording, model=None, *, modes: int = 100, wa
     rest : None (the longest still interval, else the stillest window, with a
         warning), a (start_s, end_s) the user gave (checked: a bad one raises
         RecordingError naming the file and the problem), or a :class:`RestChoice`.
-    options : passed to :func:`tonguevis.sim.simulate` (``smooth_window``, ``tolerance``...).
+    options : passed to :func:`tonguevis.sim.simulate` (``smooth_window``, ``tolerance``...);
+        ``sensor_stiffness`` takes the CLI's words too: a positive number, "default" or "hard"
+        (:func:`tonguevis.sensor_stiffness.sensor_stiffness_value`; any other is a SimulationError).
     The choice is in ``motion.metadata["rest"]``; :func:`rest_of` reads it back.
     """
+    from tonguevis.sensor_stiffness import sensor_stiffness_value
     from tonguevis.sim.simulate import simulate
+
+    if "sensor_stiffness" in options:
+        options["sensor_stiffness"] = sensor_stiffness_value(options["sensor_stiffness"],
+                                                             recording.metadata.get("file"))
 
     return simulate(recording, model, modes=modes, warping=warping, landmarks=landmarks, rest_interval=rest,
                     progress=progress, **options)

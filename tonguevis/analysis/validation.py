@@ -104,7 +104,8 @@ def validate(
     Needs >= 3 tongue sensors with landmarks on the model (each run is driven
     by >= 2).  ``rest_interval`` (start_s, end_s) or a :class:`~tonguevis.preprocess.RestChoice`
     defaults to the detected rest, else the stillest 0.2 s window (logged; the JSON says which).
-    ``sensor_stiffness`` as :func:`tonguevis.sim.simulate` (every physical predictor uses it).
+    ``sensor_stiffness`` as :func:`tonguevis.sim.simulate` (every physical predictor uses it), with
+    the CLI's words: a positive number, "default" or "hard" (:mod:`tonguevis.sensor_stiffness`).
     """
     from tonguevis.sim import TongueModel
     from tonguevis.io.sensor_map import how_to_map
@@ -112,6 +113,9 @@ def validate(
     from tonguevis.sim.constrained import point_stiffness
     from tonguevis.sim.simulate import DEFAULT_SENSOR_STIFFNESS, drive_schedule, simulate
 
+    from tonguevis.sensor_stiffness import sensor_stiffness_value
+
+    sensor_stiffness = sensor_stiffness_value(sensor_stiffness, recording.metadata.get("file"))
     model = model or TongueModel.default()
     recording = recording.on_uniform_grid()  # as simulate: dropped frames back as missing samples
     file = recording.metadata.get("file")

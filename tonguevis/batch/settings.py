@@ -48,7 +48,7 @@ class BatchSettings:
         and its summary row; energy and segment simulate when no saved motion
         with the same key exists.
     modes, landmarks, warping, sensor_stiffness, rest : as ``tonguevis simulate``
-        (``sensor_stiffness`` "default", a number, or None for hard constraints;
+        (``sensor_stiffness`` "default", a number, or "hard"/None for hard constraints;
         ``rest`` (start_s, end_s) for every recording, None to find it).
     sensors : sensor map for every recording (preset name, JSON path or dict);
         None uses a ``sensor_map.json`` beside each recording.
@@ -75,7 +75,10 @@ class BatchSettings:
     csv: bool = False
 
     def __post_init__(self) -> None:
+        from tonguevis.sensor_stiffness import sensor_stiffness_value
+
         object.__setattr__(self, "steps", parse_steps(self.steps))
+        object.__setattr__(self, "sensor_stiffness", sensor_stiffness_value(self.sensor_stiffness))
         if self.keep is not None:
             object.__setattr__(self, "keep", tuple(int(k) for k in self.keep))
         if self.rest is not None:

@@ -68,18 +68,15 @@ def add_sensor_stiffness_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def sensor_stiffness_arg(text: str):
-    """``--sensor-stiffness`` value: a positive number, 'hard' (None) or 'default'."""
-    if text.strip().lower() == "hard":
-        return None
-    if text == "default":  # argparse passes string defaults through ``type`` too
-        return text
+    """``--sensor-stiffness`` value: a positive number, 'hard' (None) or 'default', the library's words
+    (:func:`tonguevis.sensor_stiffness.sensor_stiffness_value`)."""
+    from tonguevis.errors import SimulationError
+    from tonguevis.sensor_stiffness import sensor_stiffness_value
+
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is neither a positive number nor 'hard'") from None
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"{text!r} must be a positive number or 'hard'")
-    return value
+        return sensor_stiffness_value(text)
+    except SimulationError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def add_rest_argument(parser: argparse.ArgumentParser, every: bool = False) -> None:
