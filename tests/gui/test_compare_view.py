@@ -208,3 +208,24 @@ def test_during_playback_b_is_drawn_for_the_frame_a_draws(qtbot, pair, layout):
     if hasattr(view3d.plotter, "set_pipelined"):  # image views: A is drawn ahead of the clock
         assert np.median([drawn - clock for _, _, clock, drawn in seen]) > 0.0
     assert panel.frame_b == panel.matched_frame(float(times_a[a.frames.frame_at(state.time)]))
+
+
+def test_a_production_b_does_not_have_is_said_so(qtbot, window):
+    """B with fewer productions than A: in A's later productions the caption says B has none there."""
+    a = show_and_simulate(qtbot, window, demo_session())
+    short = other_session(start=3.0, end=6.0)  # B cut short: 3 productions to A's 5
+    panel = compare(qtbot, window, short)
+    assert panel.comparison.mode == "production"
+    n_b = len(short.productions)
+    assert 1 <= n_b < len(a.productions)
+    start, end = a.productions[n_b]  # A's production n_b + 1: B has no such production
+    window.state.set_time(start + 0.34 * (end - start))
+    caption = panel.caption.text()
+    assert f"B has no production {n_b + 1} (it has {n_b})" in caption
+    assert "(both)" not in caption
+    assert panel.frame_b == len(short.motion.times) - 1  # B's recording ended 0.1 s into A's production 4
+    assert "held on its last frame" in caption
+    # in a production both have, the caption still says "both"
+    start, end = a.productions[0]
+    window.state.set_time(0.5 * (start + end))
+    assert "production 1, 50 % through (both)" in panel.caption.text()

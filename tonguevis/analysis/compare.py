@@ -195,6 +195,10 @@ class Comparison:
                 return k, float((t_a - p.start) / (p.end - p.start))
         return None
 
+    def productions_in_b(self) -> int:
+        """How many productions B has (production k of A is shown with production k of B while k <= this)."""
+        return len(list(self.productions_b or []))
+
     def difference(self, frame_a: int, frame_b: int, nodes: np.ndarray | None = None) -> np.ndarray:
         """(k,) distance in metres between node i of A at ``frame_a`` and node i of B at ``frame_b``
         (``nodes``: the node ids, default every node), both in the model frame."""

@@ -369,7 +369,11 @@ class ComparePanel(QWidget):
         times_b = session_b.frames.times
         text = f"B at t = {times_b[j]:.3f} s, frame {j + 1}/{len(times_b)}"
         phase = self.comparison.phase(float(session_a.frames.times[i]))
-        if phase is not None:
+        if phase is not None and phase[0] > self.comparison.productions_in_b():
+            held = "held on its last frame" if j == len(times_b) - 1 else "running on past its last production"
+            text += (f"   ·   A: production {phase[0]}, {100 * phase[1]:.0f} % through   ·   "
+                     f"B has no production {phase[0]} (it has {self.comparison.productions_in_b()}): {held}")
+        elif phase is not None:
             text += f"   ·   production {phase[0]}, {100 * phase[1]:.0f} % through (both)"
         elif self.comparison.mode == "production":
             text += "   ·   between productions"
