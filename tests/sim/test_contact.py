@@ -211,4 +211,63 @@ def test_simulate_keeps_the_demo_tongue_below_the_generic_palate(capsys):
     assert held.metadata["plausibility"]["volume_change_max_percent"] < 2.0
     assert main(["simulate", str(DATA_DIR / "spk1_ta.tsv"), "--palate", "generic", "--sensor-stiffness", "hard",
                  "--quiet"]) == 0
-    assert "palate contact: deepest penetration 0." in capsys.readouterr().out
+    assert "palate: deepest penetration 0." in capsys.readouterr().out
+
+
+def test_a_sensor_above_the_palate_is_counted_as_penetration():
+    """The palate 4 mm lower than the shipped one: the demo /ta/'s tip sensor goes above it at every
+    /t/. The figures say so (the sensor's depth, the frames, the tongue inside around it), and the
+    summary line names the sensor, instead of 0.00 mm and no contact."""
+    from tonguevis.io import read_recording
+    from tonguevis.palate import generic_palate
+    from tonguevis.paths import DATA_DIR
+    from tonguevis.sim import TongueModel, simulate
+    from tonguevis.sim.plausibility import contact_line
+
+    low = generic_palate().transformed(np.eye(3), 1.0, np.array([0.0, 0.0, -0.004]))
+    low.metadata.update(generic_palate().metadata)  # still the model's frame: used as is
+    rec = read_recording(DATA_DIR / "spk1_ta.tsv")
+    motion = simulate(rec, TongueModel.default(), modes=40, palate=low)
+    c = motion.metadata["contact"]
+    tip = c["sensors_above_palate"]["TT"]
+    assert tip["frames"] > 20 and tip["deepest_mm"] > 0.5
+    # the measured tip, on its node's rest, really is above the lowered palate by that much
+    k = motion.sensor_names.index("TT")
+    gap, _ = low.clearance(motion.targets[:, k] + motion.jaw_offset)
+    assert np.nanmax(-gap) * 1e3 == pytest.approx(tip["deepest_mm"], rel=1e-6)
+    assert np.sum(gap < 0) == tip["frames"]
+    assert c["penetration_max_mm"] >= tip["deepest_mm"] and c["frames_in_contact"] >= 20
+    assert motion.penetration.max() * 1e3 == pytest.approx(c["tongue_penetration_max_mm"])
+    line = contact_line(motion.metadata)
+    assert "TT in" in line and f"deepest penetration {c['penetration_max_mm']:.2f} mm" in line
+    assert motion.palate is not None  # the placed palate comes with the motion: no second preparation
+
+
+def test_a_raised_palate_is_reported_once_with_its_reason(caplog, tmp_path):
+    """A speaker's palate 8 mm too low: simulate() raises it and says so once; the views then draw
+    the surface it placed (no second preparation, no second warning), and the summary says why."""
+    import logging
+
+    from tonguevis.gui.simulation import shown_palate
+    from tonguevis.io import read_recording
+    from tonguevis.palate import fit_palate
+    from tonguevis.paths import DATA_DIR
+    from tonguevis.sim import TongueModel, simulate
+    from tonguevis.sim.plausibility import contact_line
+
+    rec = read_recording(DATA_DIR / "spk1_ta.tsv", sensor_map=DATA_DIR / "sensor_map.json")
+    tip = rec.sensors["TT"]
+    centre = np.nanmean(tip, axis=0)
+    xs, ys = np.meshgrid(np.linspace(-0.03, 0.03, 25), np.linspace(-0.02, 0.02, 17))
+    roof = np.column_stack([xs.ravel() + centre[0], ys.ravel() + centre[1], np.full(xs.size, np.nanmax(tip[:, 2]))])
+    palate = fit_palate(roof - [0.0, 0.0, 0.008])
+    path = tmp_path / "low.stl"
+    palate.save(path)
+    model = TongueModel.default()
+    with caplog.at_level(logging.WARNING, logger="tonguevis"):
+        motion = simulate(rec, model, modes=40, palate=path)
+        shown = shown_palate(rec, motion, model, path)
+    raised = [r for r in caplog.records if "the palate lies" in r.getMessage()]
+    assert len(raised) == 1
+    assert shown.surface is motion.palate and shown.raised_mm > 3  # model millimetres (the alignment scales)
+    assert "palate raised" in contact_line(motion.metadata) and "another sitting" in contact_line(motion.metadata)

@@ -68,12 +68,9 @@ def summary(motion) -> list[str]:
         f"drift at the end: {1e3 * np.linalg.norm(end, axis=1).max():.3f} mm (largest node displacement, last frame)",
     ]
     if "contact" in meta:
-        c = meta["contact"]
-        lines.append(
-            f"palate contact: deepest penetration {c['penetration_max_mm']:.2f} mm, {c['frames_in_contact']} frames in "
-            f"contact, largest contact area {c['contact_area_max_mm2']:.0f} mm²; sensors above the palate (they win): "
-            + (", ".join(f"{motion.sensor_names[int(k)]} in {n} frames" for k, n in c["conflicts"]["by_sensor_index"].items())
-               or "none"))
+        from tonguevis.sim.plausibility import contact_line
+
+        lines.append(contact_line({**meta, "sensor_names": list(motion.sensor_names)}))
     if meta.get("ignored_sensors"):
         lines.append("ignored (no landmark on the model): " + ", ".join(meta["ignored_sensors"]))
     return lines

@@ -221,14 +221,9 @@ class Session:
 
 def contact_note(motion) -> str:
     """The palate-contact figures of a motion simulated against a palate, as one line."""
-    c = motion.metadata["contact"]
-    conflicts = c.get("conflicts", {}).get("by_sensor_index", {})
-    names = ", ".join(f"{motion.sensor_names[int(k)]} ({n} frames)" for k, n in conflicts.items())
-    text = (f"palate: deepest penetration {c['penetration_max_mm']:.2f} mm, {c['frames_in_contact']} frames in contact, "
-            f"largest contact area {c['contact_area_max_mm2']:.0f} mm²")
-    if c.get("palate_raised_mm", 0.0) > 0.05:
-        text += f", palate raised {c['palate_raised_mm']:.1f} mm"
-    return text + (f"; sensors above the palate (they win): {names}" if names else "")
+    from tonguevis.sim.plausibility import contact_line
+
+    return contact_line({**motion.metadata, "sensor_names": list(motion.sensor_names)})
 
 
 def load_session(path: str | os.PathLike, sensor_map: dict | str | None = None, rest=None, audio=None,

@@ -138,6 +138,9 @@ def shown_palate(recording, motion, model, palate):
     surface = load_palate(palate)
     if surface.metadata.get("generic"):
         return generic_shown(simulated=True)
-    placed, raised = placed_palate(recording, surface, model, landmarks=motion.metadata.get("landmarks", "speaker"),
-                                   rest_interval=rest_of(motion))
+    if getattr(motion, "palate", None) is not None:  # as the simulation placed it: no second preparation
+        placed, raised = motion.palate, 1e-3 * motion.metadata.get("contact", {}).get("palate_raised_mm", 0.0)
+    else:  # a motion loaded from a file
+        placed, raised = placed_palate(recording, surface, model, landmarks=motion.metadata.get("landmarks", "speaker"),
+                                       rest_interval=rest_of(motion))
     return speaker_palate(placed, palate_label(surface), simulated=True, raised_mm=1e3 * raised)

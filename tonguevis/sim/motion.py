@@ -50,6 +50,9 @@ class Motion:
     jaw_offset : (F, 3) metres, the jaw's translation from rest in the model
         frame (what carries the tongue from the jaw's frame, where it is
         simulated, into the head's frame, where the palate is), or None.
+    palate : the palate as the simulation placed it in the model frame (raised where
+        the sensors went above it), or None; kept in memory only: a loaded motion
+        has none (:func:`tonguevis.sim.simulate.placed_palate` places it again).
     """
 
     times: np.ndarray
@@ -67,6 +70,8 @@ class Motion:
     penetration: np.ndarray | None = None
     contact_area: np.ndarray | None = None
     jaw_offset: np.ndarray | None = None
+    #: the palate as the simulation placed it (model frame; a PalateSurface), in memory only (not saved)
+    palate: Any = field(default=None, repr=False, compare=False)
 
     @property
     def n_frames(self) -> int:

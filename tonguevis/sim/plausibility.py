@@ -67,3 +67,29 @@ def plausibility_line(metadata: dict) -> str:
             f"{p['volume_change_max_percent']:.2f} %, sensor misfit {p['sensor_misfit_rms_mm']:.2f} mm RMS "
             f"(max {p['sensor_misfit_max_mm']:.2f} mm)")
     return text + (f"; {flagged} frames flagged" if flagged else "")
+
+
+def contact_line(metadata: dict) -> str:
+    """One line for users on the palate contact of a motion simulated against a palate ("" without).
+
+    What the geometry says: the deepest point inside the palate (a sensor above it counts: the
+    tongue follows the sensor there), the frames in which the tongue touches or enters it, the
+    largest contact area, each sensor measured above the palate, and a registration raise."""
+    c = metadata.get("contact")
+    if not c:
+        return ""
+    text = (f"palate: deepest penetration {c['penetration_max_mm']:.2f} mm, {c['frames_in_contact']} frames in contact, "
+            f"largest contact area {c['contact_area_max_mm2']:.0f} mm²")
+    above = c.get("sensors_above_palate")
+    if above is None:  # a motion saved before the sensors were counted: the solver's conflicts
+        names = metadata.get("sensor_names") or []
+        above = {names[int(k)] if int(k) < len(names) else f"sensor {k}": {"frames": n, "deepest_mm": float("nan")}
+                 for k, n in c.get("conflicts", {}).get("by_sensor_index", {}).items()}
+    if above:
+        text += "; above the palate (the tongue follows them there): " + ", ".join(
+            f"{name} in {v['frames']} frames" + (f" (up to {v['deepest_mm']:.1f} mm)" if v["deepest_mm"] == v["deepest_mm"]
+                                                 else "") for name, v in above.items())
+    if c.get("palate_raised_mm", 0.0) > 0.05:
+        text += (f"; palate raised {c['palate_raised_mm']:.1f} mm to sit above where the sensors went "
+                 "(traced in another sitting?)")
+    return text

@@ -221,7 +221,9 @@ class _Run:
         contact_figures, penetration, contact_area = {}, None, None
         if contact is not None:
             penetration, contact_area = figures.penetration, figures.contact_area
-            contact_figures = _contact_report(penetration, contact_area, contact, schedule, times)
+            sensors = model.mesh.points[prep.nodes][None] + measured  # as drawn: each on its node's rest
+            contact_figures = _contact_report(penetration, contact_area, contact, schedule, times,
+                                              _sensor_depth(contact, sensors, cut), prep.names)
         stiffness = self.sensor_stiffness
         metadata = {
             "recording": dict(self.recording.metadata),
@@ -263,6 +265,7 @@ class _Run:
             contact_area=contact_area,
             jaw_offset=None if prep.jaw_offset is None else prep.jaw_offset[cut],
             metadata=metadata,
+            palate=None if contact is None else contact["palate"],
         )
 
 
@@ -328,7 +331,7 @@ def drive_schedule(displacement: np.ndarray, rate: float, eigenvalues: np.ndarra
     return targets, compliance, info
 
 
-def place_palate(palate, prep: PreparedTargets):
+def place_palate(palate, prep: PreparedTargets, quiet: bool = False):
     """The palate in the model frame, where the contact solve and the app's views use it: (surface, raised by m).
 
     palate : a :class:`~tonguevis.palate.PalateSurface`, a palate file or "generic"
@@ -344,7 +347,7 @@ def place_palate(palate, prep: PreparedTargets):
     if palate.metadata.get("frame") == "model":
         return palate, 0.0
     t = prep.transform
-    return _register_palate(palate.transformed(t.rotation, t.scale, t.translation), prep)
+    return _register_palate(palate.transformed(t.rotation, t.scale, t.translation), prep, quiet=quiet)
 
 
 def placed_palate(recording: Recording, palate, model: TongueModel | None = None, landmarks: str = "speaker",
@@ -356,7 +359,7 @@ def placed_palate(recording: Recording, palate, model: TongueModel | None = None
     alignment is the one the simulation used.
     """
     prep = prepare_targets(recording, model or TongueModel.default(), landmarks, rest_interval, smooth_window)
-    return place_palate(palate, prep)
+    return place_palate(palate, prep, quiet=True)  # the simulation said it once
 
 
 def _contact_context(palate, prep, model, basis, recording) -> dict:
@@ -391,22 +394,46 @@ def _keep_below_palate(q, contact, schedule, basis, phi_s, compliance: float):
 
 
 def _contact_probe(contact, schedule, model):
-    """What :func:`tonguevis.sim.figures.frame_figures` needs to measure contact, per chunk of frames."""
-    from tonguevis.sim.contact import CONFLICT_RADIUS
+    """What :func:`tonguevis.sim.figures.frame_figures` needs to measure contact, per chunk of frames.
+
+    Every candidate node counts, also those around a sensor above the palate (the tongue drawn
+    there is inside it): the figures say what the geometry is."""
     from tonguevis.sim.figures import ContactProbe
 
     cand, pts = contact["candidates"], contact["points"]
-    near = np.linalg.norm(pts[cand][:, None] - pts[contact["sensor_nodes"]][None], axis=2) < CONFLICT_RADIUS
-    conflicts = np.array(schedule["conflicts"], dtype=np.int64).reshape(-1, 2)
-    return ContactProbe(pts, cand, contact["palate"], contact["jaw_offset"], model.surface_faces, conflicts, near)
+    return ContactProbe(pts, cand, contact["palate"], contact["jaw_offset"], model.surface_faces,
+                        np.zeros((0, 2), dtype=np.int64), np.zeros((len(cand), 0), dtype=bool))
 
 
-def _contact_report(pen, contact_area, contact, schedule, times):
-    """The contact figures for metadata, from the per-frame penetration (m) and contact area (m²)."""
+def _sensor_depth(contact, sensors: np.ndarray, cut: slice) -> np.ndarray:
+    """(F, S) how far (m, >= 0) each sensor (F, S, 3, model frame, jaw's frame) lies above the palate;
+    0 below it, NaN where not measured or no palate lies above."""
+    offset = contact["jaw_offset"][cut]
+    gap, _ = contact["palate"].clearance((sensors + offset[:, None]).reshape(-1, 3))
+    gap = gap.reshape(sensors.shape[:2])
+    return np.where(np.isfinite(gap), np.maximum(0.0, -gap), np.nan)
+
+
+def _contact_report(pen, contact_area, contact, schedule, times, sensor_depth, names):
+    """The contact figures for metadata, from the per-frame penetration (m) of the tongue's nodes,
+    its contact area (m²) and the depth (F, S) m of each sensor above the palate.
+
+    They say what the geometry says: a sensor above the palate is penetration (the tongue follows
+    the sensor there), and a frame is in contact when the tongue touches, enters or presses on the
+    palate, whatever made it."""
+    above = np.nan_to_num(sensor_depth) > 0
+    deepest_sensor = float(np.nanmax(sensor_depth)) if np.isfinite(sensor_depth).any() else 0.0
+    touching = (contact_area > 0) | (pen > 0) | (schedule["active"][:len(pen)] > 0)  # touching, inside or pressed
     conflicts = sorted({s for _, s in schedule["conflicts"]})
     figures = {
-        "penetration_max_mm": float(1e3 * pen.max()) if len(pen) else 0.0,
-        "frames_in_contact": int(np.sum(schedule["active"] > 0)),
+        "penetration_max_mm": float(1e3 * max(pen.max() if len(pen) else 0.0, deepest_sensor)),
+        "tongue_penetration_max_mm": float(1e3 * pen.max()) if len(pen) else 0.0,
+        "sensor_penetration_max_mm": 1e3 * deepest_sensor,
+        "sensors_above_palate": {name: {"frames": int(above[:, k].sum()),
+                                        "deepest_mm": float(1e3 * np.nanmax(sensor_depth[:, k]))}
+                                 for k, name in enumerate(names) if above[:, k].any()},
+        "frames_in_contact": int(touching.sum()),
+        "frames_with_contact_forces": int(np.sum(schedule["active"] > 0)),
         "frames_corrected_after_the_dynamics": int(len(schedule.get("corrected_frames", []))),
         "contact_area_max_mm2": float(1e6 * contact_area.max()) if len(contact_area) else 0.0,
         "conflicts": {"frames": len({f for f, _ in schedule["conflicts"]}),
@@ -418,7 +445,7 @@ def _contact_report(pen, contact_area, contact, schedule, times):
     return figures
 
 
-def _register_palate(palate, prep, percentile: float = 1.0):
+def _register_palate(palate, prep, percentile: float = 1.0, quiet: bool = False):
     """The palate raised, if need be, until the tongue sensors stay below it; (palate, shift in m).
 
     A palate traced in another sitting than the speech (no head references to
@@ -435,8 +462,9 @@ def _register_palate(palate, prep, percentile: float = 1.0):
         return palate, 0.0
     shift = max(0.0, -float(np.percentile(gap, percentile)))
     if shift > 0:
-        logger.warning("the palate lies %.1f mm below where the tongue sensors went: raised by that much "
-                       "(traced in another sitting?)", 1e3 * shift)
+        if not quiet:
+            logger.warning("the palate lies %.1f mm below where the tongue sensors went: raised by that much "
+                           "(traced in another sitting?)", 1e3 * shift)
         palate = palate.transformed(np.eye(3), 1.0, np.array([0.0, 0.0, shift]))
     return palate, shift
 
