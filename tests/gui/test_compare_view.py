@@ -114,9 +114,51 @@ def test_difference_colouring_is_the_distance_between_the_tongues(qtbot, pair):
     reference = 1e3 * panel.comparison.difference(i, j, nodes)  # float64, from q
     np.testing.assert_allclose(shown[nodes], reference, atol=2e-3)  # float32 drawing data, mm
     assert shown[nodes].max() > 0.05  # two speakers: the tongues differ
-    np.testing.assert_allclose(np.asarray(panel._surface.point_data["difference"]), shown, atol=1e-6)
+    np.testing.assert_allclose(panel._b_values, shown, atol=1e-6)  # B coloured by the same distances
     assert window.view3d.scene.mode == "difference"
     assert window.view3d.scene.scalar_bar.GetTitle().startswith("distance to")
+
+
+def _lit_b(panel):
+    """B's drawn colours (m, 3) uint8 at its surface nodes after the panel's view rendered."""
+    panel.plotter.render()
+    return np.asarray(panel._surface.point_data["rgb"])[panel._b_nodes].copy()
+
+
+def test_b_is_lit_and_coloured_like_a_by_default(qtbot, pair):
+    """Without any option B is drawn as A is: A's colouring through A's colour map, lit by A's lights."""
+    from tonguevis.gui.scene import LIGHTS, TONGUE_COLOUR, TONGUE_MATERIAL, mapped_colours
+    from tonguevis.render.shading import shade
+
+    window, _a, b, panel = pair
+    assert window.state.color == "displacement"
+    window.state.set_time(5.62)
+    j, nodes = panel.frame_b, panel._b_nodes
+    assert not panel._b_actor.prop.lighting  # drawn from colours lit at the vertices, as A's tongue
+    # coloured: B's displacement (mm) at its matched frame through A's lookup table (A's range)
+    values = b.frames.scalars["displacement"][j][nodes]
+    lut = window.view3d.scene.lookup_table
+    np.testing.assert_allclose(panel.b_colours(), mapped_colours(lut, values))
+    assert np.ptp(panel.b_colours(), axis=0).max() > 0.3  # not one flat colour
+    # lit: VTK's lighting model for A's lights and material, for the camera both views share
+    rgb = _lit_b(panel)
+    camera = panel.plotter.renderer.GetActiveCamera()
+    view = np.array(camera.GetViewTransformMatrix().GetData()).reshape(4, 4)
+    points = np.asarray(panel._surface.points)[nodes]
+    normals = np.asarray(panel._surface.point_data["Normals"])[nodes]
+    expected = shade(panel.b_colours(), normals, points, view, LIGHTS, parallel=camera.GetParallelProjection(),
+                     **TONGUE_MATERIAL)
+    np.testing.assert_array_equal(rgb, expected)
+    # the light follows the camera: turning it relights B
+    camera.Azimuth(60)
+    assert np.abs(_lit_b(panel).astype(int) - rgb).max() > 20
+    # plain: the tongue's own colour, still lit (shaded from light to dark, not a silhouette)
+    window.state.set_color("plain")
+    import pyvista as pv
+
+    np.testing.assert_allclose(panel.b_colours()[0], pv.Color(TONGUE_COLOUR).float_rgb)
+    plain = _lit_b(panel).astype(float).sum(axis=1)
+    assert plain.max() - plain.min() > 150
 
 
 def test_the_energy_tab_gets_both_recordings(qtbot, window):

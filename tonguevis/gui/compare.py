@@ -40,7 +40,6 @@ TIME_MODES = {"production": "per production", "absolute": "absolute time"}
 GHOST_COLOUR = "#8ff0ff"
 GHOST_PANEL_WIDTH = 460  # px: the panel's controls, when B is drawn inside A's views
 GHOST_OPACITY = 0.4
-B_COLOUR = "#f2c57c"
 #: Colour range of the distance between the tongues: at least this (mm), else the 98th percentile
 #: of a sample of matched frames.
 DIFFERENCE_MIN_RANGE_MM = 1.0
@@ -106,6 +105,9 @@ class ComparePanel(QWidget):
         self.frame_b = -1
         self.renders = 0
         self._surface = None  # B's drawn surface (PolyData), shared by the panel's view and the ghosts
+        self._b_nodes = np.zeros(0, dtype=np.int64)  # B's surface nodes (the ones lit)
+        self._b_values = None
+        self._b_shaded = None
         self._ghosts: list = []
         self._clim: tuple[float, float] | None = None
         self._camera_seen = None
@@ -131,6 +133,7 @@ class ComparePanel(QWidget):
         bar.addWidget(self.close_button)
         self.plotter = make_plotter(self, multi_samples=0)
         self.plotter.set_background(_background())
+        self.plotter.renderer.AddObserver("StartEvent", lambda *_a: self._shade_b())
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addLayout(bar)
@@ -185,31 +188,73 @@ class ComparePanel(QWidget):
         self.show_time(self.state.time)
 
     def _build_surface(self, session) -> None:
+        """B's tongue, drawn as A's: lit at its vertices for the shared camera
+        (:mod:`tonguevis.render.shading`, A's lights and material) and coloured as A is coloured."""
         import pyvista as pv
 
-        from tonguevis.gui.scene import SENSOR_COLOUR, faces_to_vtk
-        from tonguevis.render.surface_geometry import VertexNormals
+        from tonguevis.gui.scene import SENSOR_COLOUR, add_lit_surface, faces_to_vtk
+        from tonguevis.render.surface_geometry import VertexNormals, hidden_side
         from tonguevis.gui.view3d import surface_faces
 
         frames = session.frames
         faces = surface_faces(frames.motion.model)
         points = np.asarray(frames.points[0], dtype=np.float32)
         self.plotter.clear()
-        self._normals = VertexNormals(faces, len(points))
+        hidden = hidden_side(points, faces)
+        # Shading normals point out of the tongue whichever way its triangles are wound (as A's).
+        self._normals = VertexNormals(np.asarray(faces)[:, ::-1] if hidden == "front" else faces, len(points))
         self._surface = pv.PolyData(points.copy(), faces_to_vtk(faces))
-        self._surface.point_data["difference"] = np.zeros(len(points), dtype=np.float32)
         self._surface.point_data["Normals"] = self._normals(points)
         self._surface.point_data.active_normals_name = "Normals"
-        self._b_actor = self.plotter.add_mesh(self._surface, color=B_COLOUR, name="tongue_b", reset_camera=False,
-                                              show_scalar_bar=False, scalars="difference", cmap="plasma",
-                                              specular=0.3, specular_power=15)
-        self._b_actor.mapper.scalar_visibility = False
-        self._b_actor.prop.interpolation = "gouraud"  # smooth, from the normals, as A's tongue is shaded
+        self._surface.point_data["rgb"] = np.zeros((len(points), 3), dtype=np.uint8)
+        self._b_nodes = np.unique(np.asarray(faces, dtype=np.int64))
+        self._b_values = None  # B's colouring values at this frame (None: the plain tongue colour)
+        self._b_shaded = None  # what B's colours were last lit from
+        self._b_actor = add_lit_surface(self.plotter, self._surface, "tongue_b", cull=hidden)
         n_sensors = max(len(frames.motion.sensor_names), 1)
         self._sensors = pv.PolyData(np.zeros((n_sensors, 3), dtype=np.float32))
         self.plotter.add_mesh(self._sensors, color=SENSOR_COLOUR, point_size=12, render_points_as_spheres=True,
                               name="sensors_b", reset_camera=False)
         self.plotter.add_text("B", position="upper_right", font_size=12, name="label_b")
+
+    def b_colours(self) -> np.ndarray:
+        """(m, 3) B's unlit colours in [0, 1] at its surface nodes: its values of A's colouring through
+        A's lookup table (same colour, same value), or the plain tongue colour."""
+        import pyvista as pv
+
+        from tonguevis.gui.scene import TONGUE_COLOUR, mapped_colours
+
+        lut = self.view_a.scene.lookup_table
+        if lut is None or self._b_values is None:
+            return np.broadcast_to(np.asarray(pv.Color(TONGUE_COLOUR).float_rgb), (len(self._b_nodes), 3))
+        return mapped_colours(lut, self._b_values[self._b_nodes])
+
+    def _shade_b(self) -> None:
+        """Light B's tongue for the shared camera when its frame, colouring or the camera changed
+        (called as the panel's view starts rendering)."""
+        if self._surface is None or self.layout_mode != "side":
+            return
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+
+        from tonguevis.gui.scene import LIGHTS, TONGUE_MATERIAL
+        from tonguevis.render.shading import shade
+
+        camera = self.plotter.renderer.GetActiveCamera()
+        view = np.array(camera.GetViewTransformMatrix().GetData()).reshape(4, 4)
+        parallel = bool(camera.GetParallelProjection())
+        lut = self.view_a.scene.lookup_table
+        key = (view.tobytes(), parallel, self.frame_b, self.state.color, id(lut),
+               None if lut is None else tuple(lut.GetTableRange()))
+        if key == self._b_shaded:
+            return
+        nodes = self._b_nodes
+        points = np.asarray(self._surface.points)[nodes]
+        normals = np.asarray(self._surface.point_data["Normals"])[nodes]
+        rgb = self._surface.GetPointData().GetArray("rgb")
+        vtk_to_numpy(rgb)[nodes] = shade(self.b_colours(), normals, points, view, LIGHTS, parallel=parallel,
+                                         **TONGUE_MATERIAL)
+        rgb.Modified()
+        self._b_shaded = key
 
     def _share_camera(self) -> None:
         """The panel looks through A's main camera (one vtkCamera): turning either view turns both."""
@@ -343,18 +388,15 @@ class ComparePanel(QWidget):
         t_a = float(session_a.frames.times[i])
         j = self.comparison.frame_b(t_a)
         reference = self.state.reference
-        drawn = draw_frame(session_b, j, reference, "plain")
+        difference = self.state.color == "difference" and self._clim is not None
+        drawn = draw_frame(session_b, j, reference, "plain" if difference else self.state.color)
         self._surface.points[:] = drawn.points
         self._surface.point_data["Normals"][:] = self._normals(drawn.points)
         if len(drawn.sensor_points):
             self._sensors.points[:] = drawn.sensor_points
-        difference = self.state.color == "difference" and self._clim is not None
-        if difference:
-            self._surface.point_data["difference"][:] = self._difference(i, j)
-            self._b_actor.mapper.lookup_table = self.view_a.scene.lookup_table
-            self._b_actor.mapper.scalar_range = self._clim
-        self._b_actor.mapper.scalar_visibility = difference
+        self._b_values = self._difference(i, j) if difference else drawn.scalars
         self.frame_b = j
+        self._b_shaded = None  # new points or values: lit again as the view renders
         self.caption.setText(self._caption(session_a, i, session_b, j))
         if self.layout_mode == "side":
             request = getattr(self.plotter.interactor, "request_render", None)

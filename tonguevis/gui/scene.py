@@ -248,7 +248,7 @@ class TongueScene:
             tongue = self._tongue_views[index] = sharing_geometry(self.surface)
             tongue.point_data["rgb"] = np.zeros((len(points), 3), dtype=np.uint8)
             # Lit at the vertices (shade_view), drawn unlit: colours interpolated between nodes.
-            actor = _add_lit_surface(plotter, tongue, f"tongue{index}", cull=tongue_hidden)
+            actor = add_lit_surface(plotter, tongue, f"tongue{index}", cull=tongue_hidden)
             self.surface_actors.append(actor)
             if n_sensors:
                 plotter.add_mesh(self.sensors, color=SENSOR_COLOUR, point_size=14 if main else 8,
@@ -267,7 +267,7 @@ class TongueScene:
                 shell = self._context_views[index][name] = sharing_geometry(surface)
                 shell.point_data["rgb"] = np.zeros((surface.n_points, 3), dtype=np.uint8)
                 shell.field_data["colour"] = np.asarray(pv.Color(colour).float_rgb)
-                context_actor = _add_lit_surface(plotter, shell, f"{name}{index}",
+                context_actor = add_lit_surface(plotter, shell, f"{name}{index}",
                                                  opacity=opacity if main else 0.8 * opacity,
                                                  cull=self._context_hidden[name])
                 context_actor.SetVisibility(self.context_visible)
@@ -405,15 +405,7 @@ class TongueScene:
         if self._lut is None:
             colours = np.broadcast_to(np.asarray(pv.Color(TONGUE_COLOUR).float_rgb), (len(nodes), 3))
         else:
-            import vtk
-            from vtkmodules.util.numpy_support import numpy_to_vtk
-
-            values = np.ascontiguousarray(vtk_to_numpy(data.GetArray("value"))[nodes])
-            # MapScalars reads the "no palate above" (NaN) and "inside" (below range) colours from
-            # entries that only Build() brings up to date after they are set.
-            self._lut.Build()
-            mapped = self._lut.MapScalars(numpy_to_vtk(values), vtk.VTK_COLOR_MODE_MAP_SCALARS, -1, vtk.VTK_RGB)
-            colours = vtk_to_numpy(mapped).reshape(len(nodes), 3) / 255.0
+            colours = mapped_colours(self._lut, vtk_to_numpy(data.GetArray("value"))[nodes])
         normals = vtk_to_numpy(data.GetArray("Normals"))[nodes]
         points = vtk_to_numpy(self.surface.GetPoints().GetData())[nodes]
         self._colours = (key, (colours, normals, points))
@@ -502,7 +494,20 @@ class TongueScene:
         self.plotter.subplot(MAIN)
 
 
-def _add_lit_surface(plotter, surface: pv.PolyData, name: str, opacity: float = 1.0, cull: str | None = None):
+def mapped_colours(lut, values: np.ndarray) -> np.ndarray:
+    """(n, 3) colours in [0, 1] of ``values`` (n,) through the VTK lookup table ``lut`` (its range)."""
+    import vtk
+    from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+
+    values = np.ascontiguousarray(values, dtype=np.float32)
+    # MapScalars reads the "no palate above" (NaN) and "inside" (below range) colours from
+    # entries that only Build() brings up to date after they are set.
+    lut.Build()
+    mapped = lut.MapScalars(numpy_to_vtk(values), vtk.VTK_COLOR_MODE_MAP_SCALARS, -1, vtk.VTK_RGB)
+    return vtk_to_numpy(mapped).reshape(len(values), 3) / 255.0
+
+
+def add_lit_surface(plotter, surface: pv.PolyData, name: str, opacity: float = 1.0, cull: str | None = None):
     """Add ``surface`` drawn unlit in the colours of its "rgb" point array (lit by
     :meth:`TongueScene.shade_view`) to the plotter's active view; returns the actor.
     ``cull``: the faces not drawn ("back", "front" or None, see :func:`hidden_side`).
