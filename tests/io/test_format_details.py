@@ -195,7 +195,7 @@ def test_mview_variable_option_and_non_mview_mat(tmp_path):
     import scipy.io
 
     ex = examples.make_mview_v5(tmp_path)
-    assert read_recording(ex.path, variable="take1").sensor_names == ["TR", "TB", "TT"]
+    assert read_recording(ex.path, variable="take1").sensor_names == ["TBK", "TB", "TT"]  # Haskins' TR: tongue rear
     with pytest.raises(RecordingError, match="no MVIEW struct variable 'other'.*take1"):
         read_recording(ex.path, variable="other")
     plain = tmp_path / "plain.mat"

@@ -115,3 +115,52 @@ def test_a_map_states_the_files_axes_so_no_command_guesses_them(tmp_path, capsys
     (tmp_path / "sensor_map.json").write_text(json.dumps({"sensors": {"TT": 1}, "axes": "up,left,front"}))
     with pytest.raises(RecordingError, match=r"sensor_map.json.*'axes' 'up,left,front' is not an axis mapping"):
         read_recording(tmp_path / "take.tsv")
+
+
+def test_a_haskins_file_without_a_map_reads_tr_as_the_tongue_rear_and_says_so(caplog):
+    """Issue 23: MVIEW's TR (tongue rear) was read as our right lateral sensor, silently."""
+    import logging
+
+    from tests.conftest import shared_file
+
+    path = shared_file("ema", "mview", "F01_B01_S01_R01_N.mat")
+    with caplog.at_level(logging.WARNING, logger="tonguevis"):
+        plain = read_recording(path)
+    said = [r.getMessage() for r in caplog.records if "channel TR" in r.getMessage()]
+    assert len(said) == 1 and "F01_B01_S01_R01_N.mat" in said[0]
+    assert "read as the tongue rear (back) (TBK)" in said[0] and "MVIEW (Haskins)" in said[0]
+    assert '--sensors MAP with {"TR": "TR"}' in said[0]  # how to choose the other meaning
+    assert "TBK" in plain.sensors and "TR" not in plain.sensors
+    assert plain.metadata["channel_meanings"] == {"TR": "TBK"}
+    preset = read_recording(path, sensor_map="haskins")  # the same as the preset
+    np.testing.assert_array_equal(plain.sensors["TBK"], preset.sensors["TBK"])
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="tonguevis"):
+        kept = read_recording(path, sensor_map={"TR": "TR"})  # a map decides: no guess, no warning
+    assert "TR" in kept.sensors and not [r for r in caplog.records if "channel TR" in r.getMessage()]
+
+
+def test_tr_without_tl_elsewhere_stays_the_right_lateral_with_a_warning(tmp_path, caplog):
+    import logging
+
+    rec = make_recording(names=("TT", "TB", "TR", "JAW"), audio_rate=None, orientation=False)
+    path = tmp_path / "three.csv"
+    write_recording(rec, path)
+    with caplog.at_level(logging.WARNING, logger="tonguevis"):
+        read = read_recording(path)
+    said = [r.getMessage() for r in caplog.records if "channel TR" in r.getMessage()]
+    assert len(said) == 1 and "three.csv" in said[0]
+    assert "read as the right lateral tongue sensor (TR)" in said[0] and "haskins" in said[0]
+    assert "TR" in read.sensors and read.metadata["channel_meanings"] == {"TR": "TR"}
+
+
+def test_tr_beside_tl_is_the_lateral_pair_without_a_warning(tmp_path, caplog):
+    import logging
+
+    from tonguevis.io.sensor_map import resolve_two_meanings
+
+    rec = make_recording(names=("TT", "TD", "TL", "TR"), audio_rate=None, orientation=False)
+    rec.metadata["format"] = "mview"  # even in an MVIEW file: TL beside TR means the laterals
+    with caplog.at_level(logging.WARNING, logger="tonguevis"):
+        same = resolve_two_meanings(rec)
+    assert same is rec and not caplog.records

@@ -160,7 +160,7 @@ def read_recording(
     Raises :class:`RecordingError` naming the file and the problem.
     """
     from tonguevis.io.companions import attach_audio, attach_labels
-    from tonguevis.io.sensor_map import apply_sensor_map, load_sensor_map
+    from tonguevis.io.sensor_map import apply_sensor_map, load_sensor_map, resolve_two_meanings
 
     path = Path(path)
     if format is not None:
@@ -199,6 +199,8 @@ def read_recording(
     if mapping is not None:
         rec = apply_sensor_map(rec, mapping, fmt.channel_name, path)
         rec.metadata["sensor_map"] = dict(mapping)
+    else:
+        rec = resolve_two_meanings(rec, path)
     _check_recording(rec, path)
     return rec
 

@@ -17,6 +17,7 @@ corpus folder says once how its recordings lie and no command warns about it.
 from __future__ import annotations
 
 import json
+import logging
 import os
 from pathlib import Path
 from typing import Any, Callable
@@ -25,6 +26,14 @@ from tonguevis.errors import RecordingError
 from tonguevis.io.recording import Recording
 
 PRESET_DIR = Path(__file__).resolve().parents[1] / "presets"
+
+log = logging.getLogger("tonguevis")
+
+#: Channel names that mean two things when no sensor map says which: name -> (our meaning,
+#: {format: that format's meaning}).  Haskins (MVIEW) files call the tongue *rear* TR, which is
+#: our right lateral sensor; a file with a TL beside its TR has the lateral pair, no doubt.
+TWO_MEANINGS = {"TR": ("TR", {"mview": "TBK"})}
+MEANING_WORDS = {"TR": "the right lateral tongue sensor", "TBK": "the tongue rear (back)"}
 
 CANONICAL_NAMES = ("TT", "TB", "TD", "TBK", "TL", "TR", "JAW")
 
@@ -174,6 +183,47 @@ def apply_sensor_map(
         if isinstance(rec.metadata.get(key), dict):
             renamed.metadata[key] = {rename.get(k, k): v for k, v in rec.metadata[key].items()}
     return renamed
+
+
+def resolve_two_meanings(rec: Recording, path=None) -> Recording:
+    """``rec`` (read without a sensor map) with its channels whose names could mean two things
+    given one meaning, and a warning naming the choice made and how to choose the other.
+
+    TR is our right lateral sensor unless the file's format names the tongue rear so (MVIEW,
+    Haskins: then it becomes TBK); with TL beside it, it is the right lateral in any format.
+    The choices are kept in ``metadata["channel_meanings"]`` (channel -> canonical name).
+    """
+    fmt = str(rec.metadata.get("format", ""))
+    where = path or rec.metadata.get("file", "recording")
+    rename, chosen = {}, {}
+    for name, (ours, by_format) in TWO_MEANINGS.items():
+        if name not in rec.sensors or "TL" in rec.sensors:
+            continue
+        meaning = by_format.get(fmt, ours)
+        if meaning != name and meaning in rec.sensors:
+            continue  # the other meaning's name is taken: keep the channel's own name
+        others = sorted({m for m in (ours, *by_format.values()) if m != meaning})
+        how = ", ".join(f"{{\"{m}\": \"{name}\"}}" for m in others)
+        log.warning("%s: channel %s could mean %s; read as %s (%s)%s. If it is %s, give a sensor map "
+                    "(--sensors MAP with %s%s)", where, name,
+                    " or ".join(MEANING_WORDS.get(m, m) for m in (meaning, *others)),
+                    MEANING_WORDS.get(meaning, meaning), meaning,
+                    f", as {fmt.upper()} (Haskins) files name it" if meaning != ours else
+                    ", tonguevis's own name; Haskins files use TR for the tongue rear",
+                    " or ".join(MEANING_WORDS.get(m, m) for m in others), how,
+                    ", or the preset haskins" if "TBK" in others else "")
+        chosen[name] = meaning
+        if meaning != name:
+            rename[name] = meaning
+    if not chosen:
+        return rec
+    out = rec.renamed(rename) if rename else rec
+    out.metadata = dict(rec.metadata)
+    for key in PER_SENSOR_METADATA:
+        if rename and isinstance(rec.metadata.get(key), dict):
+            out.metadata[key] = {rename.get(k, k): v for k, v in rec.metadata[key].items()}
+    out.metadata["channel_meanings"] = chosen
+    return out
 
 
 def inverse_channel(name: str, mapping: dict[str, Any] | None) -> Any:
