@@ -57,7 +57,11 @@ class ModalTab(QWidget):
     def __init__(self, state: AppState, parent=None):
         super().__init__(parent)
         self.state = state
-        self.surface_canvas = FigureCanvasQTAgg(Figure(figsize=(5, 3.5), facecolor=FACE, layout="constrained"))
+        # Fixed margins, not constrained layout: a 3D axes' labels keep the positions of its previous
+        # drawing until it is drawn again, so after ax3d.clear() and a new surface the layout measured
+        # them thousands of pixels off and matplotlib warned "axes sizes collapsed to zero" on every run.
+        self.surface_canvas = FigureCanvasQTAgg(Figure(figsize=(5, 3.5), facecolor=FACE))
+        self.surface_canvas.figure.subplots_adjust(left=0.02, right=0.95, bottom=0.02, top=0.92)
         self.surface_canvas.setMinimumHeight(160)
         self.ax3d = self.surface_canvas.figure.add_subplot(projection="3d")
         self.map = ModalMap(state, self)
