@@ -257,7 +257,7 @@ def test_segment_counts_productions_in_the_tier(tmp_path, capsys, monkeypatch):
     model = box_model()
     monkeypatch.setattr(segment_cli, "load_model", lambda mesh, axes: model)
     recording = _demo_with_textgrid(tmp_path, [Label(5.45, 5.72, "ta", "syll"), Label(8.03, 8.30, "ta", "syll")])
-    common = ["segment", recording, "--modal-modes", "20", "--landmarks", "rule", "--quiet", "--modes", "rigid",
+    common = ["segment", recording, "--modes", "20", "--landmarks", "rule", "--quiet", "--mode-kind", "rigid",
               "--seeds", "2", "--out", tmp_path / "s.vtu"]
     code, out, err = run(capsys, *common, "--production", "2", "--productions-from", "syll")
     assert code == 0, err

@@ -67,7 +67,7 @@ def run(capsys, *argv) -> tuple[int, str, str]:
 COMMANDS = {  # command -> extra arguments (files go to OUT)
     "simulate": lambda f, out: ["simulate", f],
     "energy": lambda f, out: ["energy", f, "--csv", out / "e.csv"],
-    "segment": lambda f, out: ["segment", f, "--out", out / "s.vtu", "--modes", "rigid", "--seeds", "2"],
+    "segment": lambda f, out: ["segment", f, "--out", out / "s.vtu", "--mode-kind", "rigid", "--seeds", "2"],
     "morph": lambda f, out: ["morph", f"{f}@0.5", f"{f}@1.5", "--out", out / "m.png"],
     "validate": lambda f, out: ["validate", f, "--json", out / "v.json", "--no-static"],
 }

@@ -87,3 +87,19 @@ def test_readme_command_runs_as_written(args, tmp_path, monkeypatch, capsys):
     err = capsys.readouterr().err
     assert code == 0, err
     assert "error" not in err
+
+
+def test_readme_opens_the_batch_tables_with_what_tonguevis_installs(tmp_path, monkeypatch):
+    """Issue 27, item 10: the README said pandas, which `.[all]` does not install; its snippet runs as written."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    blocks = [b for b in re.findall(r"```python\n(.*?)```", README.read_text(encoding="utf-8"), flags=re.S)
+              if "results/energy.parquet" in b]
+    assert len(blocks) == 1, "the README shows how to open the batch tables in Python"
+    assert "pandas" not in blocks[0] and "pd." not in blocks[0]
+    (tmp_path / "results").mkdir()
+    pq.write_table(pa.table({"speaker": ["spk1", "spk1"], "syllable": ["ta", "ta"], "energy_J": [1e-3, 2e-3]}),
+                   tmp_path / "results" / "energy.parquet")
+    monkeypatch.chdir(tmp_path)
+    exec(compile(blocks[0], "README.md", "exec"), {})

@@ -160,7 +160,7 @@ def test_simulate(name, simulations):
 def test_segment_and_morph_take_the_saved_motion(name, simulations, tmp_path, capsys):
     _, simulated, saved = simulations(name)
     rest = REST.search(simulated).group(0)
-    code, out, err = run(capsys, "segment", saved, "--out", tmp_path / "s.vtu", "--modes", "rigid", "--seeds", "2",
+    code, out, err = run(capsys, "segment", saved, "--out", tmp_path / "s.vtu", "--mode-kind", "rigid", "--seeds", "2",
                          "--quiet")
     assert code == 0, err
     assert rest in out and "2 partitions" in out and (tmp_path / "s.vtu").stat().st_size > 0

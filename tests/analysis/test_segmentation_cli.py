@@ -24,7 +24,7 @@ def block(monkeypatch):
 def _run(*arguments):
     from tonguevis.cli import main
 
-    return main(["segment", str(RECORDING), "--modal-modes", "20", "--landmarks", "rule", "--quiet",
+    return main(["segment", str(RECORDING), "--modes", "20", "--landmarks", "rule", "--quiet",
                  *arguments])
 
 
@@ -34,7 +34,7 @@ def test_production_autoseeded_to_a_count_writes_vtu_png_npz(block, tmp_path, ca
     pytest.importorskip("pyvista", reason="the PNG is rendered with pyvista (the gui extra)")
 
     vtu, png, npz = tmp_path / "s.vtu", tmp_path / "s.png", tmp_path / "s.npz"
-    code = _run("--production", "2", "--modes", "constraint", "--seeds", "3", "--out", str(vtu),
+    code = _run("--production", "2", "--mode-kind", "constraint", "--seeds", "3", "--out", str(vtu),
                 "--png", str(png), "--save", str(npz))
     out = capsys.readouterr().out
     assert code == 0, out
@@ -53,7 +53,7 @@ def test_production_autoseeded_to_a_count_writes_vtu_png_npz(block, tmp_path, ca
 
 def test_single_frame_with_seed_tets(block, tmp_path, capsys):
     vtu, npz = tmp_path / "s.vtu", tmp_path / "s.npz"
-    code = _run("--time", "12.9", "--modes", "rigid", "--seed-tets", f"0,{block.mesh.n_tets - 1}",
+    code = _run("--time", "12.9", "--mode-kind", "rigid", "--seed-tets", f"0,{block.mesh.n_tets - 1}",
                 "--out", str(vtu), "--save", str(npz))
     assert code == 0, capsys.readouterr()
     result = SegmentationResult.load(npz)

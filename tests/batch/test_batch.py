@@ -134,7 +134,7 @@ def test_motion_segmentation_validation_equal_the_commands(corpus, serial, tmp_p
     row = _table(mine / "simulation.parquet")
     assert row["peak_energy_mJ"][0] == pytest.approx(1e3 * ours.energy.max(), rel=1e-12)
 
-    assert main(["segment", recording, "--production", "1", "--modal-modes", str(MODES), "--landmarks", "rule",
+    assert main(["segment", recording, "--production", "1", "--modes", str(MODES), "--landmarks", "rule",
                  "--out", str(tmp_path / "s.vtu"), "--save", str(tmp_path / "s.npz"), "--quiet"]) == 0
     expected = SegmentationResult.load(tmp_path / "s.npz")
     with np.load(mine / "segmentation.npz") as stored:

@@ -328,7 +328,7 @@ def test_view_and_export_video_against_the_generic_palate_in_either_frame(tmp_pa
     if not (DEMO.exists() and _default_model_available()):
         pytest.skip("needs the demo corpus and the shipped mesh")
     out = tmp_path / "jaw.mp4"
-    result = _run("export-video", str(DEMO), "--palate", "generic", "--frame", "jaw", "--color", "contact",
+    result = _run("export-video", str(DEMO), "--palate", "generic", "--reference", "jaw", "--color", "contact",
                   "--out", str(out), "--start", "5.5", "--end", "5.8", "--modes", "20", "--size", "320x240",
                   "--quiet", timeout=170)
     assert result.returncode == 0, result.stderr[-2000:]

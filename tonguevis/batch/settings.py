@@ -52,6 +52,8 @@ class BatchSettings:
         ``rest`` (start_s, end_s) for every recording, None to find it).
     sensors : sensor map for every recording (preset name, JSON path or dict);
         None uses a ``sensor_map.json`` beside each recording.
+    read_options : reader options for every recording (``-O``: ``axes=``, ``audio=False`` ...), a dict
+        or (key, value) pairs; kept as sorted pairs.
     keep : production positions kept per train (None: every production), as ``tonguevis energy --all``.
     window : energy curve span, "release" or "vowel", as ``tonguevis energy --window``.
     tier : productions from this label tier instead (``--productions-from``).
@@ -67,6 +69,7 @@ class BatchSettings:
     sensor_stiffness: float | None | str = "default"
     rest: tuple[float, float] | None = None
     sensors: Any = None
+    read_options: tuple = ()
     keep: tuple[int, ...] | None = (2, 3, 4)
     window: str = "release"
     tier: str | None = None
@@ -79,6 +82,7 @@ class BatchSettings:
 
         object.__setattr__(self, "steps", parse_steps(self.steps))
         object.__setattr__(self, "sensor_stiffness", sensor_stiffness_value(self.sensor_stiffness))
+        object.__setattr__(self, "read_options", tuple(sorted(dict(self.read_options or ()).items())))
         if self.keep is not None:
             object.__setattr__(self, "keep", tuple(int(k) for k in self.keep))
         if self.rest is not None:
@@ -99,6 +103,8 @@ class BatchSettings:
         """The settings ``step``'s results depend on (JSON-able)."""
         sim = {"modes": self.modes, "landmarks": self.landmarks, "warping": self.warping,
                "sensor_stiffness": self.sensor_stiffness, "rest": self.rest}
+        read = {"read_options": dict(self.read_options)} if self.read_options else {}  # old keys stay valid
+        sim.update(read)
         if step == "simulate":
             return sim
         if step == "energy":
@@ -108,7 +114,7 @@ class BatchSettings:
                     "mode": "constraint", "seeds": "auto", "threshold": 0.05, "adjust": False}
         if step == "validate":
             return {"modes": self.modes, "landmarks": self.landmarks, "sensor_stiffness": self.sensor_stiffness,
-                    "rest": self.rest, "quasi_static": self.quasi_static}
+                    "rest": self.rest, "quasi_static": self.quasi_static, **read}
         raise BatchError(f"unknown step {step!r}")
 
     def as_dict(self) -> dict:

@@ -21,7 +21,7 @@ COMMANDS: list[tuple[str, str, str]] = [
     ("syllables", "syllables", "find the CV productions of a recording"),
     ("convert", "convert", "convert a recording to another format (BVH, CSV, NDI Wave TSV)"),
     ("simulate", "simulate", "drive the tongue model with a recording"),
-    ("export-video", "export_video", "render a recording's simulation to MP4 with its audio"),
+    ("export-video", "export_video", "render a recording's simulation to MP4 with its sound (if it has any)"),
     ("energy", "energy", "energy-time curves of the productions of recordings"),
     ("morph", "morph", "morph one simulated shape into another"),
     ("segment", "segment", "deformation segmentation with rigid or constraint modes"),

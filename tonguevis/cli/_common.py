@@ -7,7 +7,30 @@ command-line arguments onto them.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
+
+
+class DeprecatedAlias(argparse.Action):
+    """An option's old name, kept for one release: it works as before and prints a deprecation note.
+
+    ``new`` is the option to use instead (shown in the note); the old name is
+    left out of ``--help``.
+    """
+
+    def __init__(self, option_strings, dest, new: str, **kwargs):
+        self.new = new
+        kwargs.setdefault("help", argparse.SUPPRESS)
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        deprecation_note(option_string, self.new)
+        setattr(namespace, self.dest, values)
+
+
+def deprecation_note(old: str, new: str) -> None:
+    """Print on stderr that option ``old`` is deprecated in favour of ``new`` (one line)."""
+    print(f"tonguevis: note: {old} is deprecated and goes in the next release; use {new}", file=sys.stderr)
 
 
 def add_recording_arguments(parser: argparse.ArgumentParser) -> None:
@@ -15,7 +38,45 @@ def add_recording_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sensors", metavar="MAP",
                         help="sensor map: a preset (paper, haskins, mngu0) or a JSON file of name -> channel "
                              "(default: sensor_map.json beside the file, if there is one)")
+    add_reader_options_argument(parser)
     add_companion_arguments(parser)
+
+
+def add_reader_options_argument(parser: argparse.ArgumentParser, which: str = "") -> None:
+    """``-O KEY=VALUE`` (repeatable): options of the reader of every recording the command reads."""
+    parser.add_argument("-O", "--option", action="append", metavar="KEY=VALUE",
+                        help=f"reader option{which}, e.g. channels=12 (headerless AG500), axes=-y,x,z (the "
+                             "recording's axes), unit=mm, audio=false (no sound at all), labels=false; repeatable")
+
+
+def parse_options(pairs: list[str] | None) -> dict:
+    """``["channels=12", "axes=-y,x,z"]`` -> {"channels": 12, "axes": "-y,x,z"} (ints, floats, booleans)."""
+    from tonguevis.errors import TonguevisError
+
+    options = {}
+    for pair in pairs or []:
+        key, sep, value = pair.partition("=")
+        if not sep or not key.strip():
+            raise TonguevisError(f"option {pair!r} is not KEY=VALUE")
+        text = value.strip()
+        parsed: object = text
+        if text.lower() in ("true", "false"):
+            parsed = text.lower() == "true"
+        else:
+            for convert in (int, float):
+                try:
+                    parsed = convert(text)
+                    break
+                except ValueError:
+                    pass
+        options[key.strip().replace("-", "_")] = parsed
+    return options
+
+
+def reading_options(args) -> dict:
+    """Keyword arguments of :func:`tonguevis.workflows.open_recording` from ``-O`` then ``--audio``/``--labels``
+    (the files given win over ``-O audio=...``)."""
+    return {**parse_options(getattr(args, "option", None)), **companion_options(args)}
 
 
 def add_companion_arguments(parser: argparse.ArgumentParser, labels: bool = True) -> None:
@@ -50,14 +111,21 @@ def add_productions_from_argument(parser: argparse.ArgumentParser) -> None:
 def add_model_arguments(parser: argparse.ArgumentParser, modes: int = 100) -> None:
     parser.add_argument("--mesh", type=Path, metavar="PATH",
                         help="tetrahedral tongue mesh (TetGen .node/.ele, VTU, Gmsh); default: the shipped tongue")
-    parser.add_argument("--axes", metavar="MAP",
-                        help="axis mapping of --mesh into x anterior, y left, z up, e.g. -x,-z,-y (ArtiSynth)")
+    add_mesh_axes_argument(parser)
     parser.add_argument("--modes", type=int, default=modes, metavar="M", help=f"vibration modes (default {modes})")
     parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
                         help="sensor nodes: snapped to the speaker's layout (default) or the paper's placement rule")
     parser.add_argument("--linear", action="store_true", help="linear modal model (no modal warping)")
     add_sensor_stiffness_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def add_mesh_axes_argument(parser: argparse.ArgumentParser) -> None:
+    """``--mesh-axes MAP``: the axes of ``--mesh`` (``--axes``, its old name, kept for one release)."""
+    parser.add_argument("--mesh-axes", dest="mesh_axes", metavar="MAP",
+                        help="axis mapping of --mesh into x anterior, y left, z up, e.g. -x,-z,-y (ArtiSynth); "
+                             "the recording's axes are -O axes=MAP")
+    parser.add_argument("--axes", dest="mesh_axes", action=DeprecatedAlias, new="--mesh-axes")
 
 
 def add_sensor_stiffness_argument(parser: argparse.ArgumentParser) -> None:
@@ -121,16 +189,16 @@ def rest_line(motion) -> str:
 def read_recording_args(args):
     from tonguevis.workflows import open_recording
 
-    return open_recording(args.file, args.sensors, **companion_options(args))
+    return open_recording(args.file, args.sensors, **reading_options(args))
 
 
 def load_model_args(args):
-    """The tongue model of ``--mesh``/``--axes``, else the shipped default."""
+    """The tongue model of ``--mesh``/``--mesh-axes``, else the shipped default."""
     from tonguevis.sim import TongueModel
 
     if getattr(args, "mesh", None) is None:
         return TongueModel.default()
-    options = {"axes": args.axes} if getattr(args, "axes", None) else {}
+    options = {"axes": args.mesh_axes} if getattr(args, "mesh_axes", None) else {}
     return TongueModel.from_mesh(args.mesh, **options)
 
 

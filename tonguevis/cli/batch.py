@@ -22,7 +22,8 @@ from pathlib import Path
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from tonguevis.batch.settings import DEFAULT_STEPS, STEPS
-    from tonguevis.cli._common import add_model_arguments, add_productions_from_argument, add_rest_argument
+    from tonguevis.cli._common import (add_model_arguments, add_productions_from_argument,
+                                       add_reader_options_argument, add_rest_argument)
 
     parser.add_argument("paths", nargs="+", type=Path, metavar="CORPUS",
                         help="a folder of recordings (walked recursively) or recording files")
@@ -50,12 +51,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "segmentation takes several seconds per production)")
     parser.add_argument("--no-static", action="store_true", help="validation without the quasi-static baseline")
     parser.add_argument("--force", action="store_true", help="redo every step, even those up to date")
+    add_reader_options_argument(parser, " of every recording")
     add_model_arguments(parser)
     add_rest_argument(parser, every=True)
 
 
 def load_model(args):
-    """The tongue model of ``--mesh``/``--axes`` as (model, None), or (None, mesh file) for the workers to read.
+    """The tongue model of ``--mesh``/``--mesh-axes`` as (model, None), or (None, mesh file) for the workers to read.
 
     A hook the tests replace.
     """
@@ -65,12 +67,12 @@ def load_model(args):
 def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
     from tonguevis.batch import BatchSettings, run as run_batch
-    from tonguevis.cli._common import rest_arg
+    from tonguevis.cli._common import parse_options, rest_arg
 
     settings = BatchSettings(
         steps=args.steps, modes=args.modes, landmarks=args.landmarks, warping=not args.linear,
         sensor_stiffness=args.sensor_stiffness, rest=rest_arg(args), sensors=args.sensors,
-        keep=None if args.all else (2, 3, 4), window=args.window, tier=args.productions_from,
+        read_options=parse_options(args.option), keep=None if args.all else (2, 3, 4), window=args.window, tier=args.productions_from,
         segment_first=args.segment_first, quasi_static=not args.no_static, csv=args.csv)
     model, mesh = load_model(args)
     client = None
@@ -84,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         with tqdm_progress("batch", disable=args.quiet, unit="recording") as progress:
             result = run_batch(args.paths, args.out, jobs=args.jobs, client=client, model=model, mesh=mesh,
-                               axes=args.axes, labels=args.labels, settings=settings, force=args.force,
+                               axes=args.mesh_axes, labels=args.labels, settings=settings, force=args.force,
                                progress=progress)
     except KeyboardInterrupt:
         print(f"the recordings finished are kept in {args.out}: run the same command again to resume",

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from tonguevis.cli.info import add_reading_arguments, parse_options, read_from_args
+from tonguevis.cli._common import parse_options
+from tonguevis.cli.info import add_reading_arguments, read_from_args
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -24,7 +24,7 @@ log = logging.getLogger("tonguevis")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from tonguevis.cli._common import (add_companion_arguments, add_model_arguments, add_productions_from_argument,
-                                       add_rest_argument)
+                                       add_reader_options_argument, add_rest_argument)
 
     parser.add_argument("paths", nargs="+", type=Path, metavar="PATH", help="recordings or folders of recordings")
     parser.add_argument("--sensors", metavar="MAP",
@@ -45,6 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(the consonant mid-curve)")
     add_productions_from_argument(parser)
     # --labels is the name table above: each recording's TextGrid is the NAME.TextGrid beside it.
+    add_reader_options_argument(parser, " of every recording")
     add_companion_arguments(parser, labels=False)
     add_model_arguments(parser)
     add_rest_argument(parser, every=True)
@@ -61,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
     from tonguevis.analysis.corpus import CorpusError, corpus_energy_curves, load_corpus
     from tonguevis.analysis.energy import GROUP_KEYS, summarize, write_curves_csv, write_summary_csv
-    from tonguevis.cli._common import companion_options, rest_arg
+    from tonguevis.cli._common import reading_options, rest_arg
 
     by = tuple(k.strip() for k in args.group_by.split(",") if k.strip())
     bad = [k for k in by if k not in GROUP_KEYS]
@@ -78,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
         result = corpus_energy_curves(corpus, model=model, sensor_map=args.sensors, modes=args.modes,
                                       keep=None if args.all else (2, 3, 4), keep_motions=False, window=args.window,
                                       landmarks=args.landmarks, warping=not args.linear, rest=rest_arg(args),
-                                      tier=args.productions_from, open_options=companion_options(args),
+                                      tier=args.productions_from, open_options=reading_options(args),
                                       progress=progress)
     for path, reason in result.skipped:
         print(f"skipped {path}: {reason}")

@@ -1,4 +1,7 @@
-"""``tonguevis export-video``: simulate a recording and render it off screen to MP4 with its sound."""
+"""``tonguevis export-video``: simulate a recording and render it off screen to MP4 with its sound.
+
+A recording without sound makes a silent MP4; the command says so and why.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +11,8 @@ from tonguevis.cli.view import COLOR_CHOICES
 
 
 def add_arguments(parser) -> None:
-    from tonguevis.cli._common import add_companion_arguments, add_rest_argument
+    from tonguevis.cli._common import (DeprecatedAlias, add_companion_arguments, add_reader_options_argument,
+                                       add_rest_argument)
 
     parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the demo /ta/ train, spk1_ta)")
     parser.add_argument("--out", type=Path, required=True, metavar="MP4", help="the video to write")
@@ -21,20 +25,23 @@ def add_arguments(parser) -> None:
     parser.add_argument("--size", default="1280x720", metavar="WxH", help="video size in pixels (default 1280x720)")
     parser.add_argument("--color", choices=COLOR_CHOICES, default="displacement",
                         help="surface colouring (default: displacement magnitude; contact = distance to the palate)")
-    parser.add_argument("--frame", choices=("head", "jaw"), default="head", dest="reference",
+    parser.add_argument("--reference", choices=("head", "jaw"), default="head",
                         help="frame of reference: head (default: tongue and jaw move with the jaw, palate fixed) "
                              "or jaw (the jaw's motion removed, as simulated)")
+    parser.add_argument("--frame", choices=("head", "jaw"), dest="reference", action=DeprecatedAlias,
+                        new="--reference")  # its old name: in `view`, --frame is a frame number
     parser.add_argument("--palate", metavar="PALATE",
                         help="keep the tongue below a palate and draw it: the speaker's (a file from "
                              "`tonguevis palate`) or 'generic' (the shipped one); default: no contact")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_rest_argument(parser)
+    add_reader_options_argument(parser)
     add_companion_arguments(parser, labels=False)  # the video has the sound, not the labels
 
 
 def run(args) -> int:
     from tonguevis._progress import tqdm_progress
-    from tonguevis.cli._common import rest_arg
+    from tonguevis.cli._common import reading_options, rest_arg
     from tonguevis.errors import RecordingError
     from tonguevis.gui.session import demo_recording_path, load_session
     from tonguevis.gui.simulation import simulate_session
@@ -52,11 +59,25 @@ def run(args) -> int:
         from tonguevis.palate import load_palate
 
         palate = load_palate(args.palate)
-    session = load_session(path, sensor_map=args.sensors, rest=rest_arg(args), audio=args.audio)
+    options = reading_options(args)  # -O, then --audio FILE
+    session = load_session(path, sensor_map=args.sensors, rest=rest_arg(args), **options)
     with tqdm_progress("simulating", disable=args.quiet) as progress:
         simulate_session(session, mesh_path=args.mesh, modes=args.modes, progress=progress, palate=palate)
     with tqdm_progress("rendering", disable=args.quiet) as progress:
         out = export_video(session, args.out, args.start, args.end, fps=args.fps, size=(width, height),
                            mode=args.color, progress=progress, frame=args.reference)
     print(f"{session.rest.describe()}\n{out} ({args.reference} frame)")
+    silent = silence_reason(session.recording, Path(path), audio_off=options.get("audio") is False)
+    if silent is not None:
+        print(f"note: {out} is silent: {silent}")
     return 0
+
+
+def silence_reason(recording, path: Path, audio_off: bool = False) -> str | None:
+    """Why the video of ``recording`` (read from ``path``) has no sound, or None when it has some."""
+    if recording.audio is not None and len(recording.audio.samples):
+        return None
+    if audio_off:
+        return "the sound was turned off (-O audio=false)"
+    return (f"{path.name} holds no sound and no {path.stem}.wav lies beside it; give the recording's "
+            "WAV with --audio FILE")

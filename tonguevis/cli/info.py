@@ -6,40 +6,14 @@ import argparse
 
 import numpy as np
 
-from tonguevis.errors import TonguevisError
-
-
-def parse_options(pairs: list[str] | None) -> dict:
-    """``["channels=12", "axes=-y,x,z"]`` -> {"channels": 12, "axes": "-y,x,z"} (ints, floats, booleans)."""
-    options = {}
-    for pair in pairs or []:
-        key, sep, value = pair.partition("=")
-        if not sep or not key.strip():
-            raise TonguevisError(f"option {pair!r} is not KEY=VALUE")
-        text = value.strip()
-        parsed: object = text
-        if text.lower() in ("true", "false"):
-            parsed = text.lower() == "true"
-        else:
-            for convert in (int, float):
-                try:
-                    parsed = convert(text)
-                    break
-                except ValueError:
-                    pass
-        options[key.strip().replace("-", "_")] = parsed
-    return options
-
 
 def add_reading_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import add_companion_arguments
+    from tonguevis.cli._common import add_companion_arguments, add_reader_options_argument
 
     parser.add_argument("--sensors", metavar="MAP",
                         help="sensor map: a preset (paper, haskins, mngu0) or a JSON file of name -> channel")
     parser.add_argument("--format", metavar="NAME", help="read as this format instead of detecting it")
-    parser.add_argument("-O", "--option", action="append", metavar="KEY=VALUE",
-                        help="reader option, e.g. channels=12 (headerless AG500), axes=-y,x,z, unit=mm, "
-                             "audio=false (no sound at all), labels=false; repeatable")
+    add_reader_options_argument(parser)
     add_companion_arguments(parser)
 
 
@@ -126,10 +100,9 @@ def describe(rec) -> list[str]:
 def read_from_args(args, path):
     from tonguevis.workflows import open_recording
 
-    from tonguevis.cli._common import companion_options
+    from tonguevis.cli._common import reading_options
 
-    options = {**parse_options(args.option), **companion_options(args)}
-    return open_recording(path, args.sensors, format=args.format, **options)
+    return open_recording(path, args.sensors, format=args.format, **reading_options(args))
 
 
 def run(args) -> int:

@@ -30,7 +30,7 @@ def _frame_spec(text: str) -> tuple[Path, float]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import add_model_arguments, add_rest_argument
+    from tonguevis.cli._common import add_model_arguments, add_reader_options_argument, add_rest_argument
 
     parser.add_argument("source", type=_frame_spec, metavar="SOURCE@TIME", help="source shape (t = 0)")
     parser.add_argument("target", type=_frame_spec, metavar="TARGET@TIME", help="target shape (t = 1)")
@@ -42,6 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "or node_mean (mean squared node distance, independent of element size)")
     parser.add_argument("--one-way", action="store_true", help="MP4 plays source → target only (default: and back)")
     parser.add_argument("--sensors", metavar="MAP", help="sensor map for recordings (default: sensor_map.json beside)")
+    add_reader_options_argument(parser, " of both recordings")
     add_model_arguments(parser)
     add_rest_argument(parser, every=True)
 
@@ -54,13 +55,14 @@ def load_model(args):
 
 
 def _motion(path: Path, model, args, progress):
-    from tonguevis.cli._common import simulate_args
+    from tonguevis.cli._common import reading_options, simulate_args
     from tonguevis.sim import Motion
     from tonguevis.workflows import open_recording
 
     if path.suffix.lower() == ".npz":
         return Motion.load(path)
-    rec = open_recording(path, args.sensors)  # a sensor_map.json beside the file is used by default
+    # a sensor_map.json beside the file is used by default
+    rec = open_recording(path, args.sensors, **reading_options(args))
     return simulate_args(args, rec, model, progress=progress)
 
 

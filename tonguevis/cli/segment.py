@@ -16,9 +16,13 @@ from pathlib import Path
 
 log = logging.getLogger("tonguevis")
 
+MODE_KINDS = ("rigid", "constraint")
+DEFAULT_MODES = 100
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import add_companion_arguments, add_productions_from_argument, add_rest_argument
+    from tonguevis.cli._common import (DeprecatedAlias, add_companion_arguments, add_mesh_axes_argument,
+                                       add_productions_from_argument, add_reader_options_argument, add_rest_argument)
 
     parser.add_argument("file", type=Path,
                         help="the recording (NDI Wave TSV, Carstens .pos, EST .ema, ...) or a saved motion (.npz)")
@@ -27,20 +31,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default: sensor_map.json beside the file, if there is one)")
     parser.add_argument("--mesh", metavar="PATH", type=Path,
                         help="tongue mesh to use instead of ours (TetGen .node/.ele, VTU, Gmsh, .npz)")
-    parser.add_argument("--axes", metavar="MAP",
-                        help="axis mapping of --mesh into x anterior, y left, z up, e.g. -x,-z,-y "
-                             "for the ArtiSynth tongue")
+    add_mesh_axes_argument(parser)
     which = parser.add_mutually_exclusive_group()
     which.add_argument("--production", metavar="K", type=int,
                        help="segment production K (1-based, as listed by 'tonguevis syllables', with the same "
                             "--productions-from)")
     which.add_argument("--time", metavar="T", type=float, help="segment the frame nearest T seconds")
     add_productions_from_argument(parser)
+    add_reader_options_argument(parser)
     add_companion_arguments(parser)
     parser.add_argument("--peak", action="store_true",
                         help="with --production: only its frame of peak energy (default: the whole "
                              "production, frames weighted by energy, eq. 5)")
-    parser.add_argument("--modes", choices=("rigid", "constraint"), default="constraint",
+    parser.add_argument("--mode-kind", choices=MODE_KINDS, default=None,
                         help="local modes: rigid (eq. 9) or constraint (eq. 13; default)")
     parser.add_argument("--seeds", default="auto", metavar="auto|N",
                         help="auto: add partitions until --threshold; N: autoseed exactly N partitions")
@@ -52,8 +55,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="post-segmentation adjustment: move interface tets while the error falls")
     parser.add_argument("--no-anchors", action="store_true",
                         help="constraint modes without the anchors as constrained nodes")
-    parser.add_argument("--modal-modes", type=int, default=100, metavar="M",
-                        help="modes of the simulation (default 100)")
+    parser.add_argument("--modes", type=_count_or_old_kind, default=None, metavar="M",
+                        help="vibration modes of the simulation (default 100)")
+    parser.add_argument("--modal-modes", type=int, action=DeprecatedAlias, new="--modes")
     parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
                         help="sensor nodes: the speaker's own layout (default) or the paper's placement rule")
     parser.add_argument("--linear", action="store_true", help="linear modal model (no modal warping)")
@@ -62,6 +66,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--png", type=Path, metavar="OUT.png", help="also render a picture (off screen)")
     parser.add_argument("--save", type=Path, metavar="OUT.npz", help="also save the whole result")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _count_or_old_kind(text: str):
+    """``--modes``: a count; 'rigid'/'constraint' (its meaning before ``--mode-kind``) for one more release."""
+    if text in MODE_KINDS:
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of vibration modes (the kind of local modes "
+                                         "is --mode-kind rigid|constraint)") from None
+
+
+def resolve_mode_options(args) -> None:
+    """``args.mode_kind`` and ``args.modes`` (a count) from the new names and the old ones
+    (``--modes rigid|constraint``, ``--modal-modes M``), with a note for each old one."""
+    from tonguevis.cli._common import deprecation_note
+
+    old_kind = args.modes if isinstance(args.modes, str) else None
+    if old_kind is not None:
+        deprecation_note(f"--modes {old_kind}", f"--mode-kind {old_kind} (--modes is now the number of modes)")
+        args.modes = None
+    args.mode_kind = args.mode_kind or old_kind or "constraint"
+    if args.modes is None:
+        args.modes = args.modal_modes if args.modal_modes is not None else DEFAULT_MODES
 
 
 def _seeding(args) -> dict:
@@ -111,12 +140,12 @@ def _target(args, rec, motion):
 
 
 def load_model(mesh: Path | None, axes: str | None):
-    """The tongue model: ours, or one built on ``--mesh`` (a hook the tests replace)."""
+    """The tongue model: ours, or one built on ``--mesh`` with ``--mesh-axes`` (a hook the tests replace)."""
     from types import SimpleNamespace
 
     from tonguevis.cli._common import load_model_args
 
-    return load_model_args(SimpleNamespace(mesh=mesh, axes=axes))
+    return load_model_args(SimpleNamespace(mesh=mesh, mesh_axes=axes))
 
 
 def _recording(path: Path, sensors, options=None):
@@ -128,7 +157,7 @@ def _recording(path: Path, sensors, options=None):
 
 def _motion(args):
     """(recording or None, motion): a saved motion is loaded, a recording simulated."""
-    from tonguevis.cli._common import companion_options, simulate_args
+    from tonguevis.cli._common import reading_options, simulate_args
     from tonguevis.sim.motion import Motion
 
     if args.file.suffix.lower() == ".npz":
@@ -143,11 +172,11 @@ def _motion(args):
         source = source.get("file") if isinstance(source, dict) else source
         rec = None
         if args.production is not None and source and Path(source).exists():
-            rec = _recording(Path(source), args.sensors, companion_options(args))
+            rec = _recording(Path(source), args.sensors, reading_options(args))
         return rec, motion
-    rec = _recording(args.file, args.sensors, companion_options(args))
-    model = load_model(args.mesh, args.axes)
-    return rec, simulate_args(args, rec, model, modes=args.modal_modes)
+    rec = _recording(args.file, args.sensors, reading_options(args))
+    model = load_model(args.mesh, args.mesh_axes)
+    return rec, simulate_args(args, rec, model, modes=args.modes)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -155,6 +184,7 @@ def run(args: argparse.Namespace) -> int:
     from tonguevis.analysis.segmentation import segment
     from tonguevis.cli._common import rest_line
 
+    resolve_mode_options(args)
     seeding = _seeding(args)
     if args.productions_from is not None and args.production is None:
         from tonguevis.analysis.segmentation import SegmentationError
@@ -164,13 +194,13 @@ def run(args: argparse.Namespace) -> int:
     rec, motion = _motion(args)
     model = motion.model
     target = _target(args, rec, motion)
-    with tqdm_progress(f"segmenting ({args.modes} modes)", disable=args.quiet) as progress:
-        result = segment(model, target, args.modes, constrained_nodes=[] if args.no_anchors else None,
+    with tqdm_progress(f"segmenting ({args.mode_kind} modes)", disable=args.quiet) as progress:
+        result = segment(model, target, args.mode_kind, constrained_nodes=[] if args.no_anchors else None,
                          adjust=args.adjust, progress=progress, **seeding)
     result.metadata["recording"] = str(args.file)
     result.to_vtu(args.out)
     lines = [rest_line(motion), f"target: {target.description}",
-             f"{result.n_partitions} partitions with {args.modes} modes in {result.metadata['seconds']:.2f} s; "
+             f"{result.n_partitions} partitions with {args.mode_kind} modes in {result.metadata['seconds']:.2f} s; "
              f"relative global error {100 * result.relative_error:.2f} % (|u~ - u|^2 / |u|^2)",
              "partition  tets  volume_cm3  rms_error_mm  seed_tet"]
     for row in result.partition_rows():

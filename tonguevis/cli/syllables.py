@@ -22,12 +22,13 @@ log = logging.getLogger("tonguevis")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import add_companion_arguments, add_productions_from_argument
+    from tonguevis.cli._common import add_companion_arguments, add_productions_from_argument, add_reader_options_argument
 
     parser.add_argument("file", type=Path, help="the recording (NDI Wave TSV, Carstens .pos, EST .ema, ...)")
     parser.add_argument("--sensors", metavar="MAP",
                         help="sensor map: a JSON file or a preset (paper, haskins, mngu0) naming which "
                              "channel is TT, JAW, REF1...; default: sensor_map.json beside FILE if any")
+    add_reader_options_argument(parser)
     add_companion_arguments(parser)
     parser.add_argument("--csv", metavar="OUT", type=Path, help="also write the table to this CSV file")
     parser.add_argument("--gestures", metavar="OUT", type=Path,
@@ -58,12 +59,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tonguevis.cli._common import companion_options
+    from tonguevis.cli._common import reading_options
     from tonguevis.io.textgrid import tier_names
     from tonguevis.preprocess.labelled import PRODUCTIONS_TIER
     from tonguevis.workflows import find_recording_productions, head_references, open_recording
 
-    rec = open_recording(args.file, args.sensors, **companion_options(args))
+    rec = open_recording(args.file, args.sensors, **reading_options(args))
     sensor_map = rec.metadata.get("sensor_map")
     tier = args.productions_from
     if tier is None and not args.automatic and PRODUCTIONS_TIER in tier_names(rec.labels):

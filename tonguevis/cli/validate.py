@@ -14,8 +14,8 @@ import argparse
 from pathlib import Path
 
 from tonguevis.cli._common import (
-    add_recording_arguments, add_rest_argument, add_sensor_stiffness_argument, load_model_args, read_recording_args,
-    rest_arg,
+    add_mesh_axes_argument, add_recording_arguments, add_rest_argument, add_sensor_stiffness_argument, load_model_args,
+    read_recording_args, rest_arg,
 )
 
 
@@ -23,8 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_recording_arguments(parser)
     parser.add_argument("--mesh", type=Path, metavar="PATH",
                         help="tetrahedral tongue mesh (TetGen .node/.ele, VTU, Gmsh); default: the shipped tongue")
-    parser.add_argument("--axes", metavar="MAP",
-                        help="axis mapping of --mesh into x anterior, y left, z up, e.g. -x,-z,-y (ArtiSynth)")
+    add_mesh_axes_argument(parser)
     parser.add_argument("--modes", type=int, default=100, metavar="M", help="vibration modes (default 100)")
     parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
                         help="sensor nodes: snapped to the speaker's layout (default) or the paper's placement rule")

@@ -9,7 +9,7 @@ COLOR_CHOICES = ("displacement", "energy", "contact", "plain", "difference")
 
 
 def add_arguments(parser) -> None:
-    from tonguevis.cli._common import add_companion_arguments, add_rest_argument
+    from tonguevis.cli._common import add_companion_arguments, add_reader_options_argument, add_rest_argument
 
     parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the demo /ta/ train, spk1_ta)")
     parser.add_argument("--sensors", metavar="MAP",
@@ -40,13 +40,15 @@ def add_arguments(parser) -> None:
                         help="simulate B without modal warping (compare a recording with itself: --compare A)")
     parser.add_argument("--compare-sensors", metavar="MAP", help="sensor map of B (as --sensors)")
     add_rest_argument(parser)
+    add_reader_options_argument(parser, " of FILE")
     add_companion_arguments(parser)
 
 
 def run(args) -> int:
-    from tonguevis.cli._common import rest_arg
+    from tonguevis.cli._common import parse_options, rest_arg
 
     rest = rest_arg(args)
+    options = parse_options(args.option)  # a malformed -O stops here, before a window opens
     palate = None
     if args.palate is not None:  # a bad palate file stops here, as one line naming it
         from tonguevis.palate import load_palate
@@ -56,7 +58,7 @@ def run(args) -> int:
 
     return run_view(args.file, args.sensors, args.mesh, args.modes, args.screenshot, args.frame, rest=rest,
                     audio=args.audio, labels=args.label_file, palate=palate, reference=args.reference,
-                    color=args.color, compare=_compare_options(args))
+                    color=args.color, compare=_compare_options(args), options=options)
 
 
 def _compare_options(args) -> dict | None:

@@ -36,11 +36,12 @@ def install_error_hook(window) -> None:
 
 
 def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings=None, feature_tabs: bool = True,
-                  rest=None, audio=None, labels=None, palate=None, frame: str | None = None):
+                  rest=None, audio=None, labels=None, palate=None, frame: str | None = None,
+                  options: dict | None = None):
     """A shown MainWindow that opens ``file`` (default: the demo), with ``rest`` (start_s, end_s) if given,
     and the sound ``audio`` and TextGrid ``labels`` if given (else those found beside the file);
     simulated against ``palate`` (a PalateSurface, a file or "generic"; None: no contact), shown in
-    ``frame`` ("head" or "jaw"; default head)."""
+    ``frame`` ("head" or "jaw"; default head); ``options``: the reader options (``-O``) of ``file``."""
     from tonguevis.gui.window import MainWindow
 
     application()
@@ -52,13 +53,13 @@ def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings
 
         add_feature_tabs(window)
     window.show()
-    if file is None and rest is None and audio is None and labels is None:
+    if file is None and rest is None and audio is None and labels is None and not options:
         window.open_demo()  # with the palate given, if any
     else:
         from tonguevis.gui.session import demo_recording_path
 
         window.open_recording(file if file is not None else demo_recording_path(), sensor_map=sensors, rest=rest,
-                              audio=audio, labels=labels)
+                              audio=audio, labels=labels, options=options)
     return window
 
 
@@ -86,16 +87,17 @@ def opening_problem(window, file):
 
 def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None,
              rest=None, audio=None, labels=None, palate=None, reference: str | None = None,
-             color: str | None = None, compare: dict | None = None) -> int:
+             color: str | None = None, compare: dict | None = None, options: dict | None = None) -> int:
     """``tonguevis view``: run the app; with ``screenshot``, save the window at ``frame``, print the
     rest line and exit.  ``rest``: (start_s, end_s) of the rest interval, None to find it; ``audio``,
     ``labels``: a WAV and a TextGrid, None for those beside the file; ``palate``: simulate against it
     (None: no contact); ``reference``: "head" or "jaw" frame; ``color``: the surface colouring;
     ``compare``: the keyword arguments of :meth:`MainWindow.open_compare` (``path`` ...) for a
-    second recording shown with the first (a screenshot waits for both simulations)."""
+    second recording shown with the first (a screenshot waits for both simulations); ``options``: reader
+    options (``-O``) of ``file``."""
     app = application()
     window = create_window(file, sensors, mesh, modes, rest=rest, audio=audio, labels=labels, palate=palate,
-                           frame=reference)
+                           frame=reference, options=options)
     if compare is not None and window.session is not None:
         if not window.open_compare(**compare) and screenshot is not None:
             window.close()

@@ -227,17 +227,18 @@ def contact_note(motion) -> str:
 
 
 def load_session(path: str | os.PathLike, sensor_map: dict | str | None = None, rest=None, audio=None,
-                 labels=None) -> Session:
+                 labels=None, **options) -> Session:
     """Read a recording (any supported format) and find its productions.
 
     rest : (start_s, end_s) to use as the rest interval (checked against the recording), or None to find it.
     audio, labels : a WAV and a Praat TextGrid to use, or None for those found beside the recording
         (see :func:`tonguevis.workflows.open_recording`).
+    options : the reader's (``-O``: ``axes=``, ``channels=`` ...), as ``open_recording``.
     """
     from tonguevis.workflows import check_rest_interval, open_recording
 
     path = Path(path)
-    recording = open_recording(path, sensor_map, audio=audio, labels=labels)
+    recording = open_recording(path, sensor_map, audio=audio, labels=labels, **options)
     if recording.n_samples < 2:
         raise RecordingError(f"the recording has {recording.n_samples} sample(s); at least 2 needed", path)
     session = make_session(recording, path)

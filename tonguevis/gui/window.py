@@ -229,15 +229,18 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
             return
         self.open_recording(path)
 
-    def open_recording(self, path, sensor_map=None, rest=None, audio=None, labels=None) -> bool:
+    def open_recording(self, path, sensor_map=None, rest=None, audio=None, labels=None,
+                       options: dict | None = None) -> bool:
         """Read ``path``; ask for a sensor map if needed; then simulate in the worker.
 
         ``rest`` (start_s, end_s) is the rest interval to use (checked; None: found as usual);
-        ``audio`` and ``labels`` a WAV and a TextGrid (None: those beside the recording).
+        ``audio`` and ``labels`` a WAV and a TextGrid (None: those beside the recording);
+        ``options`` the reader's (``tonguevis view -O``).
         """
         self.state.set_playing(False, self)
         try:
-            session = load_session(path, sensor_map=sensor_map, rest=rest, audio=audio, labels=labels)
+            given = {k: v for k, v in (("audio", audio), ("labels", labels)) if v is not None}  # files win over -O
+            session = load_session(path, sensor_map=sensor_map, rest=rest, **{**(options or {}), **given})
         except (TonguevisError, OSError) as exc:
             self.show_error("Cannot open recording", str(exc), path)
             return False
