@@ -198,3 +198,41 @@ def test_walked_non_recordings_are_skipped_named_ones_fail(tmp_path, monkeypatch
     assert "skipped" in text and "energy_old.csv" in text and "15 production curves" in text
     code = main(["energy", str(tmp_path / "energy_old.csv"), "--csv", str(out), "--quiet"])
     assert code == 2 and "energy_old.csv" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name, speaker, syllable, trial", [
+    ("006_OSN12_Kah_nofb_natural_take2_HR.tsv", "OSN12", "ka", 2),
+    ("009_OSN12_Tah_withFb_natural_HR.tsv", "OSN12", "ta", 1),
+    ("recording_07.tsv", "", "", 1),
+])
+def test_labels_from_names_in_no_fixed_layout(tmp_path, name, speaker, syllable, trial):
+    """Issue 27, item 13: names not laid out like the demo's gave blank speaker and syllable columns."""
+    entry = labels_from_name(tmp_path / name)
+    assert (entry.speaker, entry.syllable, entry.trial) == (speaker, syllable, trial)
+
+
+def test_cli_energy_takes_speaker_and_syllable_and_says_when_unknown(tmp_path, monkeypatch, capsys):
+    """A name with no speaker or syllable: the command says so; --speaker/--syllable fill the columns."""
+    import shutil
+
+    from tonguevis.cli import energy as energy_cli
+    from tonguevis.cli import main
+    from tonguevis.render.energy import group_label
+
+    monkeypatch.setattr(energy_cli, "load_model", lambda args: box_tongue())
+    for source, target in (("spk1_ta.tsv", "recording_07.tsv"), ("spk1_ta.wav", "recording_07.wav"),
+                           ("sensor_map.json", "sensor_map.json")):
+        shutil.copy(DATA_DIR / source, tmp_path / target)
+    out = tmp_path / "e.csv"
+    common = ["energy", str(tmp_path / "recording_07.tsv"), "--csv", str(out), "--modes", str(MODES),
+              "--landmarks", "rule", "--quiet"]
+    assert main(common) == 0
+    assert ("recording_07: speaker and syllable unknown (not in the file name or the labels; give --speaker NAME "
+            "--syllable CV or --labels TABLE)") in capsys.readouterr().out
+    assert group_label(("", ""), ("speaker", "syllable")) == "unknown speaker unknown syllable"
+
+    assert main([*common, "--speaker", "P7", "--syllable", "TA"]) == 0
+    assert "unknown" not in capsys.readouterr().out
+    with open(out, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert rows and {(r["speaker"], r["syllable"]) for r in rows} == {("P7", "ta")}

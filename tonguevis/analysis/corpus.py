@@ -4,12 +4,19 @@ Labels come, in increasing priority, from
 
 1. the file name: ``<speaker>_<syllable>[_<trial>]`` (``spk1_ta.tsv``,
    ``S03-ka-2.pos``, ``spk2_la_t3.tsv``), or ``<syllable>[_<trial>]`` inside a
-   folder named after the speaker (``spk1/ta_2.tsv``);
+   folder named after the speaker (``spk1/ta_2.tsv``); in other names, a CV
+   token is the syllable (``Kah`` -> ka, :func:`~tonguevis.preprocess.articulators.syllable_from_name`),
+   a letters-then-digits token the speaker (``OSN12``) and ``take2``/``t2`` the
+   trial (``006_OSN12_Kah_nofb_natural_take2_HR.tsv``);
 2. the recording's metadata keys ``speaker``, ``syllable``, ``trial`` (when a
    reader or the user put them there; applied by :meth:`CorpusEntry.apply_metadata`);
 3. a small user table (CSV with a ``file`` column and any of ``speaker``,
    ``syllable``, ``trial``), matched on the path relative to the table, the file
-   name, or the stem.
+   name, or the stem;
+4. labels given for every recording (``tonguevis energy --speaker/--syllable``,
+   :func:`with_labels`).
+
+An empty label is unknown: :func:`unknown_labels` says which.
 """
 
 from __future__ import annotations
@@ -35,6 +42,8 @@ _SEP = r"[_\-\s]"
 _TRIAL = rf"(?:{_SEP}(?:t|trial|take|rep|r)?(?P<trial>\d+))?"
 NAME_PATTERN = re.compile(rf"^(?P<speaker>[^_\-\s]+){_SEP}(?P<syllable>[A-Za-z]+){_TRIAL}$")
 SYLLABLE_PATTERN = re.compile(rf"^(?P<syllable>[A-Za-z]{{1,4}}){_TRIAL}$")
+SPEAKER_TOKEN = re.compile(r"^[A-Za-z]{1,4}\d{1,3}$")  # OSN12, spk1, F01 (not recording0001)
+TRIAL_TOKEN = re.compile(r"^(?:t|trial|take|rep|r)(?P<trial>\d+)$", re.IGNORECASE)
 
 
 @dataclass(frozen=True)
@@ -45,7 +54,7 @@ class CorpusEntry:
     speaker: str = ""
     syllable: str = ""
     trial: int = 1
-    source: str = "name"  # where the labels came from: name, folder, metadata, table
+    source: str = "name"  # where the labels came from: name, folder, tokens, metadata, table, given
     walked: bool = False  # found by walking a folder (not named by the user): skipped if unreadable
 
     @property
@@ -71,7 +80,39 @@ def labels_from_name(path: Path) -> CorpusEntry:
     m = SYLLABLE_PATTERN.match(stem)
     if m and path.parent.name:
         return CorpusEntry(path, path.parent.name, m["syllable"].lower(), _trial(m["trial"] or 1, path), "folder")
-    return CorpusEntry(path, "", "", 1, "none")
+    return _labels_from_tokens(path, stem)
+
+
+def _labels_from_tokens(path: Path, stem: str) -> CorpusEntry:
+    """Labels of a name in no fixed layout (``006_OSN12_Kah_nofb_natural_take2_HR``): the CV token,
+    the first letters-then-digits token that is no trial, and a trial token; empty where none."""
+    from tonguevis.preprocess.articulators import syllable_from_name
+
+    tokens = [t for t in re.split(r"[^A-Za-z0-9]+", stem) if t]
+    trials = [TRIAL_TOKEN.match(t) for t in tokens]
+    trial = next((int(m["trial"]) for m in trials if m), 1)
+    speaker = next((t for t, m in zip(tokens, trials) if not m and SPEAKER_TOKEN.match(t)), "")
+    syllable = syllable_from_name(stem) or ""
+    return CorpusEntry(path, speaker, syllable, trial, "tokens" if speaker or syllable else "none")
+
+
+def with_labels(corpus: "Corpus", speaker: str | None = None, syllable: str | None = None) -> "Corpus":
+    """``corpus`` with ``speaker`` and/or ``syllable`` given to every recording (they win over names,
+    metadata and tables: ``tonguevis energy --speaker/--syllable``)."""
+    changes = {k: v for k, v in (("speaker", speaker), ("syllable", syllable and syllable.lower())) if v}
+    if not changes:
+        return corpus
+    return Corpus([replace(e, **changes, source="given") for e in corpus.entries])
+
+
+def unknown_labels(curves) -> dict[str, list[str]]:
+    """{recording: ["speaker", "syllable"] (those still empty)} over energy ``curves``, recordings with one."""
+    unknown: dict[str, list[str]] = {}
+    for c in curves:
+        for name in ("speaker", "syllable"):
+            if not getattr(c, name) and name not in unknown.setdefault(c.recording, []):
+                unknown[c.recording].append(name)
+    return {k: v for k, v in unknown.items() if v}
 
 
 def _trial(value, path) -> int:
@@ -270,7 +311,7 @@ def open_entry(entry: CorpusEntry, sensor_map=None, open_options: dict | None = 
     if mapping is None and (entry.path.parent / "sensor_map.json").is_file():
         mapping = entry.path.parent / "sensor_map.json"
     rec = open_recording(entry.path, mapping, **(open_options or {}))
-    return (entry.apply_metadata(rec.metadata) if entry.source != "table" else entry), rec
+    return (entry.apply_metadata(rec.metadata) if entry.source not in ("table", "given") else entry), rec
 
 
 def entry_curves(entry: CorpusEntry, rec, motion, keep=(2, 3, 4), window: str = "release",

@@ -8,7 +8,9 @@ written in long format: one row per frame with the columns
 ``speaker,syllable,trial,train,index,recording_time_s,frame``.  ``time_s`` is
 seconds since the production's consonant release (``--window vowel``: since
 the previous vowel), ``time_norm`` the same divided by the span's duration.  Speaker, syllable and trial come from
-file names like ``spk1_ta.tsv`` or ``spk1/ta_2.tsv``, or from ``--labels TABLE``.
+file names like ``spk1_ta.tsv`` or ``spk1/ta_2.tsv`` (in other names, tokens such as
+``OSN12`` and ``Kah``), the productions' labels, ``--labels TABLE``, or ``--speaker/--syllable``;
+the command says which recordings' labels stay unknown.
 ``--productions-from TIER`` takes the productions from a label tier of each
 recording (its ``NAME.TextGrid``, or MVIEW's words/phones) instead.
 """
@@ -36,6 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also write per-group statistics (peak, time of peak, area) as CSV")
     parser.add_argument("--labels", metavar="TABLE", type=Path,
                         help="CSV with columns file,speaker,syllable[,trial] overriding the names")
+    parser.add_argument("--speaker", metavar="NAME", help="the speaker of every recording (overrides the names)")
+    parser.add_argument("--syllable", metavar="CV", help="the syllable of every recording, e.g. ka (overrides the "
+                        "names; also tells the segmentation which articulator to follow)")
     parser.add_argument("--group-by", default="speaker,syllable",
                         help="grouping for the plot and summary, from speaker,syllable,trial,recording "
                              "(default: speaker,syllable)")
@@ -60,7 +65,7 @@ def load_model(args):
 
 def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
-    from tonguevis.analysis.corpus import CorpusError, corpus_energy_curves, load_corpus
+    from tonguevis.analysis.corpus import CorpusError, corpus_energy_curves, load_corpus, unknown_labels, with_labels
     from tonguevis.analysis.energy import GROUP_KEYS, summarize, write_curves_csv, write_summary_csv
     from tonguevis.cli._common import reading_options, rest_arg
 
@@ -68,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     bad = [k for k in by if k not in GROUP_KEYS]
     if bad or not by:
         raise CorpusError(f"--group-by {args.group_by!r}: choose from {', '.join(GROUP_KEYS)}")
-    corpus = load_corpus(args.paths, table=args.labels)
+    corpus = with_labels(load_corpus(args.paths, table=args.labels), args.speaker, args.syllable)
     if not len(corpus):
         raise CorpusError(f"no recordings found in {', '.join(map(str, args.paths))}")
     if args.audio is not None and len(corpus) > 1:
@@ -85,6 +90,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"skipped {path}: {reason}")
     for name, rest in result.rests.items():
         print(f"{name}: {rest.describe()}")
+    options = {"speaker": "--speaker NAME", "syllable": "--syllable CV"}
+    for name, which in unknown_labels(result.curves).items():
+        print(f"{name}: {' and '.join(which)} unknown (not in the file name or the labels; give "
+              f"{' '.join(options[w] for w in which)} or --labels TABLE)")
     write_curves_csv(result.curves, args.csv)
     print(f"{len(corpus)} recording(s), {len(result.curves)} production curves -> {args.csv}")
     summaries = summarize(result.curves, by) if result.curves else []

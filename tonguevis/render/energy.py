@@ -16,9 +16,12 @@ from tonguevis.analysis.energy import EnergyCurve, group_curves
 
 
 def group_label(key: tuple, by: Sequence[str]) -> str:
-    """'spk1 /ka/' style legend text for a group key."""
+    """'spk1 /ka/' style legend text for a group key ('unknown speaker' for an empty label)."""
     parts = []
     for name, value in zip(by, key):
+        if value in ("", None):
+            parts.append(f"unknown {name}")
+            continue
         parts.append(f"/{value}/" if name == "syllable" else f"{name} {value}" if name in ("trial", "train", "index")
                      else str(value))
     return " ".join(parts) or "all"
