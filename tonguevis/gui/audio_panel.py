@@ -21,6 +21,10 @@ TIER_ROW_RATIO = 0.3
 #: Minimum heights (px) of the plot without tiers and with them (base + per tier), so the
 #: waveform and spectrogram keep their room when rows are added.
 MIN_HEIGHT, MIN_HEIGHT_WITH_TIERS, MIN_HEIGHT_PER_TIER = 110, 200, 26
+#: Height (px) of the one line that says a recording has no sound (and no label tiers to show).
+SILENT_HEIGHT = 22
+SILENT_TEXT = "no sound in this recording"
+_ANY_HEIGHT = 16777215  # Qt's QWIDGETSIZE_MAX
 
 
 def envelope(samples: np.ndarray, rate: float, offset: float, bins: int = ENVELOPE_BINS):
@@ -65,6 +69,7 @@ class AudioPlot(TimePlot):
         super().__init__(state, parent, height=1.8)
         self.tiers_ax = None
         self.n_tiers = 0
+        self.silent = False  # True: one thin line saying there is no sound, instead of two empty plots
         self._tier_texts: list = []
         self._time_range = (0.0, 1.0)
         self._marks: list = []  # the productions' artists, replaced when they are corrected
@@ -74,6 +79,9 @@ class AudioPlot(TimePlot):
     def _layout(self, n_tiers: int) -> None:
         """(Re)make the axes: waveform, spectrogram and, when there are tiers, their rows."""
         self.figure.clear()
+        self.figure.set_layout_engine("constrained")
+        self.silent = False
+        self.setMaximumHeight(_ANY_HEIGHT)
         if n_tiers:
             self.wave_ax, self.spec_ax, self.tiers_ax = self.figure.subplots(
                 3, 1, sharex=True, height_ratios=[1, 1.3, TIER_ROW_RATIO * n_tiers])
@@ -84,8 +92,26 @@ class AudioPlot(TimePlot):
         self.setMinimumHeight(MIN_HEIGHT_WITH_TIERS + MIN_HEIGHT_PER_TIER * n_tiers if n_tiers else MIN_HEIGHT)
         self.set_time_axes(self.time_axes)
 
+    def _layout_silent(self) -> None:
+        """One thin line saying there is no sound: the waveform and spectrogram axes exist (the
+        productions are marked on them as ever) but are hidden, and take no room."""
+        self.figure.clear()
+        self.figure.set_layout_engine("none")  # nothing to lay out: no "collapsed to zero" warning
+        self.wave_ax, self.spec_ax = self.figure.subplots(2, 1, sharex=True)
+        self.tiers_ax = None
+        for ax in (self.wave_ax, self.spec_ax):
+            ax.set_visible(False)
+        self.figure.text(0.5, 0.5, SILENT_TEXT, ha="center", va="center", fontsize=8, color="#5f6b6d")
+        self.n_tiers = 0
+        self.silent = True
+        self.setMinimumHeight(SILENT_HEIGHT)
+        self.setMaximumHeight(SILENT_HEIGHT)
+        self.set_time_axes([])
+
     @property
     def time_axes(self) -> list:
+        if self.silent:
+            return []
         return [ax for ax in (self.wave_ax, self.spec_ax, self.tiers_ax) if ax is not None]
 
     def show_audio(self, audio, time_range: tuple[float, float], productions=(), labels=(), landmarks=()) -> None:
@@ -94,7 +120,16 @@ class AudioPlot(TimePlot):
         ``labels`` (a list of :class:`~tonguevis.io.Label`) in rows below."""
         labels = list(labels or ())
         n_tiers = len(tiers(labels))
-        if n_tiers != self.n_tiers:
+        no_sound = audio is None or len(audio.samples) == 0
+        if no_sound and not n_tiers:
+            self._layout_silent()
+            self._time_range = (float(time_range[0]), float(time_range[1]))
+            self._marks = []
+            self.show_productions(productions, landmarks, draw=False)
+            self.wave_ax.set_xlim(*time_range)
+            self.draw_idle()
+            return
+        if n_tiers != self.n_tiers or self.silent:
             self._layout(n_tiers)
         self._time_range = (float(time_range[0]), float(time_range[1]))
         self._tier_texts = []

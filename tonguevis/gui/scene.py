@@ -42,6 +42,9 @@ CONTEXT_COLOUR = "#e8e2d0"
 #: A speaker's own palate stands out from the generic context (colour, opacity in the main view).
 SPEAKER_PALATE_STYLE = ("#8fc1e3", 0.3)
 COLORMAP = "plasma"
+#: The part of :data:`COLORMAP` used: its dark-purple low end (#0d0887) merged with the
+#: background (contrast 1.14); from 0.25 on it starts at #7e03a8 (contrast 1.55 to the background).
+COLORMAP_RANGE = (0.25, 1.0)
 #: Distance to the palate: red where the tongue touches it, blue far below; magenta inside it;
 #: a neutral light grey where no palate lies above (outside a traced palate's footprint): the
 #: tongue's own pink, lit from the side, read as the dark red of contact.
@@ -62,6 +65,14 @@ CONTEXT_MATERIAL = dict(ambient=0.0, diffuse=1.0, specular=0.0, specular_power=1
 #: Opacity of a closed shell (jaw, palate) in the main view: drawn with its back faces culled,
 #: one layer of it shows where two (near and far wall) used to, so 0.2 ≈ 1 - (1 - 0.12)².
 CONTEXT_OPACITY = 0.2
+#: The colour bar at the main view's right edge (fractions of the view) and the room kept for it (a
+#: shift of the main camera's window centre, VTK's units: 2 = the view's width):
+#: the main camera centres the tongue in the rest of the view, so the bar's numbers never sit on
+#: the tongue's tip (which points right, anterior).
+COLOUR_BAR = dict(position_x=0.915, position_y=0.25, width=0.03, height=0.5)
+COLOUR_BAR_ROOM = 0.06
+#: The main view's zoom after fitting the tongue (1 = VTK's fit, which leaves a wide margin).
+MAIN_ZOOM = 1.2
 #: Caption font sizes in pixels (the time and frame in the main view, the direction in the small ones).
 CAPTION_PX = {"main": 15, "small": 12}
 
@@ -219,7 +230,7 @@ class TongueScene:
         self._context_offsets = {name: np.zeros(3) for name in self.context}
         self.view_labels = {}
         self._luts = {"contact": _contact_lut(self._clim.get("contact", (0.0, 1.0))),
-                      "default": pv.LookupTable(cmap=COLORMAP, n_values=256)}
+                      "default": pv.LookupTable(cmap=colour_map(), n_values=256)}
         self._context_normals = {name: outward_normals(surface.points, _faces_of(surface))
                                  for name, surface in self.context.items()}
         self._context_hidden = {name: hidden_side(surface.points, _faces_of(surface))
@@ -278,9 +289,8 @@ class TongueScene:
                 bar_mapper = DataSetMapper(self.surface)
                 bar_mapper.lookup_table = self._luts["default"]
                 self.scalar_bar = plotter.add_scalar_bar(
-                    title="", mapper=bar_mapper, vertical=True, n_labels=4, fmt="%.3g",
-                    position_x=0.9, position_y=0.25, width=0.045, height=0.5, title_font_size=12,
-                    label_font_size=11,
+                    title="", mapper=bar_mapper, vertical=True, n_labels=4, fmt="%.3g", **COLOUR_BAR,
+                    title_font_size=12, label_font_size=11,
                 )
                 self.scalar_bar.SetVerticalTitleSeparation(8)
                 self.time_text = Caption(plotter, "", CAPTION_PX["main"], "time")
@@ -490,8 +500,30 @@ class TongueScene:
             if index != MAIN:
                 camera.parallel_scale = 0.5 * size * 0.75
             else:
-                camera.zoom(1.3)
+                camera.zoom(MAIN_ZOOM)
+                # Shift the picture left by half the bar's room: the tongue centred beside the bar.
+                camera.SetWindowCenter(COLOUR_BAR_ROOM, 0.0)
         self.plotter.subplot(MAIN)
+
+
+def colour_map():
+    """The tongue's colour map: :data:`COLORMAP` over :data:`COLORMAP_RANGE` (a matplotlib colormap)."""
+    import matplotlib
+    from matplotlib.colors import ListedColormap
+
+    low, high = COLORMAP_RANGE
+    return ListedColormap(matplotlib.colormaps[COLORMAP](np.linspace(low, high, 256)), name=f"{COLORMAP}_part")
+
+
+def contrast_ratio(colour_a, colour_b) -> float:
+    """WCAG contrast ratio (1-21) of two colours (anything :class:`pyvista.Color` reads)."""
+    def luminance(colour) -> float:
+        c = np.asarray(pv.Color(colour).float_rgb)
+        c = np.where(c <= 0.03928, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+        return float(c @ [0.2126, 0.7152, 0.0722])
+
+    light, dark = sorted((luminance(colour_a), luminance(colour_b)), reverse=True)
+    return (light + 0.05) / (dark + 0.05)
 
 
 def mapped_colours(lut, values: np.ndarray) -> np.ndarray:

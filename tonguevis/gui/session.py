@@ -185,11 +185,11 @@ class Session:
         from tonguevis.workflows import rest_of
 
         from tonguevis.io.recording import unstated_axes_note
-        from tonguevis.sim.plausibility import plausibility_line
+        from tonguevis.sim.plausibility import plausibility_status
 
         self.motion, self.frames, self.rest = motion, frames, rest_of(motion)
         self.palate, self.shown_palate = palate, shown_palate
-        self.notes = [plausibility_line(motion.metadata)] if "plausibility" in motion.metadata else []
+        self.notes = [plausibility_status(motion.metadata)] if "plausibility" in motion.metadata else []
         if "contact" in motion.metadata:
             self.notes.append(contact_note(motion))
         self.notes += [note] if (note := unstated_axes_note(self.recording, short=True)) else []

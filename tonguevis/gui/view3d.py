@@ -7,11 +7,11 @@ import time
 
 import numpy as np
 from PySide6.QtCore import QElapsedTimer, Signal
-from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
 from tonguevis.appstate import COLOR_MODES, REFERENCE_FRAMES, AppState, interval_at
 from tonguevis.gui.drawing import CONTACT_RANGE_MM, contact_line, draw_frame
-from tonguevis.gui.elastic_label import ElasticLabel
+from tonguevis.gui.elastic_label import ElasticComboBox, ElasticLabel
 from tonguevis.gui.frames import SCALARS
 from tonguevis.gui.scene import SPEAKER_PALATE_STYLE, TongueScene
 
@@ -154,20 +154,18 @@ class View3D(QWidget):
         # No multisampling: under software OpenGL (Xvfb, VMs) 8x MSAA costs most of each frame.
         self.plotter = make_plotter(self, shape="1|3", splitting_position=0.72, multi_samples=0, auto_update=False)
         self.scene = TongueScene(self.plotter)
-        self.colour = QComboBox()
+        self.colour = ElasticComboBox(minimum_characters=14)
         for mode in COLOR_MODES:
             self.colour.addItem(COLOUR_LABELS[mode], mode)
-        self.reference = QComboBox()
+        self.reference = ElasticComboBox(minimum_characters=14)
         for frame in REFERENCE_FRAMES:
             self.reference.addItem(REFERENCE_LABELS[frame], frame)
         self.reference.setToolTip("Head frame: the tongue and the jaw move with the jaw, the palate is fixed (as seen\n"
                                   "from outside). Jaw frame: the jaw's motion removed, as the tongue is simulated.")
-        # The combos' long entries (e.g. "head frame (jaw moving, palate fixed)") are cut in the
-        # closed box and shown whole in the list: the views' bar does not set a minimum window
-        # width wider than a laptop's screen.
+        # The combos' long entries (e.g. "head frame (jaw moving, palate fixed)") show whole where
+        # the window has room and are cut only in a narrow one: the views' bar does not set a
+        # minimum window width wider than a laptop's screen.
         for combo in (self.colour, self.reference):
-            combo.setSizeAdjustPolicy(QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
-            combo.setMinimumContentsLength(14)
             combo.setToolTip(combo.toolTip() or "the 3D views' colouring")
         self.reset = QPushButton("Reset camera")
         # The model's description (nodes, modes, sensors, palate) is as long as the names in

@@ -69,6 +69,20 @@ def plausibility_line(metadata: dict) -> str:
     return text + (f"; {flagged} frames flagged" if flagged else "")
 
 
+def plausibility_status(metadata: dict) -> str:
+    """The figures of :func:`plausibility_line` in fewer words, for the app's one status line
+    (whose end a 1920-pixel window cut in the middle of the figures)."""
+    p = metadata.get("plausibility")
+    if not p:
+        return "plausibility: not recorded in this motion"
+    flagged = len(metadata.get("recovered_frames", [])) + len(metadata.get("implausible_frames", []))
+    text = (f"far-field amplification {p['amplification']:.2f} ({p['largest_node_displacement_mm']:.1f} / "
+            f"{p['largest_sensor_displacement_mm']:.1f} mm), volume change ≤ "
+            f"{p['volume_change_max_percent']:.2f} %, sensor misfit {p['sensor_misfit_rms_mm']:.2f} mm RMS, "
+            f"max {p['sensor_misfit_max_mm']:.2f} mm")
+    return text + (f"; {flagged} frames flagged" if flagged else "")
+
+
 def contact_line(metadata: dict) -> str:
     """One line for users on the palate contact of a motion simulated against a palate ("" without).
 
