@@ -351,3 +351,19 @@ def test_fitting_a_palate_to_a_recording_without_a_probe_is_a_dialog(qtbot, wind
     assert "no probe sensor 'PROBE'" in text and DEMO.name in text and "Palate fit" in window.last_dialog.windowTitle()
     assert window.palate is None and not (tmp_path / "palate.stl").exists()
     window.last_dialog.close()
+
+
+def test_sensors_on_the_surface_from_the_simulation_menu(qtbot, window):
+    """Simulation ▸ Sensors on the surface simulates again with the sensor patches: every measured
+    sensor is then on its node, and unticking it goes back to the modes alone."""
+    session = show_and_simulate(qtbot, window, demo_session())
+    assert "sensor_patches" not in session.motion.metadata
+    with qtbot.waitSignal(window.simulation_finished, timeout=60000) as blocker:
+        window.patches_action.setChecked(True)
+    assert blocker.args == [True] and window.sensor_patches == "default"
+    motion = window.session.motion
+    assert motion.metadata["sensor_patches"]["shapes"] == 3 * len(motion.sensor_nodes)
+    assert np.nanmax(motion.sensor_residual) < 1e-9
+    with qtbot.waitSignal(window.simulation_finished, timeout=60000):
+        window.patches_action.setChecked(False)
+    assert "sensor_patches" not in window.session.motion.metadata

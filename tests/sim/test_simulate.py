@@ -140,3 +140,20 @@ def test_a_recording_in_the_devices_frame_is_noted_not_warned_on_every_command(m
     simulate(rec, model, modes=20, landmarks="rule")
     said = [r for r in caplog.records if "device's frame" in r.getMessage()]
     assert said and all(r.levelno < logging.WARNING for r in said)
+
+
+def test_simulate_takes_the_clis_stiffness_words():
+    """'hard' means the paper's hard constraints in the library as on the command line; a wrong word is
+    a SimulationError naming the words (it ended in NumPy's "ufunc 'isfinite' not supported")."""
+    from tonguevis.errors import SimulationError
+    from tonguevis.io import read_recording
+    from tonguevis.paths import DATA_DIR
+    from tonguevis.sim import TongueModel, simulate
+
+    rec = read_recording(DATA_DIR / "spk1_ta.tsv", sensor_map=DATA_DIR / "sensor_map.json")
+    short = rec.with_sensors({k: v[:400] for k, v in rec.sensors.items()}, times=rec.times[:400], audio=None,
+                             orientations={})
+    motion = simulate(short, TongueModel.default(), modes=100, sensor_stiffness="hard")
+    assert motion.metadata["sensor_stiffness"] is None
+    with pytest.raises(SimulationError, match="hard"):
+        simulate(short, TongueModel.default(), modes=10, sensor_stiffness="soft")

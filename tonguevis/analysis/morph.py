@@ -199,9 +199,11 @@ def morph_between(source_motion, source_time: float, target_motion, target_time:
     if not same_model(source_motion.model, target_motion.model):
         raise MorphError("source and target motions are on different tongue models (mesh, anchors or "
                          "material differ); morphing needs the same model")
-    if source_motion.q.shape[1] != target_motion.q.shape[1]:
-        raise MorphError(f"source motion has {source_motion.q.shape[1]} modes, target "
-                         f"{target_motion.q.shape[1]}; simulate both with the same number")
+    from tonguevis.sim.patches import global_part
+
+    if global_part(source_motion)[1].shape[1] != global_part(target_motion)[1].shape[1]:
+        raise MorphError(f"source motion has {global_part(source_motion)[1].shape[1]} modes, target "
+                         f"{global_part(target_motion)[1].shape[1]}; simulate both with the same number")
     if source_motion.warping != target_motion.warping:
         raise MorphError("one motion is warped and the other linear")
     for motion, t, what in ((source_motion, source_time, "source"), (target_motion, target_time, "target")):
@@ -210,8 +212,12 @@ def morph_between(source_motion, source_time: float, target_motion, target_time:
             raise MorphError(f"{what} time {t:.3f} s is outside its motion ({motion.times[0]:.3f}-"
                              f"{motion.times[-1]:.3f} s)")
     i, j = source_motion.frame_at(source_time), target_motion.frame_at(target_time)
-    # Use the source's model for both: the target's q lives on an identical basis.
-    morph = Morph(source_motion.model, source_motion.q[i], target_motion.q[j], warping=source_motion.warping,
-                  difference=difference)
+    # Use the source's model for both: the target's q lives on an identical basis.  Sensor patches
+    # (tonguevis.sim.patches) belong to one recording's sensors: the morph is between the modes.
+    from tonguevis.sim.patches import global_part
+
+    model, q_source = global_part(source_motion)
+    q_target = global_part(target_motion)[1]
+    morph = Morph(model, q_source[i], q_target[j], warping=source_motion.warping, difference=difference)
     morph.source_frame, morph.target_frame = i, j
     return morph

@@ -98,6 +98,7 @@ def validate(
     tolerance: float = 1e-8,
     sensor_stiffness: float | None | str = "default",
     progress: ProgressCallback | None = None,
+    sensor_patches: float | None | str = None,
 ) -> ValidationResult:
     """Leave-one-sensor-out validation of ``model`` (default: the shipped tongue) on ``recording``.
 
@@ -106,6 +107,8 @@ def validate(
     defaults to the detected rest, else the stillest 0.2 s window (logged; the JSON says which).
     ``sensor_stiffness`` as :func:`tonguevis.sim.simulate` (every physical predictor uses it), with
     the CLI's words: a positive number, "default" or "hard" (:mod:`tonguevis.sensor_stiffness`).
+    ``sensor_patches`` as :func:`tonguevis.sim.simulate`: in each run the patches of the driving
+    sensors only close their gaps, and the held-out node moves with the modes and those patches.
     """
     from tonguevis.sim import TongueModel
     from tonguevis.io.sensor_map import how_to_map
@@ -116,6 +119,10 @@ def validate(
     from tonguevis.sensor_stiffness import sensor_stiffness_value
 
     sensor_stiffness = sensor_stiffness_value(sensor_stiffness, recording.metadata.get("file"))
+    if sensor_patches == "default":
+        from tonguevis.sim.patches import PATCH_RADIUS
+
+        sensor_patches = PATCH_RADIUS
     model = model or TongueModel.default()
     recording = recording.on_uniform_grid()  # as simulate: dropped frames back as missing samples
     file = recording.metadata.get("file")
@@ -137,7 +144,8 @@ def validate(
     if sensor_stiffness == "default":
         sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
     motion = simulate(recording, model, modes=modes, warping=True, landmarks=landmarks,
-                      rest_interval=prep.rest, tolerance=tolerance, sensor_stiffness=sensor_stiffness)
+                      rest_interval=prep.rest, tolerance=tolerance, sensor_stiffness=sensor_stiffness,
+                      sensor_patches=sensor_patches)
     centres = prep.aligned_rest
     s = len(names)
     dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
@@ -159,8 +167,14 @@ def validate(
     predicted: dict[str, list] = {}
 
     def keep_held_out(method: str, runs, warping: bool) -> None:
-        predicted[method] = [(_node_trajectory(basis, w_full, int(nodes[h]), q, warping), np.asarray(conv, bool))
-                             for h, (q, conv) in enumerate(runs)]
+        out = []
+        for h, (q, conv) in enumerate(runs):
+            run_basis, run_w = basis, w_full
+            if sensor_patches is not None:  # the drivers' patches close their gaps; the held-out one has none
+                run_basis, run_w, q = _patched(model, basis, np.delete(nodes, h), q,
+                                               np.delete(prep.displacement, h, axis=1), warping, sensor_patches)
+            out.append((_node_trajectory(run_basis, run_w, int(nodes[h]), q, warping), np.asarray(conv, bool)))
+        predicted[method] = out
 
     for k, (method, warping) in enumerate((("model", True), ("linear", False))):
         report(progress, 1 + k, 4, f"leave-one-out: {method}")
@@ -231,6 +245,17 @@ def _drive_trials(basis, phi_s, w_s, trials, compliance, warping, dt, material, 
     results = integrate_compiled(basis.eigenvalues, phi_s, w_s, trials, settings, compliance=compliance,
                                  rates=False)  # q alone: each trial's q̇ and q̈ would be two more (F, m) arrays
     return [(r.q, r.converged) for r in results]
+
+
+def _patched(model, basis, drivers: np.ndarray, q: np.ndarray, measured: np.ndarray, warping: bool, radius: float):
+    """(augmented basis, its W, q with the patch coordinates) of one run: the driving sensors'
+    patches (:mod:`tonguevis.sim.patches`) closing the gaps to their measurements (F, S', 3)."""
+    from tonguevis.sim.patches import augmented_basis, augmented_model, close_sensor_gaps
+
+    augmented = augmented_basis(model, basis, drivers, radius)
+    rotation = augmented_model(model, augmented).rotation_matrix(augmented)
+    patch = close_sensor_gaps(augmented, rotation, drivers, q, measured, warping)
+    return augmented, rotation, np.hstack([q, patch])
 
 
 def _node_trajectory(basis, w_full, node: int, q: np.ndarray, warping: bool) -> np.ndarray:

@@ -131,8 +131,10 @@ def _static_shape(motion, targets: np.ndarray) -> np.ndarray:
     from tonguevis.analysis.quasistatic import quasi_static
     from tonguevis.sim.constrained import point_stiffness
 
-    model = motion.model
-    basis = model.basis(motion.q.shape[1])
+    from tonguevis.sim.patches import global_part
+
+    model, q_modes = global_part(motion)  # the modes' static shape (patches only close sensor gaps)
+    basis = model.basis(q_modes.shape[1])
     w_full = model.rotation_matrix(basis)
     nodes = np.asarray(motion.sensor_nodes)
     dofs = (3 * nodes[:, None] + np.arange(3)).ravel()

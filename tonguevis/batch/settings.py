@@ -60,6 +60,7 @@ class BatchSettings:
     segment_first : segment only the first N productions of each recording (None: all).
     quasi_static : the quasi-static baseline of the validation (``tonguevis validate --no-static``).
     csv : write CSV beside every Parquet table.
+    sensor_patches : as :func:`tonguevis.simulate` (None: none; "default" or a radius in m).
     """
 
     steps: tuple[str, ...] = DEFAULT_STEPS
@@ -70,6 +71,7 @@ class BatchSettings:
     rest: tuple[float, float] | None = None
     sensors: Any = None
     read_options: tuple = ()
+    sensor_patches: float | str | None = None
     keep: tuple[int, ...] | None = (2, 3, 4)
     window: str = "release"
     tier: str | None = None
@@ -97,13 +99,15 @@ class BatchSettings:
     def simulate_options(self) -> dict:
         """Keyword arguments of :func:`tonguevis.workflows.simulate_recording` (besides the model)."""
         return dict(modes=self.modes, warping=self.warping, landmarks=self.landmarks, rest=self.rest,
-                    sensor_stiffness=self.sensor_stiffness)
+                    sensor_stiffness=self.sensor_stiffness, sensor_patches=self.sensor_patches)
 
     def step_settings(self, step: str) -> dict:
         """The settings ``step``'s results depend on (JSON-able)."""
         sim = {"modes": self.modes, "landmarks": self.landmarks, "warping": self.warping,
                "sensor_stiffness": self.sensor_stiffness, "rest": self.rest}
         read = {"read_options": dict(self.read_options)} if self.read_options else {}  # old keys stay valid
+        if self.sensor_patches is not None:  # likewise: only when asked for
+            read["sensor_patches"] = self.sensor_patches
         sim.update(read)
         if step == "simulate":
             return sim

@@ -230,7 +230,8 @@ def _validate(task, entry, rec, model, motion, seconds):
 
     s = task.settings
     result = validate(rec, model, modes=s.modes, landmarks=s.landmarks, rest_interval=s.rest,
-                      sensor_stiffness=s.sensor_stiffness, quasi_static=s.quasi_static)
+                      sensor_stiffness=s.sensor_stiffness, quasi_static=s.quasi_static,
+                      sensor_patches=s.sensor_patches)
     result.write_json(task.folder / "validation.json")
     rows = tables.validation_rows(entry, task.file, result.as_dict())
     written = tables.write(tables.to_arrow("validation", rows), task.folder / "validation.parquet", s.csv)

@@ -85,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
                                       keep=None if args.all else (2, 3, 4), keep_motions=False, window=args.window,
                                       landmarks=args.landmarks, warping=not args.linear, rest=rest_arg(args),
                                       tier=args.productions_from, open_options=reading_options(args),
+                                      sensor_stiffness=args.sensor_stiffness, sensor_patches=args.sensor_patches,
                                       progress=progress)
     for path, reason in result.skipped:
         print(f"skipped {path}: {reason}")

@@ -44,6 +44,15 @@ def _stiffness_text(meta: dict) -> str:
     return f"sensor springs {k:g}x the tongue's stiffness there: the tongue's most natural shape near the sensors"
 
 
+def _modes_text(motion) -> str:
+    """"100 modes", or "100 modes + 15 sensor patch shapes (3 mm)" with sensor patches."""
+    patches = motion.metadata.get("sensor_patches")
+    if not patches:
+        return f"{motion.q.shape[1]} modes"
+    return (f"{patches['global_modes']} modes + {patches['shapes']} sensor patch shapes ({patches['radius_mm']:g} mm, "
+            "the sensors on the surface)")
+
+
 def summary(motion) -> list[str]:
     """The lines ``tonguevis simulate`` prints."""
     res = np.nanmax(motion.sensor_residual) if np.isfinite(motion.sensor_residual).any() else float("nan")
@@ -52,7 +61,7 @@ def summary(motion) -> list[str]:
     meta = motion.metadata
     unconverged = len(meta.get("unconverged_frames", []))
     lines = [
-        f"model: {motion.model.mesh.n_nodes} nodes, {motion.model.mesh.n_tets} tets, {motion.q.shape[1]} modes, "
+        f"model: {motion.model.mesh.n_nodes} nodes, {motion.model.mesh.n_tets} tets, {_modes_text(motion)}, "
         f"{'modal warping' if motion.warping else 'linear'}; sensor nodes: {meta['landmarks']}",
         rest_line(motion),
         "driving sensors: " + ", ".join(f"{n}->node {int(k)}" for n, k in zip(motion.sensor_names, motion.sensor_nodes)),

@@ -37,15 +37,21 @@ def install_error_hook(window) -> None:
 
 def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings=None, feature_tabs: bool = True,
                   rest=None, audio=None, labels=None, palate=None, frame: str | None = None,
-                  options: dict | None = None):
+                  options: dict | None = None, sensor_patches=None):
     """A shown MainWindow that opens ``file`` (default: the demo), with ``rest`` (start_s, end_s) if given,
     and the sound ``audio`` and TextGrid ``labels`` if given (else those found beside the file);
     simulated against ``palate`` (a PalateSurface, a file or "generic"; None: no contact), shown in
-    ``frame`` ("head" or "jaw"; default head); ``options``: the reader options (``-O``) of ``file``."""
+    ``frame`` ("head" or "jaw"; default head); ``options``: the reader options (``-O``) of ``file``;
+    ``sensor_patches``: as :func:`tonguevis.simulate` (Simulation ▸ Sensors on the surface)."""
     from tonguevis.gui.window import MainWindow
 
     application()
     window = MainWindow(settings=settings, modes=modes, mesh_path=mesh, palate=palate)
+    if sensor_patches is not None:
+        window.sensor_patches = sensor_patches
+        window.patches_action.blockSignals(True)
+        window.patches_action.setChecked(True)
+        window.patches_action.blockSignals(False)
     if frame is not None:
         window.state.set_reference(frame)
     if feature_tabs:
@@ -87,7 +93,8 @@ def opening_problem(window, file):
 
 def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None,
              rest=None, audio=None, labels=None, palate=None, reference: str | None = None,
-             color: str | None = None, compare: dict | None = None, options: dict | None = None) -> int:
+             color: str | None = None, compare: dict | None = None, options: dict | None = None,
+             sensor_patches=None) -> int:
     """``tonguevis view``: run the app; with ``screenshot``, save the window at ``frame``, print the
     rest line and exit.  ``rest``: (start_s, end_s) of the rest interval, None to find it; ``audio``,
     ``labels``: a WAV and a TextGrid, None for those beside the file; ``palate``: simulate against it
@@ -97,7 +104,7 @@ def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=No
     options (``-O``) of ``file``."""
     app = application()
     window = create_window(file, sensors, mesh, modes, rest=rest, audio=audio, labels=labels, palate=palate,
-                           frame=reference, options=options)
+                           frame=reference, options=options, sensor_patches=sensor_patches)
     if compare is not None and window.session is not None:
         if not window.open_compare(**compare) and screenshot is not None:
             window.close()

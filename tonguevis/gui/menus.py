@@ -65,11 +65,25 @@ class MenusMixin:
         self.state.subscribe("reference", lambda event: self.reference_actions[event.value].setChecked(True))
         simulation = bar.addMenu("&Simulation")
         self.rest_action = self._action(simulation, "Set &rest interval…", self.ask_rest_interval)
+        self.patches_action = QAction("Sensors on the &surface (sensor patches)", self)
+        self.patches_action.setCheckable(True)
+        self.patches_action.setToolTip("close the gap between each sensor and the tongue's surface with the tongue's "
+                                       "own local deformation under it (tonguevis simulate --sensor-patches)")
+        self.patches_action.toggled.connect(self.set_sensor_patches)
+        simulation.addAction(self.patches_action)
         play = bar.addMenu("&Playback")
         self._action(play, "&Play / pause", lambda: self.state.toggle_playing(self), "Space")
         self._action(play, "Step &forward", lambda: self.state.step(1, self), "Right")
         self._action(play, "Step &back", lambda: self.state.step(-1, self), "Left")
         self._action(play, "&Loop current production", self.transport.loop.toggle, "L")
+
+    def set_sensor_patches(self, on: bool) -> None:
+        """Simulate with (or without) the sensor patches, and simulate the open recording again."""
+        self.sensor_patches = "default" if on else None
+        if self.patches_action.isChecked() != on:
+            self.patches_action.setChecked(on)
+        if self.session is not None:
+            self._simulate(self.session)
 
     def ask_export_paraview(self) -> None:
         from tonguevis.gui.export import ask_paraview

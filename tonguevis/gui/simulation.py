@@ -78,6 +78,7 @@ def simulate_motion(
     progress: ProgressCallback | None = None,
     palate=None,
     preview=None,
+    sensor_patches=None,
 ) -> Simulated:
     """Simulate ``recording`` on ``model`` (None: built from ``mesh_path``); returns a :class:`Simulated`.
 
@@ -86,7 +87,8 @@ def simulate_motion(
     placed it (without one, the generic palate, drawn only).  The rest is ``given_rest`` when the
     user gave one, else found as every front end finds it (:func:`tonguevis.workflows.simulate_recording`).
     ``landmarks``: sensor nodes snapped to the speaker's layout ('speaker') or the paper's placement
-    rule ('rule').  ``progress(done, total, message)`` may raise :class:`tonguevis.errors.Cancelled`.
+    rule ('rule').  ``sensor_patches`` as :func:`tonguevis.simulate` (None: the modes alone).
+    ``progress(done, total, message)`` may raise :class:`tonguevis.errors.Cancelled`.
     ``preview(simulated)``: called once, on this thread, with a :class:`Simulated` of the recording's first
     seconds as soon as they are final (:func:`tonguevis.sim.simulate`'s preview; a long recording is shown
     while the rest simulates; not called for a short one, nor with a palate).
@@ -98,6 +100,8 @@ def simulate_motion(
     if model is None:
         model = build_model(mesh_path)
     options = {} if palate is None else {"palate": palate}
+    if sensor_patches is not None:
+        options["sensor_patches"] = sensor_patches
     if preview is not None:
         def first_seconds(motion) -> None:
             # Colour ranges from a sample of the first seconds: the whole motion brings its own.

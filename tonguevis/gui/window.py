@@ -72,6 +72,7 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         if mesh_path is not None or self.state.mesh_path is not None:
             self.state.set_tongue_model(None, mesh_path, self)
         self.landmarks = "speaker"  # sensor nodes: the speaker's layout ("rule": the paper's placement)
+        self.sensor_patches = None  # Simulation ▸ Sensors on the surface: "default" (tonguevis.sim.patches)
         self.palate = palate
         self.worker: Job | None = None  # the simulation's job
         self.export_job: Job | None = None  # the latest export or palate fit
@@ -320,7 +321,8 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         palate = self.palate if palate is NO_PALATE else palate
         model, mesh_path = self.state.tongue_model, self.state.mesh_path  # read here, on the GUI thread
         recording, rest = session.recording, session.given_rest
-        options = {"modes": self.modes, "warping": self.warping, "landmarks": self.landmarks, "palate": palate}
+        options = {"modes": self.modes, "warping": self.warping, "landmarks": self.landmarks, "palate": palate,
+                   "sensor_patches": self.sensor_patches}
 
         def work(progress, partial):
             return simulate_motion(recording, rest, model=model, mesh_path=mesh_path, progress=progress,

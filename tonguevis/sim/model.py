@@ -280,8 +280,10 @@ class TongueModel:
     def energy(self, q: np.ndarray) -> np.ndarray:
         """(F,) elastic energy U = ½ qᵀΛq in J for q (F, m)."""
         q = np.atleast_2d(q)
-        lam = self.basis(q.shape[1]).eigenvalues
-        return 0.5 * np.einsum("fm,m,fm->f", q, lam, q)
+        basis = self.basis(q.shape[1])
+        if "stiffness" in basis.info:  # a basis with sensor patches (tonguevis.sim.patches): not diagonal
+            return 0.5 * np.einsum("fm,mk,fk->f", q, basis.info["stiffness"], q)
+        return 0.5 * np.einsum("fm,m,fm->f", q, basis.eigenvalues, q)
 
     def __repr__(self) -> str:
         return (

@@ -195,6 +195,13 @@ class Motion:
         landmarks = SimpleNamespace(sensors=meta["landmark_sensors"], anchors=arrays["anchors"])
         mesh = TetMesh(arrays["points"], arrays["tets"], metadata={"file": str(path)})
         model = TongueModel(mesh, landmarks, Material(**meta["material"]))
+        patches = meta["metadata"].get("sensor_patches")
+        if patches:  # the same Ritz basis again: the modes (cache) and the patch shapes (deterministic)
+            from tonguevis.sim.patches import augmented_basis, augmented_model
+
+            basis = augmented_basis(model, model.basis(int(patches["global_modes"])), np.array(patches["nodes"]),
+                                    1e-3 * float(patches["radius_mm"]), 1e-3 * float(patches["reach_mm"]))
+            model = augmented_model(model, basis)
         return cls(
             times=arrays["times"], q=arrays["q"], model=model, warping=meta["warping"],
             sensor_names=meta["sensor_names"], sensor_nodes=arrays["sensor_nodes"],

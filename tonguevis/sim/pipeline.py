@@ -48,7 +48,8 @@ class Progressive:
 def integrate_and_measure(model, eigenvalues: np.ndarray, phi_s: np.ndarray, w_s: np.ndarray, targets: np.ndarray,
                           settings: NewmarkSettings, compliance: np.ndarray, warping: bool = True,
                           progress: ProgressCallback | None = None, segment: int | None = None,
-                          on_segment: Callable[[Progressive], None] | None = None) -> Progressive:
+                          on_segment: Callable[[Progressive], None] | None = None,
+                          extend: Callable[[np.ndarray, int, int], np.ndarray] | None = None) -> Progressive:
     """Integrate ``targets`` (F, S, 3) m with ``compliance`` (F, S) m/N on the compiled backend and
     measure every frame, overlapped (see the module docstring); returns the filled :class:`Progressive`.
 
@@ -56,6 +57,9 @@ def integrate_and_measure(model, eigenvalues: np.ndarray, phi_s: np.ndarray, w_s
     on_segment(progressive) : called on this thread after each segment is measured
     (``progressive.done`` frames final).  ``progress(done, total, message)`` is called
     likewise and may raise (e.g. Cancelled): the loop's thread then stops after its segment.
+    extend(q, start, end) : more coordinates of frames start..end-1 from the loop's q (c, m), e.g.
+    the sensor patches' (:mod:`tonguevis.sim.patches`), appended to ``result.q`` on this thread before
+    the segment is measured (``model`` then has the extended basis).
     """
     from tonguevis._blas import single_threaded_blas
     from tonguevis.sim.newmark_kernel import CompiledIntegrator
@@ -64,9 +68,10 @@ def integrate_and_measure(model, eigenvalues: np.ndarray, phi_s: np.ndarray, w_s
     n_frames, n_sensors = targets.shape[:2]
     m = len(eigenvalues)
     integrator = CompiledIntegrator(eigenvalues, phi_s, w_s, settings, n_sensors=n_sensors, rates=False)
+    extra = 0 if extend is None else int(np.asarray(extend(np.zeros((1, m)), 0, 1)).shape[1])
     compliance = np.broadcast_to(np.asarray(compliance, dtype=np.float64), (n_frames, n_sensors))
     out = Progressive(
-        IntegrationResult(np.empty((n_frames, m)), None, None, np.empty((n_frames, n_sensors)),
+        IntegrationResult(np.empty((n_frames, m + extra)), None, None, np.empty((n_frames, n_sensors)),
                           np.zeros(n_frames, dtype=bool), np.zeros(n_frames, dtype=np.int64),
                           np.zeros(n_frames, dtype=bool)),
         FrameFigures(np.empty(n_frames), np.empty(n_frames)))
@@ -81,7 +86,8 @@ def integrate_and_measure(model, eigenvalues: np.ndarray, phi_s: np.ndarray, w_s
                 end = min(start + segment, n_frames)
                 part = integrator.advance(targets[None, start:end], compliance[None, start:end])[0]
                 r = out.result
-                r.q[start:end], r.residual[start:end], r.converged[start:end] = part.q, part.residual, part.converged
+                r.q[start:end, :m], r.residual[start:end] = part.q, part.residual
+                r.converged[start:end] = part.converged
                 r.iterations[start:end], r.recovered[start:end] = part.iterations, part.recovered
                 ready.put((start, end))
         except BaseException as exc:  # handed to the measuring thread, which raises it
@@ -103,6 +109,8 @@ def integrate_and_measure(model, eigenvalues: np.ndarray, phi_s: np.ndarray, w_s
             # done: float32 products split over other thread counts round differently, and the
             # figures must not depend on how far the loop had got (batch and CLI agree bit for bit).
             with single_threaded_blas():
+                if extend is not None:
+                    out.result.q[start:end, m:] = extend(out.result.q[start:end, :m], start, end)
                 part = frame_figures(model, out.result.q[start:end], warping, "warp", workers=1)
             out.figures.volume_change[start:end] = part.volume_change
             out.figures.largest_displacement[start:end] = part.largest_displacement

@@ -44,6 +44,7 @@ def simulate(
     progress: ProgressCallback | None = None,
     preview=None,
     preview_seconds: float = 20.0,
+    sensor_patches: float | None | str = None,
 ) -> Motion:
     """Drive ``model`` (default: our shipped tongue) with ``recording``.
 
@@ -74,6 +75,12 @@ def simulate(
         it and the area in contact; sensors above it win and are listed in
         ``metadata["contact"]["conflicts"]``.
 
+    sensor_patches : radius (m) of the sensor patches (:mod:`tonguevis.sim.patches`: the tongue's own
+        local deformation under each sensor, closing the gap between every measured sensor and
+        the surface after the dynamics); "default": :data:`~tonguevis.sim.patches.PATCH_RADIUS`
+        (3 mm on the model, fading out by 5 mm); None (default): the modes alone (the sensors then
+        sit up to a few mm off the surface on real recordings).
+
     preview : called once, from the simulating thread, with the :class:`Motion` of the first
         ``preview_seconds`` s (a little more: whole segments) as soon as they are final, before
         the rest is simulated (``metadata["preview"]``: frames shown and of how many); its frames
@@ -83,7 +90,10 @@ def simulate(
     from tonguevis._backend import check_backend
     from tonguevis.sim.constrained import point_stiffness
 
+    from tonguevis.sensor_stiffness import sensor_stiffness_value
+
     check_backend(backend)
+    sensor_stiffness = sensor_stiffness_value(sensor_stiffness, recording.metadata.get("file"))  # the CLI's words too
     if sensor_stiffness == "default":
         sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
     if sensor_stiffness is not None and not (np.isfinite(sensor_stiffness) and sensor_stiffness > 0):
@@ -113,6 +123,15 @@ def simulate(
     report(progress, 1, 3, "integrating")
     run = _Run(model, recording, prep, basis, phi_s, w_s, targets, compliance, schedule, warping, backend, modes,
                landmarks, sensor_stiffness, k_ref, contact)
+    if sensor_patches == "default":
+        from tonguevis.sim.patches import PATCH_RADIUS
+
+        sensor_patches = PATCH_RADIUS
+    if sensor_patches is not None:
+        if not (np.isfinite(sensor_patches) and sensor_patches > 0):
+            raise SimulationError(f"the sensor patches' radius must be a positive number of metres or None, got "
+                                  f"{sensor_patches!r}", recording.metadata.get("file"))
+        run.prepare_patches(sensor_patches)
     if backend == "warp" and contact is None:
         from tonguevis.sim.pipeline import integrate_and_measure
 
@@ -129,8 +148,9 @@ def simulate(
                     return
                 preview(shown)
 
-        done = integrate_and_measure(model, basis.eigenvalues, phi_s, w_s, targets, settings, compliance, warping,
-                                     progress=_stage(progress, 1, 3, span=2), on_segment=offer)
+        done = integrate_and_measure(run.model, basis.eigenvalues, phi_s, w_s, targets, settings, compliance, warping,
+                                     progress=_stage(progress, 1, 3, span=2), on_segment=offer,
+                                     extend=run.patch_coordinates if run.patches else None)
         result, figures = done.result, done.figures
     else:
         if backend == "warp":
@@ -145,10 +165,12 @@ def simulate(
             base = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * k_ref)
             result.q, corrected = _keep_below_palate(result.q, contact, schedule, basis, phi_s, base)
             schedule["corrected_frames"] = corrected
+        if run.patches:
+            result.q = np.hstack([result.q, run.patch_coordinates(result.q, 0, len(result.q))])
         report(progress, 2, 3, "reconstructing the mesh")
         # Chunk by chunk: the full-mesh displacement of every frame is never held at once.
-        figures = frame_figures(model, result.q, warping, backend, None if contact is None else
-                                _contact_probe(contact, schedule, model), progress=_stage(progress, 2, 3))
+        figures = frame_figures(run.model, result.q, warping, backend, None if contact is None else
+                                _contact_probe(contact, schedule, run.model), progress=_stage(progress, 2, 3))
     motion = run.motion(result, figures, len(targets))
     release_freed_memory()
     report(progress, 3, 3, "done")
@@ -166,6 +188,31 @@ class _Run:
         self.warping, self.backend, self.modes, self.landmarks = warping, backend, modes, landmarks
         self.sensor_stiffness, self.k_ref, self.contact = sensor_stiffness, k_ref, contact
         self.previewed = False
+        self.patches: dict | None = None
+
+    def prepare_patches(self, radius: float) -> None:
+        """Use the sensor patches (:mod:`tonguevis.sim.patches`): the run's model, basis and sensor
+        rows become the augmented ones (the frame loop keeps the modes alone)."""
+        from tonguevis.sim.patches import augmented_basis, augmented_model
+
+        self.global_rows = (self.basis, self.phi_s)  # what the frame loop (and a recovery) solves with
+        basis = augmented_basis(self.model, self.basis, self.prep.nodes, radius)
+        self.model = augmented_model(self.model, basis)
+        self.rotation = self.model.rotation_matrix(basis)
+        dofs = (3 * np.asarray(self.prep.nodes)[:, None] + np.arange(3)).ravel()
+        s = len(self.prep.nodes)
+        self.basis, self.phi_s, self.w_s = basis, basis.phi[dofs].reshape(s, 3, -1), self.rotation[dofs].reshape(s, 3, -1)
+        self.patches = {"radius_mm": 1e3 * radius, "reach_mm": 1e3 * basis.info["patch_reach_m"],
+                        "shapes": int(basis.n_modes - basis.info["global_modes"]),
+                        "nodes": basis.info["patch_nodes"], "global_modes": int(basis.info["global_modes"])}
+
+    def patch_coordinates(self, q: np.ndarray, start: int, end: int) -> np.ndarray:
+        """(end - start, p) patch coordinates closing the sensors' gaps in frames start..end-1 whose
+        modal coordinates (from the frame loop) are ``q`` (end - start, m)."""
+        from tonguevis.sim.patches import close_sensor_gaps
+
+        return close_sensor_gaps(self.basis, self.rotation, self.prep.nodes, q, self.prep.displacement[start:end],
+                                 self.warping)
 
     def motion(self, result, figures, n: int) -> Motion:
         """The :class:`Motion` of frames 0..n-1 (``n`` = all: the simulation's result, made from ``result``
@@ -190,8 +237,15 @@ class _Run:
             # Frames no tongue could produce (volume, or a node far beyond every sensor): the static shape for
             # the same targets instead, when that one is sane; flagged as recovered either way.
             from tonguevis.sim.constrained import compliant_shapes
+            from tonguevis.sim.patches import close_sensor_gaps
 
-            fixed = compliant_shapes(basis.eigenvalues, phi_s, self.targets[absurd], self.compliance[absurd])
+            if self.patches:  # the modes' static shape, then the patches on it
+                modes, rows = self.global_rows
+                fixed = compliant_shapes(modes.eigenvalues, rows, self.targets[absurd], self.compliance[absurd])
+                fixed = np.hstack([fixed, close_sensor_gaps(basis, self.rotation, prep.nodes, fixed,
+                                                            prep.displacement[absurd], warping)])
+            else:
+                fixed = compliant_shapes(basis.eigenvalues, phi_s, self.targets[absurd], self.compliance[absurd])
             sub = frame_figures(model, fixed, warping, backend)
             sane = np.isfinite(sub.volume_change) & (np.abs(sub.volume_change) <= ABSURD_VOLUME)
             frames = absurd[sane]
@@ -246,6 +300,7 @@ class _Run:
             "plausibility": plausibility,
             **({"contact": contact_figures} if contact is not None else {}),
             "newton_iterations_mean": float(iterations.mean()) if len(iterations) else 0.0,
+            **({"sensor_patches": self.patches} if self.patches else {}),
             **({} if whole else {"preview": {"frames": int(n), "of": int(total)}}),
         }
         rest_nodes = model.mesh.points[prep.nodes]

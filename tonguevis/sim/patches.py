@@ -1,0 +1,164 @@
+"""Sensor patches: the tongue's own local deformation under each sensor, to put the sensors on its surface.
+
+The lowest vibration modes are smooth and global: a few of them cannot make the small
+local shape a coil glued on the tongue sees, so the compliant sensor springs (the default)
+leave the sensors up to 2-4 mm off the surface on real recordings, and a stiffer spring
+instead bends the whole tongue.  A patch shape is what the mesh itself does under a load
+spread over the surface within ``radius`` of a sensor node beyond what the modes already do
+(the residual flexibility K⁻¹f - ΦΛ⁻¹Φᵀf of modal truncation, three per sensor, one per
+axis: local by nature), kept to the sensor's neighbourhood: it fades out (a cosine) between
+``radius`` and ``reach`` from the sensor node and is zero beyond, so a patch moves nothing
+far from its sensor and the model's shape elsewhere, what it predicts, stays the modes' own.
+
+They act after the dynamics, frame by frame: the modes are integrated as before (Newmark,
+warping, the compliant projection), then each patch's three coordinates close the gap
+between its measured sensor and its node (:func:`close_sensor_gaps`).  Patch shapes are
+stiff and local, so treating them quasi-statically is the mode-acceleration method's own
+assumption; they are not warped (their rotation matrix columns are zero) but ride on the
+global rotation at their node.  The basis [Φ P] is not orthogonal: its stiffness
+[[Λ, ΦᵀKP], [PᵀKΦ, PᵀKP]] is kept with it (``basis.info["stiffness"]``) so that the
+elastic energy stays ½ xᵀKx of the shape drawn.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from tonguevis.sim.modal import ModalBasis
+
+#: Default radius (m, model frame) of the surface a sensor's load is spread over: about an EMA
+#: coil with its glue.  Measured on the shared real recordings (docs/validation.md): with 3/5 mm
+#: the held-out sensors are predicted as without patches; wider patches (4/7, 5/10 mm) reach the
+#: neighbouring sensors (4-9 mm apart on the model) and cost up to 0.4 mm there.
+PATCH_RADIUS = 3e-3
+#: How far (m) from its sensor node a patch reaches (it fades out from PATCH_RADIUS to here).
+PATCH_REACH = 5e-3
+#: Patch shapes nearly dependent on the modes or on each other (overlapping patches) are dropped.
+DEPENDENCE = 1e-9
+
+
+def patch_loads(points: np.ndarray, surface: np.ndarray, nodes: np.ndarray, radius: float) -> np.ndarray:
+    """(3n, 3S) unit loads: for each sensor node and axis, a force of 1 N spread over the surface
+    nodes within ``radius`` (m) of it with weights (1 - (d/r)²)², the sensor node itself always in."""
+    n = len(points)
+    loads = np.zeros((3 * n, 3 * len(nodes)))
+    for k, node in enumerate(np.asarray(nodes, dtype=np.int64)):
+        d = np.linalg.norm(points[surface] - points[node], axis=1)
+        weight = np.clip(1.0 - (d / radius) ** 2, 0.0, None) ** 2
+        spread = np.zeros(n)
+        spread[surface] = weight
+        spread[node] = max(spread[node], 1.0)
+        spread /= spread.sum()
+        for axis in range(3):
+            loads[axis::3, 3 * k + axis] = spread
+    return loads
+
+
+def window(points: np.ndarray, centre: np.ndarray, radius: float, reach: float) -> np.ndarray:
+    """(n,) 1 within ``radius`` of ``centre``, a cosine down to 0 at ``reach``, 0 beyond (m)."""
+    d = np.linalg.norm(points - centre, axis=1)
+    fade = 0.5 * (1.0 + np.cos(np.pi * np.clip((d - radius) / max(reach - radius, 1e-12), 0.0, 1.0)))
+    return np.where(d <= radius, 1.0, fade)
+
+
+def augmented_basis(model, basis: ModalBasis, nodes: np.ndarray, radius: float = PATCH_RADIUS,
+                    reach: float = PATCH_REACH) -> ModalBasis:
+    """``basis`` extended by the patch shapes of the sensor ``nodes`` (see the module docstring).
+
+    The first ``basis.n_modes`` columns are ``basis``'s own, then three per sensor (x, y, z of
+    its load).  ``eigenvalues`` holds Λ then the patches' own stiffness (diag PᵀKP, for
+    reports); ``info`` holds the whole stiffness ("stiffness", (m+p, m+p)) and what rebuilds it
+    ({"global_modes", "patch_radius_m", "patch_reach_m", "patch_nodes"}), which
+    :func:`augmented_model` and :meth:`tonguevis.sim.Motion.load` use.
+    """
+    import scipy.sparse.linalg as spla
+
+    free = basis.free_dofs
+    stiffness = model.stiffness[free][:, free].tocsc()
+    points = model.mesh.points
+    nodes = np.asarray(nodes, dtype=np.int64)
+    loads = patch_loads(points, model.surface_nodes, nodes, radius)[free]
+    solved = spla.splu(stiffness).solve(loads)
+    phi = basis.phi[free]
+    solved -= phi @ ((phi.T @ loads) / basis.eigenvalues[:, None])  # the modes' share: what is left is local
+    patches = np.zeros((basis.phi.shape[0], solved.shape[1]))
+    patches[free] = solved
+    for k, node in enumerate(nodes):
+        patches[:, 3 * k:3 * k + 3] *= np.repeat(window(points, points[node], radius, reach), 3)[:, None]
+    full = np.hstack([basis.phi, patches])
+    k_full = model.stiffness @ patches
+    coupling = basis.phi.T @ k_full
+    own = patches.T @ k_full
+    reduced = np.block([[np.diag(basis.eigenvalues), coupling], [coupling.T, 0.5 * (own + own.T)]])
+    node_list = [int(v) for v in nodes]
+    key = f"{basis.key}-patches-{radius:.6f}-{reach:.6f}-{'-'.join(map(str, node_list))}"
+    info = {"global_modes": basis.n_modes, "patch_radius_m": float(radius), "patch_reach_m": float(reach),
+            "patch_nodes": node_list, "stiffness": reduced}
+    return ModalBasis(full, np.concatenate([basis.eigenvalues, np.diag(own)]), free, key, info)
+
+
+def augmented_model(model, basis: ModalBasis):
+    """A shallow copy of ``model`` whose basis of ``basis.n_modes`` modes is ``basis`` (patches
+    included) and whose rotation matrix leaves the patch shapes unwarped; the mesh, material
+    and FEM matrices are shared."""
+    m = basis.info["global_modes"]
+    copied = copy.copy(model)
+    copied._bases = {**model._bases, basis.n_modes: basis}
+    rotation = np.array(model.curl_operator @ basis.phi)
+    rotation[:, m:] = 0.0
+    copied._rotation_matrices = {**model._rotation_matrices, basis.key: rotation}
+    copied._transposed = {}
+    copied.base_model = model
+    return copied
+
+
+def global_part(motion):
+    """(model, q (F, m)): ``motion``'s modes without its sensor patches, on the model without them
+    (the coordinates two recordings share, e.g. for morphing); the motion's own when it has none."""
+    patches = motion.metadata.get("sensor_patches")
+    if not patches:
+        return motion.model, motion.q
+    return getattr(motion.model, "base_model", motion.model), motion.q[:, :int(patches["global_modes"])]
+
+
+def accumulated_rotations(w: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) the matrices R̃(w) of modal warping for rotation vectors w (..., 3)."""
+    from tonguevis.sim.rotation import rotate_accumulated
+
+    eye = np.eye(3)
+    columns = [rotate_accumulated(w, np.broadcast_to(eye[c], w.shape).copy()) for c in range(3)]
+    return np.stack(columns, axis=-1)
+
+
+def close_sensor_gaps(basis: ModalBasis, rotation: np.ndarray, nodes: np.ndarray, q: np.ndarray,
+                      measured: np.ndarray, warping: bool = True) -> np.ndarray:
+    """(F, 3S) patch coordinates that put each measured sensor on its node, frame by frame.
+
+    basis : the augmented basis (:func:`augmented_basis`) of the sensor ``nodes`` (S,);
+    rotation : its W (3n, m + 3S); q : (F, m) the modes' coordinates from the dynamics;
+    measured : (F, S, 3) m displacements of the sensors from rest (NaN: not measured; that
+    sensor's patch stays at rest).  With warping, node s moves by R̃_s(Φ_s q + P_s c) with R̃_s
+    from the modes alone, so P_s c = R̃_s⁻¹ measured_s - Φ_s q: 3S equations in the 3S patch
+    coordinates, solved exactly (a patch reaches other sensors only when they are closer than
+    its reach).
+    """
+    m = basis.info["global_modes"]
+    nodes = np.asarray(nodes, dtype=np.int64)
+    dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
+    s = len(nodes)
+    phi_s = basis.phi[dofs, :m].reshape(s, 3, m)
+    patch_s = basis.phi[dofs, m:]  # (3S, 3S)
+    linear = np.einsum("scm,fm->fsc", phi_s, q)
+    wanted = np.nan_to_num(measured)
+    if warping:
+        w = np.einsum("scm,fm->fsc", rotation[dofs, :m].reshape(s, 3, m), q)
+        wanted = np.linalg.solve(accumulated_rotations(w), wanted[..., None])[..., 0]
+    acting = np.repeat(np.all(np.isfinite(measured), axis=2), 3, axis=1)  # (F, 3S)
+    gap = np.where(acting, (wanted - linear).reshape(len(q), 3 * s), 0.0)
+    # A sensor not measured: its patch at rest (its row and column replaced by the identity).
+    mats = np.where(acting[:, :, None] & acting[:, None, :], patch_s[None], 0.0)
+    idx = np.arange(3 * s)
+    mats[:, idx, idx] += np.where(acting, 0.0, 1.0)
+    return np.linalg.solve(mats, gap[:, :, None])[:, :, 0]
