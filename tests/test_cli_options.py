@@ -85,6 +85,7 @@ READING_COMMANDS = {
     "energy": ["energy", DEMO, "--csv", "e.csv"],
     "morph": ["morph", f"{DEMO}@6.2", f"{DEMO}@6.4", "--out", "m.png"],
     "export-video": ["export-video", DEMO, "--out", "v.mp4"],
+    "palate": ["palate", DEMO, "--out", "p.stl"],
 }
 
 

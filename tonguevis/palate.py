@@ -335,12 +335,13 @@ def _mirrored(points: np.ndarray, y0: float) -> np.ndarray:
     return np.concatenate([points, mirror])
 
 
-def palate_from_traces(paths, probe: str = "PROBE", sensors=None, progress=None) -> PalateSurface:
+def palate_from_traces(paths, probe: str = "PROBE", sensors=None, progress=None,
+                       read_options: dict | None = None) -> PalateSurface:
     """The speaker's palate fitted to palate-trace recordings (``tonguevis palate`` and the app's
-    File > Fit palate from traces): each read, its probe's positions head-corrected
-    (:func:`trace_points`), the midline taken from the lateral tongue sensors when the
-    traces have them, one surface fitted to all points (:func:`fit_palate`).  The
-    probe's sample count per file is in ``metadata["samples"]``.
+    File > Fit palate from traces): each read (with the reader's ``read_options``, ``-O``),
+    its probe's positions head-corrected (:func:`trace_points`), the midline taken from the
+    lateral tongue sensors when the traces have them, one surface fitted to all points
+    (:func:`fit_palate`).  The probe's sample count per file is in ``metadata["samples"]``.
     """
     from tonguevis._progress import report
     from tonguevis.workflows import open_recording
@@ -351,7 +352,7 @@ def palate_from_traces(paths, probe: str = "PROBE", sensors=None, progress=None)
     points, midlines, samples = [], [], {}
     for k, path in enumerate(paths):
         report(progress, k, len(paths) + 1, f"reading {Path(path).name}")
-        rec = open_recording(path, sensors, audio=False)
+        rec = open_recording(path, sensors, **{**(read_options or {}), "audio": False})  # traces: no sound needed
         pts = trace_points(rec, probe)
         points.append(pts)
         samples[str(path)] = int(len(pts))

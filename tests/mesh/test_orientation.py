@@ -45,7 +45,7 @@ def test_auto_axes_refused_when_the_shape_does_not_tell(tmp_path):
 
     points, tets = box_mesh(3, 3, 3, size=(0.05, 0.05, 0.05))
     path = write_tetgen(tmp_path / "cube", points, tets)
-    with pytest.raises(MeshError, match=r"cube.*cannot tell the mesh's axes.*--axes"):
+    with pytest.raises(MeshError, match=r"cube.*cannot tell the mesh's axes.*--mesh-axes"):
         read_mesh(path, axes="auto")
 
 
@@ -66,7 +66,7 @@ def test_a_model_of_a_turned_mesh_is_refused_with_the_axes_to_give():
     from tonguevis.sim.model import TongueModel
 
     path = shared_file("artisynth", "tongue3.1.node")
-    with pytest.raises(MeshError, match=r"tongue3\.1.*not lie in our frame.*'-x,-z,-y'.*--axes=-x,-z,-y"):
+    with pytest.raises(MeshError, match=r"tongue3\.1.*not lie in our frame.*'-x,-z,-y'.*--mesh-axes=-x,-z,-y"):
         TongueModel.from_mesh(path)
     model = TongueModel.from_mesh(path, axes="auto")
     assert abs(model.landmarks.metadata["midline_y_m"]) < 1e-3  # the midline found: the mesh's z = 0

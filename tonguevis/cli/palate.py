@@ -23,6 +23,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--probe", default="PROBE", metavar="SENSOR",
                         help="the sensor drawn along the palate (default PROBE, Opti-Speech's name)")
     parser.add_argument("--sensors", metavar="MAP", help="sensor map (preset or JSON) for the trace recordings")
+    from tonguevis.cli._common import add_reader_options_argument
+
+    add_reader_options_argument(parser, " of every trace")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -31,7 +34,9 @@ def run(args: argparse.Namespace) -> int:
     from tonguevis.palate import check_mesh_path, palate_from_traces
 
     check_mesh_path(args.out)
-    surface = palate_from_traces(args.traces, args.probe, args.sensors)
+    from tonguevis.cli._common import parse_options
+
+    surface = palate_from_traces(args.traces, args.probe, args.sensors, read_options=parse_options(args.option))
     for path, count in surface.metadata["samples"].items():
         print(f"{path}: {count} probe samples")
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -90,7 +90,7 @@ def _found_axes(mesh: TetMesh, source) -> str:
     if not fit.decided:
         raise MeshError(f"cannot tell the mesh's axes from its shape (best mapping {fit.axes!r} fits only "
                         f"{fit.margin:.2f} times better than the next); give them, e.g. axes='-x,-z,-y' "
-                        "(--axes=-x,-z,-y), new x anterior, y left, z up", source)
+                        "(--mesh-axes=-x,-z,-y), new x anterior, y left, z up", source)
     log.info("%s: axes %s found from the shape (fits %.1f times better than the next mapping, "
              "%.1f times better than the file's own axes)", source, fit.axes, fit.margin,
              fit.identity_misfit / fit.misfit)

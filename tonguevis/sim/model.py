@@ -304,5 +304,5 @@ def _check_our_frame(mesh: TetMesh) -> None:
         f"the mesh does not lie in our frame (x anterior, y left, z up): turned by the axis mapping "
         f"{fit.axes!r} its shape matches a tongue {fit.identity_misfit / fit.misfit:.1f} times better than as "
         f"it is, and the sensors and anchors would land on its side or floor. Read it with "
-        f"axes={fit.axes!r} (command line: --axes={fit.axes}), or axes='auto' to take the mapping found",
+        f"axes={fit.axes!r} (command line: --mesh-axes={fit.axes}), or axes='auto' to take the mapping found",
         mesh.metadata.get("source"))
