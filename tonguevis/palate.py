@@ -11,7 +11,10 @@ the recording's frame: x anterior, y left, z up, metres) into a
   traced on one side only is whole;
 * fitted by a smoothing thin-plate spline (SciPy's ``RBFInterpolator``), with
   points more than 3 robust standard deviations off the fit dropped and the
-  fit repeated (the probe entering or leaving the mouth, a slip off the palate);
+  fit repeated (the probe entering or leaving the mouth, a slip off the palate),
+  its smoothing raised until the surface bends nowhere more tightly than
+  ``MIN_BEND_RADIUS`` (3 mm: no folds; the bound and the bend reached are in
+  its metadata);
 * kept only within 3 mm of the traced points' footprint: forward to the
   alveolar ridge and back towards the soft palate as far as the points go,
   never extrapolated further.
@@ -36,6 +39,13 @@ from tonguevis.errors import TonguevisError
 GRID_STEP = 1e-3  # m
 FOOTPRINT_MARGIN = 3e-3  # m: how far beyond the traced points the surface reaches
 OUTLIER_SIGMAS = 3.0
+#: No fold: the fitted palate bends nowhere more tightly than this radius (m).  The alveolar ridge, a
+#: real palate's tightest bend, is 3-5 mm; the traces' own jitter made folds of 0.15 mm radius.
+MIN_BEND_RADIUS = 3e-3
+#: The seam (m) over which a traced palate blends into the generic one behind and beside it.
+SEAM = 3e-3
+#: Grid cells where a traced and the generic palate must both lie before they are joined.
+MIN_OVERLAP_CELLS = 20
 
 
 class PalateError(TonguevisError):
@@ -237,43 +247,88 @@ def _checked(surface: PalateSurface, path) -> PalateSurface:
 
 
 def _height_field(points, tris, step, metadata) -> PalateSurface:
-    """Lowest z of the triangles over each grid point (x, y)."""
+    """Lowest z of the triangles over each grid point (x, y).
+
+    The grid is regular, so each triangle visits only the grid points of its bounding box
+    (index ranges, not a search of the whole grid)."""
     lo, hi = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
     x = np.arange(lo[0], hi[0] + step / 2, step)
     y = np.arange(lo[1], hi[1] + step / 2, step)
-    gx, gy = np.meshgrid(x, y)
-    q = np.column_stack([gx.ravel(), gy.ravel()])
-    z = np.full(len(q), np.inf)
+    z = np.full((len(y), len(x)), np.inf)
     a, b, c = (points[tris[:, k]] for k in range(3))
-    for t in range(len(tris)):  # few hundred triangles; each touches a small box of grid points
-        box_lo = np.minimum(np.minimum(a[t, :2], b[t, :2]), c[t, :2])
-        box_hi = np.maximum(np.maximum(a[t, :2], b[t, :2]), c[t, :2])
-        sel = np.flatnonzero(np.all((q >= box_lo - 1e-12) & (q <= box_hi + 1e-12), axis=1))
-        if len(sel) == 0:
+    box_lo = np.minimum(np.minimum(a[:, :2], b[:, :2]), c[:, :2])
+    box_hi = np.maximum(np.maximum(a[:, :2], b[:, :2]), c[:, :2])
+    first = np.maximum(np.ceil((box_lo - lo) / step - 1e-9).astype(np.int64), 0)
+    last = np.minimum(np.floor((box_hi - lo) / step + 1e-9).astype(np.int64), [len(x) - 1, len(y) - 1])
+    for t in range(len(tris)):
+        if first[t, 0] > last[t, 0] or first[t, 1] > last[t, 1]:
             continue
         v0, v1 = b[t, :2] - a[t, :2], c[t, :2] - a[t, :2]
         den = v0[0] * v1[1] - v0[1] * v1[0]
         if abs(den) < 1e-18:
             continue
-        w = q[sel] - a[t, :2]
-        u = (w[:, 0] * v1[1] - w[:, 1] * v1[0]) / den
-        v = (v0[0] * w[:, 1] - v0[1] * w[:, 0]) / den
+        gx, gy = np.meshgrid(x[first[t, 0]:last[t, 0] + 1], y[first[t, 1]:last[t, 1] + 1])
+        wx, wy = gx - a[t, 0], gy - a[t, 1]
+        u = (wx * v1[1] - wy * v1[0]) / den
+        v = (v0[0] * wy - v0[1] * wx) / den
         inside = (u >= -1e-9) & (v >= -1e-9) & (u + v <= 1 + 1e-9)
-        zz = a[t, 2] + u * (b[t, 2] - a[t, 2]) + v * (c[t, 2] - a[t, 2])
-        z[sel[inside]] = np.minimum(z[sel[inside]], zz[inside])
-    z = np.where(np.isfinite(z), z, np.nan).reshape(len(y), len(x))
+        zz = np.where(inside, a[t, 2] + u * (b[t, 2] - a[t, 2]) + v * (c[t, 2] - a[t, 2]), np.inf)
+        block = z[first[t, 1]:last[t, 1] + 1, first[t, 0]:last[t, 0] + 1]
+        np.minimum(block, zz, out=block)
+    z = np.where(np.isfinite(z), z, np.nan)
     return PalateSurface(x, y, z, metadata=metadata)
 
 
+def bend_curvature(z: np.ndarray, step: float) -> float:
+    """The largest principal curvature (1/m) of a height field z (ny, nx) on a grid of ``step`` m
+    (finite differences of the Hessian; NaN cells and their neighbours left out); 0 without any."""
+    zxx = (z[1:-1, 2:] - 2 * z[1:-1, 1:-1] + z[1:-1, :-2]) / step ** 2
+    zyy = (z[2:, 1:-1] - 2 * z[1:-1, 1:-1] + z[:-2, 1:-1]) / step ** 2
+    zxy = (z[2:, 2:] - z[2:, :-2] - z[:-2, 2:] + z[:-2, :-2]) / (4 * step ** 2)
+    half = 0.5 * (zxx + zyy)
+    spread = np.sqrt(np.maximum(half ** 2 - (zxx * zyy - zxy ** 2), 0.0))
+    k = np.maximum(np.abs(half + spread), np.abs(half - spread))
+    k = k[np.isfinite(k)]
+    return float(k.max()) if k.size else 0.0
+
+
 def fit_palate(points: np.ndarray, midline_y: float | None = None, smoothing: float = 5e-7,
-               step: float = GRID_STEP, sources: list[str] | None = None) -> PalateSurface:
+               step: float = GRID_STEP, sources: list[str] | None = None,
+               min_radius: float | None = MIN_BEND_RADIUS) -> PalateSurface:
     """Fit a palate to (k, 3) trace points (metres, x anterior, y left, z up); see the module docstring.
 
     midline_y : the midline's y (default: the points' median y).
-    smoothing : the thin-plate spline's smoothing (m²; larger is smoother).
+    smoothing : the thin-plate spline's smoothing to start from (m²; larger is smoother); raised
+        tenfold, then halved back as far as the bound allows, until the surface bends nowhere
+        more tightly than ``min_radius`` (m; None: no bound).
     The fit's figures are in ``metadata``: ``rms_m`` (trace points kept, to the
-    surface), ``points``, ``kept``, ``midline_y``.
+    surface), ``points``, ``kept``, ``midline_y``, ``smoothing``, ``min_bend_radius_m`` (the
+    bound) and ``bend_radius_m`` (the tightest bend reached).
     """
+    surface = _fit_palate(points, midline_y, smoothing, step, sources)
+    if min_radius is None:
+        return surface
+    bound = 1.0 / min_radius
+    tried = [(smoothing, surface)]
+    while bend_curvature(np.asarray(surface.z), step) > bound and smoothing < 1.0:
+        smoothing *= 10.0
+        surface = _fit_palate(points, midline_y, smoothing, step, sources)
+        tried.append((smoothing, surface))
+    if len(tried) > 1 and bend_curvature(np.asarray(surface.z), step) <= bound:
+        low = tried[-2][0]
+        for factor in (0.5, 0.25):  # back down within the last decade: the least smoothing that keeps the bound
+            candidate = _fit_palate(points, midline_y, smoothing * factor, step, sources)
+            if smoothing * factor > low and bend_curvature(np.asarray(candidate.z), step) <= bound:
+                surface = candidate
+    reached = bend_curvature(np.asarray(surface.z), step)
+    surface.metadata.update({"min_bend_radius_m": float(min_radius),
+                             "bend_radius_m": float(1.0 / reached) if reached > 0 else float("inf")})
+    return surface
+
+
+def _fit_palate(points: np.ndarray, midline_y: float | None, smoothing: float, step: float,
+                sources: list[str] | None) -> PalateSurface:
+    """One thin-plate fit of :func:`fit_palate` at the given smoothing."""
     from scipy.interpolate import RBFInterpolator
 
     pts = np.asarray(points, dtype=np.float64)
@@ -311,6 +366,46 @@ def fit_palate(points: np.ndarray, midline_y: float | None = None, smoothing: fl
     gap, _ = surface.clearance(pts[keep])
     surface.metadata["rms_m"] = float(np.sqrt(np.nanmean(gap ** 2)))
     return surface
+
+
+def joined_palate(traced: PalateSurface, generic: PalateSurface, step: float = GRID_STEP,
+                  seam: float = SEAM) -> PalateSurface:
+    """A whole roof: ``traced`` (a speaker's palate, placed in the query frame) where it was traced,
+    ``generic`` (the same frame) behind and beside it, moved up or down to meet it.
+
+    Both become height fields on one grid of ``step`` m in the query frame (the lowest surface
+    above each point).  The generic palate is moved vertically by the median height difference
+    where both are defined, then the two blend over ``seam`` m inside the traced part's edge (a
+    smooth step), so the roof is continuous.  The result is in the query frame (identity
+    transform); ``metadata["joined"]``: {"generic_shift_mm", "traced_share", "seam_mm"}.
+    """
+    from scipy.ndimage import distance_transform_edt
+
+    pts_t, tri_t = traced.triangles()
+    pts_g, tri_g = generic.triangles()
+    if len(tri_t) == 0:
+        return traced
+    both = np.concatenate([pts_t[:, :2], pts_g[:, :2]])
+    lo, hi = both.min(axis=0), both.max(axis=0)
+    # one grid for both: each surface's lowest z over it, the grid spanning both footprints
+    corner = np.array([[lo[0], lo[1], 0.0], [hi[0], hi[1], 0.0], [lo[0], hi[1], 0.0]])
+    grid_t = _height_field(np.concatenate([pts_t, corner]), tri_t, step, {})
+    grid_g = _height_field(np.concatenate([pts_g, corner]), tri_g, step, {})
+    h_t, h_g = np.asarray(grid_t.z), np.asarray(grid_g.z)
+    overlap = np.isfinite(h_t) & np.isfinite(h_g)
+    if overlap.sum() < MIN_OVERLAP_CELLS:  # the generic roof is not where this palate is: nothing to join
+        return traced
+    shift = float(np.median(h_t[overlap] - h_g[overlap]))
+    moved = h_g + shift
+    inside = np.isfinite(h_t)
+    depth = distance_transform_edt(inside) * step  # m from the traced part's edge, inward
+    weight = np.clip(depth / max(seam, 1e-12), 0.0, 1.0)
+    weight = weight * weight * (3.0 - 2.0 * weight)  # a smooth step
+    z = np.where(inside & np.isfinite(moved), weight * h_t + (1.0 - weight) * moved, np.where(inside, h_t, moved))
+    metadata = {**traced.metadata, "joined": {"generic_shift_mm": 1e3 * shift,
+                                              "traced_share": float(inside.sum() / max(np.isfinite(z).sum(), 1)),
+                                              "seam_mm": 1e3 * seam}}
+    return PalateSurface(grid_t.x, grid_t.y, z, metadata=metadata)
 
 
 def _binned(points: np.ndarray, step: float) -> np.ndarray:

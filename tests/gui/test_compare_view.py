@@ -139,7 +139,7 @@ def test_b_is_lit_and_coloured_like_a_by_default(qtbot, pair):
     values = b.frames.scalars["displacement"][j][nodes]
     lut = window.view3d.scene.lookup_table
     np.testing.assert_allclose(panel.b_colours(), mapped_colours(lut, values))
-    assert np.ptp(panel.b_colours(), axis=0).max() > 0.3  # not one flat colour
+    assert np.ptp(panel.b_colours(), axis=0).max() > 0.15  # not one flat colour (the map starts at plasma 0.25)
     # lit: VTK's lighting model for A's lights and material, for the camera both views share
     rgb = _lit_b(panel)
     camera = panel.plotter.renderer.GetActiveCamera()

@@ -271,3 +271,75 @@ def test_a_raised_palate_is_reported_once_with_its_reason(caplog, tmp_path):
     assert len(raised) == 1
     assert shown.surface is motion.palate and shown.raised_mm > 3  # model millimetres (the alignment scales)
     assert "palate raised" in contact_line(motion.metadata) and "another sitting" in contact_line(motion.metadata)
+
+
+def test_a_fitted_palate_has_no_fold_and_says_its_bound():
+    """Noisy traces (0.3 mm jitter) of a vault: the fit is smoothed until it bends nowhere tighter than
+    3 mm, and says the bound and the tightest bend reached; the plain fit folds."""
+    from tonguevis.palate import MIN_BEND_RADIUS, bend_curvature
+
+    rng = np.random.default_rng(4)
+    xy = rng.uniform([-0.02, -0.015], [0.02, 0.015], (1500, 2))
+    z = 0.01 - 40 * xy[:, 1] ** 2 - 5 * xy[:, 0] ** 2 + rng.normal(0, 3e-4, len(xy))  # radii 12.5 and 100 mm
+    points = np.column_stack([xy, z])
+    plain = fit_palate(points, midline_y=0.0, min_radius=None)
+    bounded = fit_palate(points, midline_y=0.0)
+    assert 1.0 / bend_curvature(np.asarray(plain.z), 1e-3) < MIN_BEND_RADIUS  # the jitter folds the plain fit
+    reached = bounded.metadata["bend_radius_m"]
+    assert reached >= MIN_BEND_RADIUS and bounded.metadata["min_bend_radius_m"] == MIN_BEND_RADIUS
+    assert reached == pytest.approx(1.0 / bend_curvature(np.asarray(bounded.z), 1e-3))
+    assert bounded.metadata["rms_m"] < 1e-3  # still on the traces
+
+
+def test_a_traced_palate_is_joined_to_the_generic_one_behind_it():
+    """A palate traced over the front only: placed for a simulation it becomes a whole roof, the
+    traced part where it was traced, the generic palate (moved to meet it) behind and beside it,
+    continuous across the seam."""
+    from tonguevis.palate import SEAM, generic_palate, joined_palate
+
+    generic = generic_palate()
+    gx, gy = np.meshgrid(generic.x, generic.y)
+    front = np.isfinite(generic.z) & (gx > np.nanpercentile(gx[np.isfinite(generic.z)], 60))
+    traced = PalateSurface(generic.x, generic.y, np.where(front, generic.z + 0.002, np.nan))  # 2 mm higher
+    whole = joined_palate(traced, generic)
+    assert whole.metadata["joined"]["generic_shift_mm"] == pytest.approx(2.0, abs=0.05)
+    # a point behind the traced part now has a roof 2 mm above the generic one
+    back = np.array([[float(np.nanpercentile(gx[np.isfinite(generic.z)], 20)), 0.0, -0.05]])
+    assert np.isnan(traced.clearance(back)[0][0])
+    assert whole.clearance(back)[0][0] == pytest.approx(generic.clearance(back)[0][0] + 0.002, abs=2e-4)
+    # no step at the seam: neighbouring cells differ by no more than the roof's own slope allows
+    z = np.asarray(whole.z)
+    steps = np.abs(np.diff(z, axis=1))
+    assert np.nanmax(steps) < 3e-3 and SEAM > 0
+
+
+def test_the_height_field_of_triangles_equals_a_plain_reference():
+    """The box-indexed rasterisation (palate._height_field) against every grid point tested against
+    every triangle: the lowest triangle over each point, NaN where none is."""
+    from tonguevis.palate import _height_field
+
+    rng = np.random.default_rng(7)
+    gx, gy = np.meshgrid(np.linspace(0, 0.02, 9), np.linspace(0, 0.015, 7))
+    pts = np.column_stack([gx.ravel(), gy.ravel(), 0.01 + 0.002 * rng.random(gx.size)])
+    pts[:, :2] += rng.normal(0, 3e-4, (gx.size, 2))
+    ids = np.arange(gx.size).reshape(gx.shape)
+    quads = np.stack([ids[:-1, :-1], ids[:-1, 1:], ids[1:, 1:], ids[1:, :-1]], axis=-1).reshape(-1, 4)
+    tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    tris = np.concatenate([tris, tris[:5] + 0])  # a fold: the same triangles lifted below stay the lowest
+    pts = np.concatenate([pts, pts[tris[:5].ravel()] - [0, 0, 0.003]])
+    tris[-5:] = len(pts) - 15 + np.arange(15).reshape(5, 3)
+    fast = _height_field(pts, tris, 1e-3, {})
+    xs, ys = np.meshgrid(fast.x, fast.y)
+    expected = np.full(xs.shape, np.nan)
+    for (j, i), px in np.ndenumerate(xs):
+        p = np.array([px, ys[j, i]])
+        for t in tris:
+            a, b, c = pts[t]
+            m = np.array([b[:2] - a[:2], c[:2] - a[:2]]).T
+            if abs(np.linalg.det(m)) < 1e-18:
+                continue
+            u, v = np.linalg.solve(m, p - a[:2])
+            if u >= -1e-9 and v >= -1e-9 and u + v <= 1 + 1e-9:
+                h = a[2] + u * (b[2] - a[2]) + v * (c[2] - a[2])
+                expected[j, i] = h if np.isnan(expected[j, i]) else min(expected[j, i], h)
+    np.testing.assert_allclose(fast.z, expected, atol=1e-12, equal_nan=True)

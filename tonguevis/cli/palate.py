@@ -47,5 +47,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"palate: {meta['kept']} of {meta['points']} trace points kept (outliers dropped), RMS distance to the "
           f"surface {1e3 * meta['rms_m']:.2f} mm; midline y = {1e3 * meta['midline_y']:.1f} mm; "
           f"{1e3 * (xs.max() - xs.min()):.0f} mm front to back")
+    if "min_bend_radius_m" in meta:
+        print(f"no fold: smoothed until it bends nowhere tighter than {1e3 * meta['min_bend_radius_m']:.0f} mm "
+              f"(tightest bend {1e3 * meta['bend_radius_m']:.1f} mm, smoothing {meta['smoothing']:.2g} m²); "
+              "simulations join it to the generic palate behind it")
     print(f"wrote {args.out} and {args.out.with_name(args.out.stem + '.palate.npz')} (the recordings' frame, metres)")
     return 0

@@ -45,12 +45,9 @@ def _stiffness_text(meta: dict) -> str:
 
 
 def _modes_text(motion) -> str:
-    """"100 modes", or "100 modes + 15 sensor patch shapes (3 mm)" with sensor patches."""
-    patches = motion.metadata.get("sensor_patches")
-    if not patches:
-        return f"{motion.q.shape[1]} modes"
-    return (f"{patches['global_modes']} modes + {patches['shapes']} sensor patch shapes ({patches['radius_mm']:g} mm, "
-            "the sensors on the surface)")
+    from tonguevis.sim.patches import modes_text
+
+    return modes_text(motion)
 
 
 def summary(motion) -> list[str]:

@@ -220,7 +220,9 @@ class View3D(QWidget):
         self.scene.build(frames.points[0], surface_faces(model), **scene_setup(session))
         self.scene.set_mode(self.state.color)
         palate = getattr(session, "shown_palate", None)
-        self.message.setText(f"{model.mesh.n_nodes} nodes, {frames.motion.q.shape[1]} modes, "
+        from tonguevis.sim.patches import modes_text
+
+        self.message.setText(f"{model.mesh.n_nodes} nodes, {modes_text(frames.motion, long=False)}, "
                              f"sensors {', '.join(frames.motion.sensor_names)}"
                              + (f"; {palate.label}" if palate is not None else ""))
         self.show_time(self.state.time)

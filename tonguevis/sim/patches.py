@@ -162,3 +162,15 @@ def close_sensor_gaps(basis: ModalBasis, rotation: np.ndarray, nodes: np.ndarray
     idx = np.arange(3 * s)
     mats[:, idx, idx] += np.where(acting, 0.0, 1.0)
     return np.linalg.solve(mats, gap[:, :, None])[:, :, 0]
+
+
+def modes_text(motion, long: bool = True) -> str:
+    """"100 modes", or with sensor patches "100 modes + 15 sensor patch shapes (3 mm, the sensors on
+    the surface)" (``long``) / "100 modes + sensor patches"."""
+    patches = motion.metadata.get("sensor_patches")
+    if not patches:
+        return f"{motion.q.shape[1]} modes"
+    if not long:
+        return f"{patches['global_modes']} modes + sensor patches"
+    return (f"{patches['global_modes']} modes + {patches['shapes']} sensor patch shapes ({patches['radius_mm']:g} mm, "
+            "the sensors on the surface)")

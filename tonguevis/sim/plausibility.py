@@ -103,6 +103,10 @@ def contact_line(metadata: dict) -> str:
         text += "; above the palate (the tongue follows them there): " + ", ".join(
             f"{name} in {v['frames']} frames" + (f" (up to {v['deepest_mm']:.1f} mm)" if v["deepest_mm"] == v["deepest_mm"]
                                                  else "") for name, v in above.items())
+    joined = (c.get("palate") or {}).get("joined")
+    if joined:
+        text += (f"; traced palate joined to the generic one behind it (moved {joined['generic_shift_mm']:+.1f} mm to "
+                 "meet it)")
     if c.get("palate_raised_mm", 0.0) > 0.05:
         text += (f"; palate raised {c['palate_raised_mm']:.1f} mm to sit above where the sensors went "
                  "(traced in another sitting?)")

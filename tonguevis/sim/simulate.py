@@ -386,23 +386,43 @@ def drive_schedule(displacement: np.ndarray, rate: float, eigenvalues: np.ndarra
     return targets, compliance, info
 
 
-def place_palate(palate, prep: PreparedTargets, quiet: bool = False):
+def place_palate(palate, prep: PreparedTargets, quiet: bool = False, model: TongueModel | None = None):
     """The palate in the model frame, where the contact solve and the app's views use it: (surface, raised by m).
 
     palate : a :class:`~tonguevis.palate.PalateSurface`, a palate file or "generic"
     (:func:`tonguevis.palate.load_palate`).  A speaker's palate (the recording's frame,
     from ``tonguevis palate``) is carried onto the model by the recording's alignment
     ``prep.transform``, then raised where the tongue sensors went above it
-    (:func:`_register_palate`); one whose metadata say ``frame == "model"`` (the generic
-    one) is used as is.
+    (:func:`_register_palate`) and, on the shipped tongue (``model`` None or it), joined to the
+    generic palate behind and beside it (:func:`tonguevis.palate.joined_palate`); one whose
+    metadata say ``frame == "model"`` (the generic one) is used as is.
     """
     from tonguevis.palate import load_palate
 
     palate = load_palate(palate)
     if palate.metadata.get("frame") == "model":
         return palate, 0.0
+    from tonguevis.palate import generic_palate, joined_palate
+
     t = prep.transform
-    return _register_palate(palate.transformed(t.rotation, t.scale, t.translation), prep, quiet=quiet)
+    placed, shift = _register_palate(palate.transformed(t.rotation, t.scale, t.translation), prep, quiet=quiet)
+    if model is not None and not shipped_tongue(model):  # the generic palate is our tongue's roof, not this mesh's
+        return placed, shift
+    # A traced palate covers the front of the roof: the generic one, moved to meet it, completes it.
+    return joined_palate(placed, generic_palate()), shift
+
+
+def shipped_tongue(model: TongueModel) -> bool:
+    """Whether ``model`` is on the shipped tongue mesh (the one the generic palate belongs to)."""
+    from pathlib import Path
+
+    from tonguevis.mesh.default import default_mesh_path
+
+    source = model.mesh.metadata.get("source")
+    try:
+        return source is not None and Path(source).resolve() == default_mesh_path().resolve()
+    except OSError:
+        return False
 
 
 def placed_palate(recording: Recording, palate, model: TongueModel | None = None, landmarks: str = "speaker",
@@ -414,12 +434,12 @@ def placed_palate(recording: Recording, palate, model: TongueModel | None = None
     alignment is the one the simulation used.
     """
     prep = prepare_targets(recording, model or TongueModel.default(), landmarks, rest_interval, smooth_window)
-    return place_palate(palate, prep, quiet=True)  # the simulation said it once
+    return place_palate(palate, prep, quiet=True, model=model)  # the simulation said it once
 
 
 def _contact_context(palate, prep, model, basis, recording) -> dict:
     """What the contact solve needs: the palate in the model frame, candidate nodes and their modes."""
-    palate, shift = place_palate(palate, prep)
+    palate, shift = place_palate(palate, prep, model=model)
     candidates = np.asarray(model.dorsal_nodes)
     gap, _ = palate.clearance(model.mesh.points[candidates])
     inside = np.nanmean(gap < -1e-3) if np.isfinite(gap).any() else 0.0
@@ -494,7 +514,8 @@ def _contact_report(pen, contact_area, contact, schedule, times, sensor_depth, n
         "conflicts": {"frames": len({f for f, _ in schedule["conflicts"]}),
                       "by_sensor_index": {int(s): sum(1 for _, t in schedule["conflicts"] if t == s) for s in conflicts},
                       "first_s": float(times[schedule["conflicts"][0][0]]) if schedule["conflicts"] else None},
-        "palate": {k: v for k, v in contact["palate"].metadata.items() if k in ("rms_m", "source", "frame", "kept")},
+        "palate": {k: v for k, v in contact["palate"].metadata.items()
+                   if k in ("rms_m", "source", "frame", "kept", "joined", "min_bend_radius_m", "bend_radius_m")},
         "palate_raised_mm": float(1e3 * contact.get("registration_shift_m", 0.0)),
     }
     return figures
