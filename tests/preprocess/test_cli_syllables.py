@@ -38,3 +38,18 @@ def test_syllables_errors_in_one_line(capsys, tmp_path):
     assert main(["syllables", str(lone)]) == 2
     err = capsys.readouterr().err
     assert "tongue-tip (TT)" in err and "x.tsv" in err and err.count("\n") == 1
+
+
+def test_syllables_writes_the_gesture_landmarks(capsys, tmp_path):
+    import pyarrow.parquet as pq
+
+    out = tmp_path / "g.parquet"
+    assert main(["syllables", str(DATA_DIR / "spk1_ka.tsv"), "--all", "--gestures", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "articulator: TD (/ka/ (from the file name): the dorsum (TD))" in text
+    assert f"wrote {out} (gesture landmarks of 25 productions)" in text
+    table = pq.read_table(out).to_pydict()
+    assert table["label"] == ["ka"] * 25 and set(table["articulator"]) == {"TD"}
+    for k in range(25):
+        times = [table[f"{name}_s"][k] for name in ("gons", "pvel", "nons", "maxc", "noffs", "pvel2", "goffs")]
+        assert times == sorted(times)
