@@ -31,7 +31,6 @@ def main(argv=None) -> int:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
 
     from tonguevis._files import atomic_write
     from tonguevis.preprocess.articulators import constriction_signal

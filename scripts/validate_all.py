@@ -520,7 +520,7 @@ def why_section(study, groups=None) -> list[str]:
             continue
         lines.append(f"- {cand}: {rmse(cand)} mm [{ref}: {rmse(ref)}]; {versus(cand, ref)}" + (f". {why[0].upper()}{why[1:]}" if why else "") + ".")
     orient = {n: f.get("has_orientations", []) for n, f in facts.items()}
-    lines += [f"- Sensor orientations: not tested. Recorded (non-zero) on: "
+    lines += ["- Sensor orientations: not tested. Recorded (non-zero) on: "
               + (", ".join(f"{n} ({', '.join(v)})" for n, v in orient.items() if v) or "none")
               + "; the Opti-Speech exports carry quaternion columns but they are all zero, and the Haskins "
               "angles belong to three midline sensors.", ""]

@@ -8,7 +8,7 @@ import pytest
 from tests.conftest import shared_file
 from tests.sim._models import bar_model, sensor_rows
 from tonguevis.palate import PalateSurface, fit_palate
-from tonguevis.sim.contact import MARGIN, correct_frames, penetration, solve_contact
+from tonguevis.sim.contact import correct_frames, penetration, solve_contact
 
 HEIGHT = 0.02
 

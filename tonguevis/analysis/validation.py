@@ -113,7 +113,6 @@ def validate(
     from tonguevis.sim import TongueModel
     from tonguevis.io.sensor_map import how_to_map
     from tonguevis.preprocess.targets import TONGUE_SENSORS, prepare_targets, working_tongue_sensors
-    from tonguevis.sim.constrained import point_stiffness
     from tonguevis.sim.simulate import DEFAULT_SENSOR_STIFFNESS, drive_schedule, simulate
 
     from tonguevis.sensor_stiffness import sensor_stiffness_value

@@ -26,7 +26,6 @@ from pathlib import Path
 import numpy as np
 
 from tonguevis._files import atomic_write_text
-from tonguevis.errors import RecordingError
 from tonguevis.io.recording import Recording
 from tonguevis.preprocess import gestures
 from tonguevis.preprocess.gestures import GestureLandmarks
