@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         source = ("audio envelope" if rec.audio is not None and len(rec.audio.samples)
                   else f"{table.articulator} motion: closures under 1 s apart")
-        shown = "all" if args.all else "2nd-4th of each train of three or more, every other"
+        shown = "all" if args.all else "2nd-4th of each train of three or more; isolated ones and pairs all"
         lines.append(f"articulator: {table.articulator} ({table.articulator_reason})")
     lines.append(f"trains: {len(table.trains)} (from the {source}); productions found per train: "
                  f"{', '.join(map(str, table.counts)) or 'none'}")
