@@ -56,31 +56,29 @@ def plausibility_from_largest(node, sensor_displacement, volume_change, residual
     return figures, absurd
 
 
-def plausibility_line(metadata: dict) -> str:
-    """One line for users: amplification, volume change, sensor misfit, flagged frames."""
+def plausibility_line(metadata: dict, short: bool = False) -> str:
+    """One line for users: amplification, volume change, sensor misfit, flagged frames; ``short``:
+    the same figures in fewer words, for the app's one status line (a 1920-pixel window cut the
+    long one in the middle of the figures)."""
     p = metadata.get("plausibility")
     if not p:
         return "plausibility: not recorded in this motion"
     flagged = len(metadata.get("recovered_frames", [])) + len(metadata.get("implausible_frames", []))
-    text = (f"far-field amplification {p['amplification']:.2f} (largest surface node {p['largest_node_displacement_mm']:.1f} mm"
-            f" / largest sensor {p['largest_sensor_displacement_mm']:.1f} mm), max volume change "
-            f"{p['volume_change_max_percent']:.2f} %, sensor misfit {p['sensor_misfit_rms_mm']:.2f} mm RMS "
-            f"(max {p['sensor_misfit_max_mm']:.2f} mm)")
+    node, sensor = p["largest_node_displacement_mm"], p["largest_sensor_displacement_mm"]
+    if short:
+        text = (f"far-field amplification {p['amplification']:.2f} ({node:.1f} / {sensor:.1f} mm), volume change ≤ "
+                f"{p['volume_change_max_percent']:.2f} %, sensor misfit {p['sensor_misfit_rms_mm']:.2f} mm RMS, "
+                f"max {p['sensor_misfit_max_mm']:.2f} mm")
+    else:
+        text = (f"far-field amplification {p['amplification']:.2f} (largest surface node {node:.1f} mm / largest "
+                f"sensor {sensor:.1f} mm), max volume change {p['volume_change_max_percent']:.2f} %, sensor misfit "
+                f"{p['sensor_misfit_rms_mm']:.2f} mm RMS (max {p['sensor_misfit_max_mm']:.2f} mm)")
     return text + (f"; {flagged} frames flagged" if flagged else "")
 
 
 def plausibility_status(metadata: dict) -> str:
-    """The figures of :func:`plausibility_line` in fewer words, for the app's one status line
-    (whose end a 1920-pixel window cut in the middle of the figures)."""
-    p = metadata.get("plausibility")
-    if not p:
-        return "plausibility: not recorded in this motion"
-    flagged = len(metadata.get("recovered_frames", [])) + len(metadata.get("implausible_frames", []))
-    text = (f"far-field amplification {p['amplification']:.2f} ({p['largest_node_displacement_mm']:.1f} / "
-            f"{p['largest_sensor_displacement_mm']:.1f} mm), volume change ≤ "
-            f"{p['volume_change_max_percent']:.2f} %, sensor misfit {p['sensor_misfit_rms_mm']:.2f} mm RMS, "
-            f"max {p['sensor_misfit_max_mm']:.2f} mm")
-    return text + (f"; {flagged} frames flagged" if flagged else "")
+    """:func:`plausibility_line` in fewer words, for the app's status line."""
+    return plausibility_line(metadata, short=True)
 
 
 def contact_line(metadata: dict) -> str:
