@@ -1,0 +1,1 @@
+"""Live mode: streaming from an articulograph, biofeedback targets, sweeps."""
