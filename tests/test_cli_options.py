@@ -177,8 +177,8 @@ def test_a_silent_video_says_it_is_silent_and_why(monkeypatch, tmp_path, capsys)
 
     import numpy as np
 
-    import tonguevis.gui.session as session_module
-    import tonguevis.gui.simulation as simulation
+    import tonguevis.workflows.session as session_module
+    import tonguevis.workflows.simulation as simulation
     import tonguevis.gui.video as video
     from tonguevis.io import Audio, Recording
 
@@ -187,7 +187,7 @@ def test_a_silent_video_says_it_is_silent_and_why(monkeypatch, tmp_path, capsys)
                                   audio=sound["audio"])
     monkeypatch.setattr(session_module, "load_session", lambda path, **kw: SimpleNamespace(
         recording=recording(), rest=SimpleNamespace(describe=lambda: "rest: given")))
-    monkeypatch.setattr(simulation, "simulate_session", lambda session, **kw: None)
+    monkeypatch.setattr(simulation, "simulate_session", lambda session, *a, **kw: None)
     monkeypatch.setattr(video, "export_video", lambda session, out, *a, **kw: out)
     out = tmp_path / "v.mp4"
     take = tmp_path / "take.tsv"

@@ -98,7 +98,7 @@ def test_prepare_targets_takes_a_rest_choice_as_is():
 
 def test_the_app_finds_productions_as_the_workflow_does():
     pytest.importorskip("PySide6")
-    from tonguevis.gui.session import make_session
+    from tonguevis.workflows.session import make_session
     from tonguevis.workflows import find_recording_productions
 
     nodding = _nodding(_demo())

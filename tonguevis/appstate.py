@@ -36,6 +36,7 @@ of several slots changed, where there are several):
 ``motions``       the motions the analyses can use changed (value: {name: Motion})
 ``morph_ends``    the morph's ``key`` end (one of :data:`MORPH_ENDS`) is ``(recording name, time_s)``
 ``tongue_model``  the tongue model every simulation uses (value: the model or None: built on need)
+``run_settings``  how the app simulates (value: a :class:`tonguevis.workflows.settings.RunSettings`)
 ``status``        a line for the status bar (str); sent every time, even when the text repeats
 """
 
@@ -60,7 +61,7 @@ SESSION_ROLES = ("primary", "compare")
 #: The morph's ends: t = 0 and t = 1.
 MORPH_ENDS = ("source", "target")
 EVENT_NAMES = ("time", "playing", "speed", "loop", "range", "selection", "color", "reference",
-               "session", "motion", "productions", "motions", "morph_ends", "tongue_model", "status")
+               "session", "motion", "productions", "motions", "morph_ends", "tongue_model", "run_settings", "status")
 
 
 @dataclass(frozen=True)
@@ -103,7 +104,9 @@ class AppState:
         self._motions: dict[str, Any] = {}
         self._morph_ends: dict[str, tuple[str, float] | None] = {end: None for end in MORPH_ENDS}
         self._tongue_model: Any = None
-        self._mesh_path: Any = None
+        from tonguevis.workflows.settings import RunSettings
+
+        self._run_settings = RunSettings()
         self._status = ""
 
     # -- observers ---------------------------------------------------------
@@ -362,13 +365,33 @@ class AppState:
 
     @property
     def mesh_path(self) -> Any:
-        """The mesh the model is built on (None: the shipped tongue)."""
-        return self._mesh_path
+        """The mesh the model is built on (None: the shipped tongue): the run settings' ``mesh``."""
+        return self._run_settings.mesh
 
     def set_tongue_model(self, model: Any, mesh_path: Any = None, source: Any = None) -> None:
         """Use ``model`` (built on ``mesh_path``; None: the shipped mesh) for every simulation from now on."""
-        self._tongue_model, self._mesh_path = model, mesh_path
+        if mesh_path != self._run_settings.mesh:  # first: a new mesh drops the old model
+            self.set_run_settings(self._run_settings.replace(mesh=mesh_path), source)
+        self._tongue_model = model
         self._emit("tongue_model", model, source)
+
+    # -- how the app simulates ----------------------------------------------------------
+    @property
+    def run_settings(self):
+        """The :class:`~tonguevis.workflows.settings.RunSettings` every simulation of the app uses."""
+        return self._run_settings
+
+    def set_run_settings(self, settings, source: Any = None) -> None:
+        """Simulate with ``settings`` from now on (a new mesh drops the model built on the old one)."""
+        old, self._run_settings = self._run_settings, settings
+        if settings.model_fields() != old.model_fields() and self._tongue_model is not None:
+            self._tongue_model = None
+            self._emit("tongue_model", None, source)
+        self._emit("run_settings", settings, source)
+
+    def change_run_settings(self, source: Any = None, **changes: Any) -> None:
+        """Change some fields of the run settings (``modes=``, ``palate=``...)."""
+        self.set_run_settings(self._run_settings.replace(**changes), source)
 
     # -- status ------------------------------------------------------------------
     @property

@@ -430,42 +430,10 @@ def _mirrored(points: np.ndarray, y0: float) -> np.ndarray:
     return np.concatenate([points, mirror])
 
 
-def palate_from_traces(paths, probe: str = "PROBE", sensors=None, progress=None,
-                       read_options: dict | None = None) -> PalateSurface:
-    """The speaker's palate fitted to palate-trace recordings (``tonguevis palate`` and the app's
-    File > Fit palate from traces): each read (with the reader's ``read_options``, ``-O``),
-    its probe's positions head-corrected (:func:`trace_points`), the midline taken from the
-    lateral tongue sensors when the traces have them, one surface fitted to all points
-    (:func:`fit_palate`).  The probe's sample count per file is in ``metadata["samples"]``.
-    """
-    from tonguevis._progress import report
-    from tonguevis.workflows import open_recording
-
-    paths = list(paths)
-    if not paths:
-        raise PalateError("no palate-trace recordings given")
-    points, midlines, samples = [], [], {}
-    for k, path in enumerate(paths):
-        report(progress, k, len(paths) + 1, f"reading {Path(path).name}")
-        rec = open_recording(path, sensors, **{**(read_options or {}), "audio": False})  # traces: no sound needed
-        pts = trace_points(rec, probe)
-        points.append(pts)
-        samples[str(path)] = int(len(pts))
-        midline = midline_of(rec)
-        if midline is not None:
-            midlines.append(midline)
-    report(progress, len(paths), len(paths) + 1, "fitting the palate")
-    surface = fit_palate(np.concatenate(points), midline_y=float(np.mean(midlines)) if midlines else None,
-                         sources=[str(p) for p in paths])
-    surface.metadata["samples"] = samples
-    report(progress, len(paths) + 1, len(paths) + 1, "palate fitted")
-    return surface
-
-
 def trace_points(recording, probe: str = "PROBE") -> np.ndarray:
     """(k, 3) valid positions of the probe sensor of a palate-trace recording, head-corrected when it can be."""
     from tonguevis.errors import RecordingError
-    from tonguevis.workflows import head_corrected
+    from tonguevis.preprocess.correction import head_corrected
 
     if probe not in recording.sensors:
         raise RecordingError(f"no probe sensor {probe!r} (sensors: {', '.join(recording.sensor_names)}); "

@@ -75,7 +75,7 @@ def model():
 
 def demo_session(start: float = 3.5, end: float = 6.8):
     """spk1 /ta/ from 3.5 s to 6.8 s: 1.5 s of rest and the first train."""
-    from tonguevis.gui.session import load_session, make_session
+    from tonguevis.workflows.session import load_session, make_session
 
     if not DEMO.exists():
         pytest.skip(f"demo corpus not built: {DEMO}")

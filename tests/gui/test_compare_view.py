@@ -16,7 +16,7 @@ pytestmark = [pytest.mark.gui, pytest.mark.timeout(180)]
 
 def other_session(path_name: str = "spk2_ta.tsv", start: float = 3.0, end: float = 8.0):
     """Another demo speaker's /ta/ (a different rate), cut to its first train."""
-    from tonguevis.gui.session import load_session, make_session
+    from tonguevis.workflows.session import load_session, make_session
 
     path = DEMO.with_name(path_name)
     if not path.exists():

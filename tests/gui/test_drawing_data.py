@@ -161,7 +161,7 @@ def test_video_frame_times():
 
 
 def test_session_signals_units_and_derivatives(fake):
-    from tonguevis.gui.session import Session
+    from tonguevis.workflows.session import Session
 
     _, recording, _ = fake
     session = Session(recording)
@@ -179,7 +179,7 @@ def test_session_signals_units_and_derivatives(fake):
 
 def test_sensor_map_needed_only_without_tongue_names(fake):
     from tonguevis.gui.dialogs import guess_role
-    from tonguevis.gui.session import needs_sensor_map, remap_session, Session
+    from tonguevis.workflows.session import needs_sensor_map, remap_session, Session
 
     _, recording, _ = fake
     assert not needs_sensor_map(recording)
@@ -193,7 +193,7 @@ def test_sensor_map_needed_only_without_tongue_names(fake):
 def test_production_intervals_from_objects_and_pairs():
     from types import SimpleNamespace
 
-    from tonguevis.gui.session import production_intervals
+    from tonguevis.workflows.session import production_intervals
 
     assert production_intervals([SimpleNamespace(start=2, end=3), (0.5, 1.0)]) == [(0.5, 1.0), (2.0, 3.0)]
     assert production_intervals(None) == []

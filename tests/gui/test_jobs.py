@@ -154,7 +154,7 @@ class _Threads:
 def test_models_are_built_in_the_job_and_handed_back_to_the_gui_thread(qtbot, window, monkeypatch):
     """The simulation and the Energy tab's corpus build the tongue model they need in their job; it
     reaches the window and the app model on the GUI thread, and no worker assigns anything there."""
-    import tonguevis.gui.simulation as simulation
+    import tonguevis.workflows.simulation as simulation
     from tests.gui.conftest import DEMO
     from tonguevis.gui.energy_tab import EnergyTab
 

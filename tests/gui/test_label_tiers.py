@@ -102,7 +102,7 @@ def test_without_labels_there_is_no_tier_row(qtbot, plot):
 def test_window_shows_the_recordings_tiers(qtbot, window):
     from dataclasses import replace
 
-    from tonguevis.gui.session import make_session
+    from tonguevis.workflows.session import make_session
 
     rec = replace(fake_recording(names=("TT", "TD", "TL", "TR")), labels=LABELS)
     window.show_session(make_session(rec))

@@ -33,7 +33,7 @@ def test_no_sound_is_one_thin_line(qtbot, window):
 
     session = demo_session()
     silent = replace(session.recording, audio=None)
-    from tonguevis.gui.session import make_session
+    from tonguevis.workflows.session import make_session
 
     show_and_simulate(qtbot, window, make_session(silent, session.path))
     audio = window.audio

@@ -17,7 +17,7 @@ pytestmark = [pytest.mark.gui, pytest.mark.timeout(300)]
 
 def tiled_session(minutes: float):
     """The demo /ta/ repeated to ``minutes`` (sensors, orientations and sound), as the app opens it."""
-    from tonguevis.gui.session import load_session, make_session
+    from tonguevis.workflows.session import load_session, make_session
 
     if not DEMO.exists():
         pytest.skip(f"demo corpus not built: {DEMO}")
@@ -93,7 +93,7 @@ def test_a_long_recording_shows_its_first_seconds_while_the_rest_simulates(qtbot
     assert energy_motions and all(m is whole for batch in energy_motions for m in batch.values())
     # the preview's colour ranges from a small sample of its frames, the whole motion's from its own
     from tonguevis.gui.frames import MotionFrames
-    from tonguevis.gui.simulation import PREVIEW_COLOUR_FRAMES
+    from tonguevis.workflows.simulation import PREVIEW_COLOUR_FRAMES
 
     assert ranges[0] == MotionFrames(preview, colour_frames=PREVIEW_COLOUR_FRAMES).clim != \
         MotionFrames(preview).clim

@@ -19,7 +19,7 @@ pytestmark = [pytest.mark.gui, pytest.mark.timeout(120)]
 
 
 def test_haskins_midsagittal_recording_plays(qtbot, window):
-    from tonguevis.gui.session import load_session
+    from tonguevis.workflows.session import load_session
 
     path = shared_file("ema", "mview", "F01_B01_S01_R01_N.mat")
     session = load_session(path, sensor_map="haskins")

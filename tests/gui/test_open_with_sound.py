@@ -97,7 +97,7 @@ def test_create_window_opens_with_the_given_sound(qtbot, tmp_path, settings):
 
 
 def test_export_video_reads_the_given_sound(monkeypatch, tmp_path):
-    import tonguevis.gui.session as session_module
+    import tonguevis.workflows.session as session_module
     from tonguevis.cli import main
 
     seen = {}

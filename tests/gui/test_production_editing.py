@@ -36,7 +36,7 @@ def panels(qtbot, recording_file):
     from tonguevis.appstate import AppState
     from tonguevis.gui.audio_panel import AudioPlot
     from tonguevis.gui.sensor_panel import SensorPanel
-    from tonguevis.gui.session import load_session
+    from tonguevis.workflows.session import load_session
     from tonguevis.gui.transport import TransportBar
 
     state = AppState()
@@ -84,7 +84,7 @@ def test_productions_and_landmarks_are_drawn_on_both_panels(panels):
 def test_drag_a_boundary_add_delete_and_save(qtbot, panels, recording_file):
     from PySide6.QtCore import QPoint, Qt
 
-    from tonguevis.gui.session import load_session
+    from tonguevis.workflows.session import load_session
 
     state, session, sensors, audio, transport = panels
     plot = sensors.plot

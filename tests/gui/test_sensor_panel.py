@@ -40,7 +40,7 @@ def export_like_recording() -> Recording:
 def panel(qtbot):
     from tonguevis.appstate import AppState
     from tonguevis.gui.sensor_panel import SensorPanel
-    from tonguevis.gui.session import Session
+    from tonguevis.workflows.session import Session
 
     widget = SensorPanel(AppState())
     qtbot.addWidget(widget)
@@ -135,7 +135,7 @@ def test_a_long_trace_is_drawn_as_its_envelope():
 
 def test_the_panel_draws_a_long_recording_as_envelopes(panel):
     from tonguevis.gui.sensor_panel import MAX_TRACE_POINTS, TRACE_BINS
-    from tonguevis.gui.session import Session
+    from tonguevis.workflows.session import Session
 
     n = MAX_TRACE_POINTS + 1
     times = np.arange(n) / 100.0
@@ -151,7 +151,7 @@ def test_the_panel_draws_a_long_recording_as_envelopes(panel):
 
 def test_displacements_from_rest_despite_a_channel_without_samples():
     """A dead port (S2, all NaN) must not push every sensor's rest to its first sample."""
-    from tonguevis.gui.session import Session
+    from tonguevis.workflows.session import Session
 
     rec = export_like_recording()
     displacement = Session(rec).signals("displacement")

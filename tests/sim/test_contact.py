@@ -248,7 +248,7 @@ def test_a_raised_palate_is_reported_once_with_its_reason(caplog, tmp_path):
     the surface it placed (no second preparation, no second warning), and the summary says why."""
     import logging
 
-    from tonguevis.gui.simulation import shown_palate
+    from tonguevis.workflows.simulation import shown_palate
     from tonguevis.io import read_recording
     from tonguevis.palate import fit_palate
     from tonguevis.paths import DATA_DIR

@@ -11,6 +11,7 @@ others' results alone.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
@@ -19,6 +20,7 @@ from pathlib import Path
 from typing import Any, Iterable
 
 from tonguevis.errors import TonguevisError
+from tonguevis.workflows.settings import RunSettings
 
 #: The steps, in the order they run for a recording.
 STEPS = ("simulate", "energy", "segment", "validate")
@@ -41,8 +43,10 @@ def parse_steps(steps: str | Iterable[str]) -> tuple[str, ...]:
 
 
 @dataclass(frozen=True)
-class BatchSettings:
-    """The settings of every step (the defaults are those of the single-file commands).
+class BatchSettings(RunSettings):
+    """The settings of every step (the defaults are those of the single-file commands): the run's
+    :class:`~tonguevis.workflows.settings.RunSettings` (how each recording is simulated; the model
+    comes from the :class:`ModelSpec`) and the batch's own steps.
 
     steps : subset of :data:`STEPS`.  "simulate" saves each motion (``motion.npz``)
         and its summary row; energy and segment simulate when no saved motion
@@ -64,14 +68,8 @@ class BatchSettings:
     """
 
     steps: tuple[str, ...] = DEFAULT_STEPS
-    modes: int = 100
-    landmarks: str = "speaker"
-    warping: bool = True
-    sensor_stiffness: float | None | str = "default"
-    rest: tuple[float, float] | None = None
     sensors: Any = None
     read_options: tuple = ()
-    sensor_patches: float | str | None = None
     keep: tuple[int, ...] | None = (2, 3, 4)
     window: str = "release"
     tier: str | None = None
@@ -80,26 +78,21 @@ class BatchSettings:
     csv: bool = False
 
     def __post_init__(self) -> None:
-        from tonguevis.sensor_stiffness import sensor_stiffness_value
-
+        if int(self.modes) < 1:
+            raise BatchError(f"modes must be at least 1, got {self.modes}")
+        super().__post_init__()
         object.__setattr__(self, "steps", parse_steps(self.steps))
-        object.__setattr__(self, "sensor_stiffness", sensor_stiffness_value(self.sensor_stiffness))
         object.__setattr__(self, "read_options", tuple(sorted(dict(self.read_options or ()).items())))
         if self.keep is not None:
             object.__setattr__(self, "keep", tuple(int(k) for k in self.keep))
-        if self.rest is not None:
-            object.__setattr__(self, "rest", (float(self.rest[0]), float(self.rest[1])))
-        if int(self.modes) < 1:
-            raise BatchError(f"modes must be at least 1, got {self.modes}")
         if self.window not in ("release", "vowel"):
             raise BatchError(f"window must be 'release' or 'vowel', got {self.window!r}")
         if self.segment_first is not None and int(self.segment_first) < 1:
             raise BatchError(f"segment_first must be at least 1, got {self.segment_first}")
 
-    def simulate_options(self) -> dict:
-        """Keyword arguments of :func:`tonguevis.workflows.simulate_recording` (besides the model)."""
-        return dict(modes=self.modes, warping=self.warping, landmarks=self.landmarks, rest=self.rest,
-                    sensor_stiffness=self.sensor_stiffness, sensor_patches=self.sensor_patches)
+    def run_settings(self) -> RunSettings:
+        """How each recording is simulated, as a plain :class:`RunSettings`."""
+        return RunSettings(**{f.name: getattr(self, f.name) for f in dataclasses.fields(RunSettings)})
 
     def step_settings(self, step: str) -> dict:
         """The settings ``step``'s results depend on (JSON-able)."""
@@ -124,6 +117,8 @@ class BatchSettings:
     def as_dict(self) -> dict:
         out = asdict(self)
         out["sensors"] = _sensor_map_text(self.sensors)
+        for name in ("mesh", "mesh_axes", "palate", "backend"):  # the model is the ModelSpec's; no contact
+            out.pop(name, None)
         return out
 
 

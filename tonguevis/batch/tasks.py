@@ -170,7 +170,7 @@ def _motion(task: Task, manifest: dict, rec, model, save: bool):
         motion = Motion.load(path)
         motion.model = model  # the same model (the key says so), with its caches
         return motion
-    motion = simulate_recording(rec, model, **task.settings.simulate_options())
+    motion = simulate_recording(rec, model, task.settings.run_settings())
     if save:
         motion.save(path)
     return motion

@@ -220,31 +220,36 @@ def read_recording_args(args):
     return open_recording(args.file, args.sensors, **reading_options(args))
 
 
+def run_settings_of(args, modes: int | None = None):
+    """The :class:`~tonguevis.workflows.settings.RunSettings` of a command's options (--mesh, --mesh-axes,
+    --modes, --linear, --landmarks, --sensor-stiffness, --sensor-patches, --rest, --palate); options a
+    command does not have keep their defaults."""
+    from tonguevis.workflows.settings import RunSettings
+
+    defaults = RunSettings()
+    return RunSettings(
+        mesh=getattr(args, "mesh", None), mesh_axes=getattr(args, "mesh_axes", None),
+        modes=getattr(args, "modes", defaults.modes) if modes is None else modes,
+        warping=not getattr(args, "linear", False), landmarks=getattr(args, "landmarks", defaults.landmarks),
+        sensor_stiffness=getattr(args, "sensor_stiffness", defaults.sensor_stiffness),
+        sensor_patches=sensor_patches_option(args), rest=rest_arg(args), palate=getattr(args, "palate", None))
+
+
 def load_model_args(args):
     """The tongue model of ``--mesh``/``--mesh-axes``, else the shipped default."""
-    from tonguevis.sim import TongueModel
+    from tonguevis.workflows.settings import build_model
 
-    if getattr(args, "mesh", None) is None:
-        return TongueModel.default()
-    options = {"axes": args.mesh_axes} if getattr(args, "mesh_axes", None) else {}
-    return TongueModel.from_mesh(args.mesh, **options)
+    return build_model(run_settings_of(args))
 
 
 def simulate_args(args, recording, model, modes: int | None = None, progress=None):
-    """Simulate with the command's --modes, --linear, --landmarks and --rest, with a tqdm bar (unless --quiet
+    """Simulate with the command's settings (:func:`run_settings_of`), with a tqdm bar (unless --quiet
     or a ``progress`` callback is given)."""
     from tonguevis._progress import tqdm_progress
     from tonguevis.workflows import simulate_recording
 
-    options = dict(modes=args.modes if modes is None else modes, warping=not getattr(args, "linear", False),
-                   landmarks=getattr(args, "landmarks", "speaker"), rest=rest_arg(args),
-                   sensor_stiffness=getattr(args, "sensor_stiffness", "default"),
-                   sensor_patches=sensor_patches_option(args))
-    if getattr(args, "palate", None) is not None:
-        from tonguevis.palate import load_palate
-
-        options["palate"] = load_palate(args.palate)
+    settings = run_settings_of(args, modes)
     if progress is not None:
-        return simulate_recording(recording, model, progress=progress, **options)
+        return simulate_recording(recording, model, settings, progress=progress)
     with tqdm_progress("simulating", disable=getattr(args, "quiet", False)) as bar:
-        return simulate_recording(recording, model, progress=bar, **options)
+        return simulate_recording(recording, model, settings, progress=bar)

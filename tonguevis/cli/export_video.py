@@ -41,10 +41,10 @@ def add_arguments(parser) -> None:
 
 def run(args) -> int:
     from tonguevis._progress import tqdm_progress
-    from tonguevis.cli._common import reading_options, rest_arg
+    from tonguevis.cli._common import reading_options, rest_arg, run_settings_of
     from tonguevis.errors import RecordingError
-    from tonguevis.gui.session import demo_recording_path, load_session
-    from tonguevis.gui.simulation import simulate_session
+    from tonguevis.workflows.session import demo_recording_path, load_session
+    from tonguevis.workflows.simulation import simulate_session
     from tonguevis.gui.video import export_video
 
     path = args.file or demo_recording_path()
@@ -54,15 +54,10 @@ def run(args) -> int:
         width, height = (int(v) for v in args.size.lower().split("x"))
     except ValueError:
         raise RecordingError(f"--size must look like 1280x720, got {args.size!r}") from None
-    palate = None
-    if args.palate is not None:
-        from tonguevis.palate import load_palate
-
-        palate = load_palate(args.palate)
     options = reading_options(args)  # -O, then --audio FILE
     session = load_session(path, sensor_map=args.sensors, rest=rest_arg(args), **options)
     with tqdm_progress("simulating", disable=args.quiet) as progress:
-        simulate_session(session, mesh_path=args.mesh, modes=args.modes, progress=progress, palate=palate)
+        simulate_session(session, run_settings_of(args), progress=progress)
     with tqdm_progress("rendering", disable=args.quiet) as progress:
         out = export_video(session, args.out, args.start, args.end, fps=args.fps, size=(width, height),
                            mode=args.color, progress=progress, frame=args.reference)

@@ -31,7 +31,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from tonguevis.palate import check_mesh_path, palate_from_traces
+    from tonguevis.palate import check_mesh_path
+    from tonguevis.workflows.palate import palate_from_traces
 
     check_mesh_path(args.out)
     from tonguevis.cli._common import parse_options

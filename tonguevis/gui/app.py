@@ -62,7 +62,7 @@ def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings
     if file is None and rest is None and audio is None and labels is None and not options:
         window.open_demo()  # with the palate given, if any
     else:
-        from tonguevis.gui.session import demo_recording_path
+        from tonguevis.workflows.session import demo_recording_path
 
         window.open_recording(file if file is not None else demo_recording_path(), sensor_map=sensors, rest=rest,
                               audio=audio, labels=labels, options=options)
@@ -77,7 +77,7 @@ def opening_problem(window, file):
     """
     from tonguevis.errors import RecordingError, TonguevisError
     from tonguevis.gui.dialogs import SensorMapDialog
-    from tonguevis.gui.session import TONGUE_NAMES
+    from tonguevis.workflows.session import TONGUE_NAMES
 
     dialog = window.last_dialog
     if isinstance(dialog, SensorMapDialog):

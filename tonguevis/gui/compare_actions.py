@@ -33,7 +33,7 @@ class CompareMixin:
         can be compared with itself under another model (``warping=False``: linear).
         ``layout`` ("side" or "ghost") and ``time_mode`` ("production" or "absolute") set the panel.
         """
-        from tonguevis.gui.session import load_session, needs_sensor_map
+        from tonguevis.workflows.session import load_session, needs_sensor_map
 
         try:
             session = load_session(path, sensor_map=sensor_map)
@@ -70,18 +70,18 @@ class CompareMixin:
             self.compare_job = None
 
     def _simulate_compare(self, session, settings: dict) -> None:
-        from tonguevis.gui.simulation import simulate_motion
+        from tonguevis.workflows.simulation import simulate_motion
         from tonguevis.gui.worker import run_job
 
         if self.compare_job is not None:
             self.compare_job.stop()
-        model, mesh_path = self.state.tongue_model, self.state.mesh_path
-        recording, rest = session.recording, session.given_rest
-        options = {"modes": settings["modes"], "warping": settings["warping"], "landmarks": self.landmarks,
-                   "palate": self.palate}
+        model = self.state.tongue_model
+        recording = session.recording
+        run = self.state.run_settings.replace(modes=settings["modes"], warping=settings["warping"],
+                                              rest=session.given_rest)
 
         def work(progress):
-            return simulate_motion(recording, rest, model=model, mesh_path=mesh_path, progress=progress, **options)
+            return simulate_motion(recording, run, model, progress=progress)
 
         def done(result) -> None:
             if self.state.session_of("compare") is not session:

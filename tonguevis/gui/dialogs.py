@@ -8,7 +8,7 @@ from pathlib import Path
 from PySide6.QtWidgets import (QComboBox, QDialog, QDialogButtonBox, QFileDialog, QFormLayout, QHBoxLayout,
                                QLabel, QLineEdit, QMessageBox, QPushButton, QVBoxLayout, QWidget)
 
-from tonguevis.gui.session import ROLES, TONGUE_NAMES
+from tonguevis.workflows.session import ROLES, TONGUE_NAMES
 
 IGNORE = "(not used)"
 

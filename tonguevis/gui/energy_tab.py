@@ -222,7 +222,7 @@ class EnergyTab(QtWidgets.QWidget):
         provider, options = self.model_provider, dict(self.simulate_options)
 
         def work(progress):
-            from tonguevis.gui.simulation import build_model
+            from tonguevis.workflows.simulation import build_model
 
             used = model
             if used is None:

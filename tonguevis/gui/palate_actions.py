@@ -106,7 +106,7 @@ class PalateMixin:
     def fit_palate(self, traces, out, probe: str = "PROBE", sensors=None) -> None:
         """Fit a palate to ``traces`` in a job (progress, cancel), save it at ``out`` and simulate with it."""
         from tonguevis.gui.export import run_with_progress
-        from tonguevis.palate import palate_from_traces
+        from tonguevis.workflows.palate import palate_from_traces
 
         out = Path(out)
         if not out.suffix:

@@ -21,7 +21,7 @@ from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QLabel, QPushBu
 
 from tonguevis.appstate import AppState
 from tonguevis.errors import TonguevisError
-from tonguevis.gui.session import SIGNAL_KINDS, Session, tongue_sensors
+from tonguevis.workflows.session import SIGNAL_KINDS, Session, tongue_sensors
 from tonguevis.gui.timeplot import TimePlot
 from tonguevis.render.production_marks import mark_landmarks, shade_productions
 

@@ -31,7 +31,7 @@ from tonguevis.gui.palate_panel import PalatePanel
 from tonguevis.gui.playback import PlaybackController
 from tonguevis.gui.rest_dialog import RestMixin
 from tonguevis.gui.sensor_panel import SensorPanel
-from tonguevis.gui.session import Session, load_session, needs_sensor_map, remap_session
+from tonguevis.workflows.session import Session, load_session, needs_sensor_map, remap_session
 from tonguevis.gui.transport import TransportBar
 from tonguevis.gui.view3d import View3D
 from tonguevis.gui.worker import Job, run_job
@@ -68,12 +68,10 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         self.setAcceptDrops(True)
         self.state = state or AppState()
         self.settings = settings or QSettings("tonguevis", "tonguevis")
-        self.modes, self.warping = modes, warping
+        # How the app simulates: one RunSettings in the app model (tonguevis.workflows.settings).
+        self.state.change_run_settings(self, modes=modes, warping=warping, palate=palate)
         if mesh_path is not None or self.state.mesh_path is not None:
             self.state.set_tongue_model(None, mesh_path, self)
-        self.landmarks = "speaker"  # sensor nodes: the speaker's layout ("rule": the paper's placement)
-        self.sensor_patches = None  # Simulation ▸ Sensors on the surface: "default" (tonguevis.sim.patches)
-        self.palate = palate
         self.worker: Job | None = None  # the simulation's job
         self.export_job: Job | None = None  # the latest export or palate fit
         self.last_dialog = None
@@ -165,6 +163,18 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
     def mesh_path(self):
         return self.state.mesh_path
 
+    # The run settings' fields, read and written through the app model (the menus and scripts use these).
+    modes = property(lambda self: self.state.run_settings.modes,
+                     lambda self, value: self.state.change_run_settings(self, modes=value))
+    warping = property(lambda self: self.state.run_settings.warping,
+                       lambda self, value: self.state.change_run_settings(self, warping=value))
+    landmarks = property(lambda self: self.state.run_settings.landmarks,
+                         lambda self, value: self.state.change_run_settings(self, landmarks=value))
+    sensor_patches = property(lambda self: self.state.run_settings.sensor_patches,
+                              lambda self, value: self.state.change_run_settings(self, sensor_patches=value))
+    palate = property(lambda self: self.state.run_settings.palate,
+                      lambda self, value: self.state.change_run_settings(self, palate=value))
+
     @property
     def time_views(self) -> dict[str, object]:
         """Every view with a time cursor (name -> object with ``cursor_time``)."""
@@ -222,7 +232,7 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         return Path(recent[0]).parent if recent else Path.cwd()
 
     def open_demo(self) -> None:
-        from tonguevis.gui.session import demo_recording_path
+        from tonguevis.workflows.session import demo_recording_path
 
         path = demo_recording_path()
         if path is None:
@@ -264,7 +274,7 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         self.show_session(session)
 
     def open_mesh(self, path) -> None:
-        from tonguevis.gui.simulation import build_model
+        from tonguevis.workflows.simulation import build_model
 
         try:
             model = build_model(path)  # on the GUI thread: reading a mesh is quick
@@ -315,18 +325,16 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         The job returns the model it used and the motion; nothing is assigned until
         :meth:`_on_simulated` runs on the GUI thread.  A long recording's first seconds come
         first (:meth:`_on_preview`): the views show them while the rest simulates."""
-        from tonguevis.gui.simulation import simulate_motion
+        from tonguevis.workflows.simulation import simulate_motion
 
         self._cancel_worker()
         palate = self.palate if palate is NO_PALATE else palate
-        model, mesh_path = self.state.tongue_model, self.state.mesh_path  # read here, on the GUI thread
-        recording, rest = session.recording, session.given_rest
-        options = {"modes": self.modes, "warping": self.warping, "landmarks": self.landmarks, "palate": palate,
-                   "sensor_patches": self.sensor_patches}
+        model = self.state.tongue_model  # read here, on the GUI thread
+        settings = self.state.run_settings.replace(palate=palate, rest=session.given_rest)
+        recording = session.recording
 
         def work(progress, partial):
-            return simulate_motion(recording, rest, model=model, mesh_path=mesh_path, progress=progress,
-                                   preview=partial, **options)
+            return simulate_motion(recording, settings, model, progress=progress, preview=partial)
 
         def explain(message: str) -> str:
             if palate is None:
@@ -337,7 +345,8 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
 
         against = "" if palate is None else f" against the {self._palate_name(palate)}"
         self.state.set_status(f"simulating {session.name} with {self.modes} modes{against}…", self)
-        self.worker = run_job(self, "Simulation", work, lambda result: self._on_simulated(session, result, mesh_path),
+        self.worker = run_job(self, "Simulation", work,
+                              lambda result: self._on_simulated(session, result, settings.mesh),
                               label=f"Simulating {session.name}…", path=session.path, explain=explain,
                               on_failed=lambda _message: self.simulation_finished.emit(False),
                               on_cancelled=lambda: self.simulation_finished.emit(False),

@@ -1,16 +1,9 @@
-"""The pipeline in one place, for every front end: open -> rest -> prepare -> simulate -> productions.
-
-The CLI commands, the app, the corpus loader and the scripts call these
-functions; none strings the stages together on its own (when each did, they
-drifted apart).  No Qt here.
+"""Opening a recording and finding its productions, as every front end does.
 
 * :func:`open_recording`: read any supported file with its sensor map, sound and labels.
 * :func:`head_corrected`: head motion removed when there are >= 3 head references.
 * :func:`find_recording_productions`: head-correct, then find the CV productions (or take
   them from a label tier).
-* :func:`simulate_recording`: choose the rest (given, detected, or the stillest
-  window), prepare the targets and simulate; ``motion.metadata["rest"]`` says
-  which rest was used and :func:`rest_of` gives it back as a :class:`RestChoice`.
 """
 
 from __future__ import annotations
@@ -18,15 +11,10 @@ from __future__ import annotations
 import os
 from typing import Any
 
-from tonguevis._progress import ProgressCallback
 from tonguevis.io.recording import Recording
 from tonguevis.preprocess.correction import head_corrected, head_references
-from tonguevis.preprocess.rest import RestChoice, check_rest_interval, choose_rest_interval
 
-__all__ = [
-    "RestChoice", "check_rest_interval", "choose_rest_interval", "find_recording_productions", "head_corrected",
-    "head_references", "open_recording", "rest_of", "simulate_recording",
-]
+__all__ = ["find_recording_productions", "head_corrected", "head_references", "open_recording"]
 
 
 def open_recording(path: str | os.PathLike, sensors: dict | str | os.PathLike | None = None, *,
@@ -73,33 +61,3 @@ def find_recording_productions(recording: Recording, articulator: str | None = N
     if tier is not None:
         return productions_from_tier(rec, tier, articulator=articulator, syllable=syllable)
     return find_productions(rec, articulator=articulator, keep=keep, trains=trains, syllable=syllable)
-
-
-def simulate_recording(recording: Recording, model=None, *, modes: int = 100, warping: bool = True,
-                       landmarks: str = "speaker", rest: RestChoice | tuple[float, float] | None = None,
-                       progress: ProgressCallback | None = None, **options: Any):
-    """Drive ``model`` (default: the shipped tongue) with ``recording``; returns a :class:`~tonguevis.sim.Motion`.
-
-    rest : None (the longest still interval, else the stillest window, with a
-        warning), a (start_s, end_s) the user gave (checked: a bad one raises
-        RecordingError naming the file and the problem), or a :class:`RestChoice`.
-    options : passed to :func:`tonguevis.sim.simulate` (``smooth_window``, ``tolerance``...);
-        ``sensor_stiffness`` takes the CLI's words too: a positive number, "default" or "hard"
-        (:func:`tonguevis.sensor_stiffness.sensor_stiffness_value`; any other is a SimulationError).
-    The choice is in ``motion.metadata["rest"]``; :func:`rest_of` reads it back.
-    """
-    from tonguevis.sensor_stiffness import sensor_stiffness_value
-    from tonguevis.sim.simulate import simulate
-
-    if "sensor_stiffness" in options:
-        options["sensor_stiffness"] = sensor_stiffness_value(options["sensor_stiffness"],
-                                                             recording.metadata.get("file"))
-
-    return simulate(recording, model, modes=modes, warping=warping, landmarks=landmarks, rest_interval=rest,
-                    progress=progress, **options)
-
-
-def rest_of(motion) -> RestChoice | None:
-    """The rest a motion was simulated with (None for motions saved before it was recorded)."""
-    data = getattr(motion, "metadata", {}).get("rest")
-    return RestChoice.from_dict(data) if isinstance(data, dict) and "interval" in data else None

@@ -1,41 +1,81 @@
-"""Build the tongue model and simulate a session (no Qt; the job runner's thread runs this).
+"""Simulating a recording, as every front end does (no Qt; the app's job thread runs this too).
 
-:func:`simulate_motion` only *returns* what it made (a :class:`Simulated`): the model
-it built or was given, the motion, its drawing frames and the palate shown.  The GUI
-thread then sets them on the session (:meth:`Simulated.apply`); nothing shared is
-assigned from the worker thread.
+* :func:`simulate_recording`: choose the rest (given, detected, or the stillest window),
+  prepare the targets and simulate with a :class:`~tonguevis.workflows.settings.RunSettings`;
+  ``motion.metadata["rest"]`` says which rest was used and :func:`rest_of` gives it back.
+* :func:`simulate_motion`: the same for the app and ``export-video``, returning a
+  :class:`Simulated` (the model, the motion, its drawing frames and the palate shown); the GUI
+  thread then sets them on the session (:meth:`Simulated.apply`): nothing shared is assigned
+  from the worker thread.
 """
 
 from __future__ import annotations
 
 import logging
-import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 from tonguevis._progress import ProgressCallback
 from tonguevis.gui.frames import MotionFrames
-from tonguevis.gui.session import Session
+from tonguevis.io.recording import Recording
+from tonguevis.preprocess.rest import RestChoice
+from tonguevis.workflows.session import Session
+from tonguevis.workflows.settings import RunSettings, build_model
 
 log = logging.getLogger("tonguevis")
 
 #: Frames sampled for the colour ranges of a preview (the whole motion samples up to frames.COLOUR_FRAMES).
 PREVIEW_COLOUR_FRAMES = 200
+#: simulate_recording's keywords that are settings of the run (the others go to tonguevis.sim.simulate as they are).
+_SETTING_NAMES = ("modes", "warping", "landmarks", "rest", "sensor_stiffness", "sensor_patches", "palate", "backend")
 
 
-def build_model(mesh_path: str | os.PathLike | None = None):
-    """The default tongue model, or one on the mesh at ``mesh_path``."""
-    from tonguevis import TongueModel
+def run_settings(settings: RunSettings | None = None, **changes: Any) -> RunSettings:
+    """``settings`` (default: the defaults) with ``changes`` applied (field name -> value)."""
+    settings = settings or RunSettings()
+    return settings.replace(**changes) if changes else settings
 
-    if mesh_path is None:
-        return TongueModel.default()
-    from_file = getattr(TongueModel, "from_file", None)
-    if from_file is not None:
-        return from_file(Path(mesh_path))
-    from tonguevis.mesh import read_mesh
 
-    return TongueModel.from_mesh(read_mesh(Path(mesh_path)))
+def simulate_recording(recording: Recording, model=None, settings: RunSettings | None = None, *,
+                       progress: ProgressCallback | None = None, **options: Any):
+    """Drive ``model`` (default: built from ``settings``) with ``recording``; returns a
+    :class:`~tonguevis.sim.Motion`.
+
+    settings : a :class:`RunSettings` (default: ``tonguevis simulate``'s); any of its fields given
+        as a keyword (``modes=``, ``warping=``, ``landmarks=``, ``rest=``, ``sensor_stiffness=``,
+        ``sensor_patches=``, ``palate=``, ``backend=``) overrides it.
+    rest : None (the longest still interval, else the stillest window, with a warning), a
+        (start_s, end_s) the user gave (checked: a bad one raises RecordingError naming the file
+        and the problem), or a :class:`RestChoice` (used as is).
+    options : the others go to :func:`tonguevis.sim.simulate` as they are (``smooth_window``,
+        ``tolerance``, ``preview``...).
+    The choice of rest is in ``motion.metadata["rest"]``; :func:`rest_of` reads it back.
+    """
+    from tonguevis.errors import SimulationError
+    from tonguevis.sim.simulate import simulate
+
+    changes = {name: options.pop(name) for name in _SETTING_NAMES if name in options}
+    rest_choice = changes.pop("rest", None) if isinstance(changes.get("rest"), RestChoice) else None
+    palate_given = changes.pop("palate", None) if "palate" in changes else None
+    try:
+        settings = run_settings(settings, **changes)
+    except SimulationError as exc:  # say which recording the bad setting was for
+        raise SimulationError(str(exc), recording.metadata.get("file")) from None
+    if model is None:
+        model = build_model(settings)
+    sim_options = settings.simulate_options()
+    if rest_choice is not None:
+        sim_options["rest_interval"] = rest_choice
+    palate = palate_given if palate_given is not None else settings.palate
+    if palate is not None:
+        sim_options["palate"] = palate
+    return simulate(recording, model, progress=progress, **sim_options, **options)
+
+
+def rest_of(motion) -> RestChoice | None:
+    """The rest a motion was simulated with (None for motions saved before it was recorded)."""
+    data = getattr(motion, "metadata", {}).get("rest")
+    return RestChoice.from_dict(data) if isinstance(data, dict) and "interval" in data else None
 
 
 def staged(progress: ProgressCallback | None, stage: int, stages: int, name: str) -> ProgressCallback | None:
@@ -67,41 +107,27 @@ class Simulated:
         return session
 
 
-def simulate_motion(
-    recording,
-    given_rest: tuple[float, float] | None = None,
-    model=None,
-    mesh_path: str | os.PathLike | None = None,
-    modes: int = 100,
-    warping: bool = True,
-    landmarks: str = "speaker",
-    progress: ProgressCallback | None = None,
-    palate=None,
-    preview=None,
-    sensor_patches=None,
-) -> Simulated:
-    """Simulate ``recording`` on ``model`` (None: built from ``mesh_path``); returns a :class:`Simulated`.
+def simulate_motion(recording, settings: RunSettings | None = None, model=None, *,
+                    progress: ProgressCallback | None = None, preview=None, **changes: Any) -> Simulated:
+    """Simulate ``recording`` with ``settings`` on ``model`` (None: built from the settings); returns a
+    :class:`Simulated`.  ``changes`` override fields of ``settings`` (``rest=``, ``modes=``...).
 
-    ``palate`` (a PalateSurface, a palate file or "generic"; None: no contact): the tongue is kept
-    below it; the :attr:`Simulated.shown_palate` is it placed in the model frame as the simulation
-    placed it (without one, the generic palate, drawn only).  The rest is ``given_rest`` when the
-    user gave one, else found as every front end finds it (:func:`tonguevis.workflows.simulate_recording`).
-    ``landmarks``: sensor nodes snapped to the speaker's layout ('speaker') or the paper's placement
-    rule ('rule').  ``sensor_patches`` as :func:`tonguevis.simulate` (None: the modes alone).
+    The settings' palate (a palate file or "generic"; None: no contact) keeps the tongue below it;
+    :attr:`Simulated.shown_palate` is it as the simulation placed it (without one, the generic
+    palate, drawn only).  The rest is the settings' when the user gave one, else found as every
+    front end finds it (:func:`simulate_recording`).
     ``progress(done, total, message)`` may raise :class:`tonguevis.errors.Cancelled`.
     ``preview(simulated)``: called once, on this thread, with a :class:`Simulated` of the recording's first
     seconds as soon as they are final (:func:`tonguevis.sim.simulate`'s preview; a long recording is shown
     while the rest simulates; not called for a short one, nor with a palate).
     """
-    from tonguevis.workflows import simulate_recording
-
+    settings = run_settings(settings, **changes)
     if progress is not None:
         progress(0, 1000, "building the tongue model")
     if model is None:
-        model = build_model(mesh_path)
-    options = {} if palate is None else {"palate": palate}
-    if sensor_patches is not None:
-        options["sensor_patches"] = sensor_patches
+        model = build_model(settings)
+    palate = settings.palate
+    options = {}
     if preview is not None:
         def first_seconds(motion) -> None:
             # Colour ranges from a sample of the first seconds: the whole motion brings its own.
@@ -109,19 +135,19 @@ def simulate_motion(
                               shown_palate(recording, motion, model, palate)))
 
         options["preview"] = first_seconds
-    motion = simulate_recording(recording, model, modes=modes, warping=warping, landmarks=landmarks,
-                                rest=given_rest, progress=staged(progress, 0, 2, "simulating"), **options)
+    motion = simulate_recording(recording, model, settings, progress=staged(progress, 0, 2, "simulating"), **options)
     shown = shown_palate(recording, motion, model, palate)
     frames = MotionFrames(motion, progress=staged(progress, 1, 2, "reconstructing frames"))
     return Simulated(model, motion, frames, palate, shown)
 
 
-def simulate_session(session: Session, **options) -> Session:
-    """Simulate ``session.recording`` with :func:`simulate_motion` (its ``options``: model, mesh_path,
-    modes, warping, landmarks, progress, palate; the rest ``session.given_rest``) and return the session
-    with ``motion``, ``frames``, ``rest`` and the palates set (for scripts, the CLI and tests on one
-    thread; the app sets them on the GUI thread instead)."""
-    return simulate_motion(session.recording, session.given_rest, **options).apply(session)
+def simulate_session(session: Session, settings: RunSettings | None = None, model=None, **changes: Any) -> Session:
+    """Simulate ``session.recording`` with :func:`simulate_motion` (the rest: ``session.given_rest`` unless
+    ``changes`` give one) and return the session with ``motion``, ``frames``, ``rest`` and the palates set
+    (for scripts, the CLI and tests on one thread; the app sets them on the GUI thread instead)."""
+    progress = changes.pop("progress", None)
+    changes.setdefault("rest", session.given_rest)
+    return simulate_motion(session.recording, settings, model, progress=progress, **changes).apply(session)
 
 
 def shown_palate(recording, motion, model, palate):
