@@ -28,6 +28,8 @@ COMMANDS: list[tuple[str, str, str]] = [
     ("validate", "validate", "leave-one-sensor-out validation of the model"),
     ("palate", "palate", "the speaker's palate surface from palate-trace recordings"),
     ("batch", "batch", "a whole corpus: simulate, energy, segment, validate; resumable, in parallel"),
+    ("stream", "stream", "serve a recording over the NDI WaveFront real-time protocol (a replay server)"),
+    ("record", "record", "record a live stream (NDI WaveFront) as an NDI Wave TSV, written as it arrives"),
 ]
 
 

@@ -11,7 +11,8 @@ loop) in microseconds.  Positions are the recording's, in mm, slot k being the
 recording's k-th sensor.
 
 Commands answered (case-insensitive, as LIVE.md lists them): ``Version``,
-``SendParameters`` (an XML list of the slots: ``<Sensor slot= id= name=>``),
+``SendParameters`` (an XML list of the slots, ``<Sensor slot= id= name=>``, and ``<Axes>x,y,z</Axes>``
+when the recording's positions are in tonguevis's frame),
 ``SendCurrentFrame``, ``StreamFrames AllFrames | Frequency:n | FrequencyDivisor:n | Stop``,
 ``SetByteOrder BigEndian|LittleEndian`` (the reply is already in the new order), ``Bye``.
 Anything else gets an error packet ``Error-...``.  The reply texts are ours: the real
@@ -146,10 +147,13 @@ class ReplayServer:
 
     def parameters_xml(self) -> str:
         rate = float(self.recording.rate)
+        # Our own element: the positions are already in tonguevis's frame when the recording was read with its axes.
+        axes = "<Axes>x,y,z</Axes>" if self.recording.metadata.get("frame") == "tonguevis" else ""
         sensors = "".join(f'<Sensor slot="{k}" id="{self.ids[k]}" name={quoteattr(str(name))}/>'
                           for k, name in enumerate(self.names))
         return (f'<?xml version="1.0" encoding="ascii"?><WaveFront server="tonguevis replay">'
-                f'<Frequency>{rate:g}</Frequency><Sensors count="{len(self.names)}">{sensors}</Sensors></WaveFront>')
+                f'<Frequency>{rate:g}</Frequency>{axes}<Sensors count="{len(self.names)}">{sensors}</Sensors>'
+                f'</WaveFront>')
 
     # --- serving ---------------------------------------------------------------------------------------
     def start(self) -> int:

@@ -102,6 +102,9 @@ class Source(ABC):
     sensor_names: list[str] | None = None
     #: Slot ids when the device told them (NDI Wave port ids), else None.
     sensor_ids: list[int] | None = None
+    #: "x,y,z" when the device said its positions are already in tonguevis's frame (x anterior,
+    #: y left, z up; the replay server of a recording read with its axes), else None (device frame).
+    axes: str | None = None
 
     @abstractmethod
     def start(self) -> "Source":
@@ -172,7 +175,9 @@ class ThreadedSource(Source):
             self._status.message = message
             if error:
                 self._errors.append(message)
-        (log.warning if error else log.info)("live source: %s", message)
+        # With a callback the consumer shows the message; the log then keeps it quiet (no double lines).
+        level = logging.WARNING if error and self._on_event is None else logging.INFO
+        log.log(level, "live source: %s", message)
         if self._on_event is not None:
             try:
                 self._on_event(message)
@@ -258,26 +263,27 @@ class _Closed(Exception):
     pass
 
 
-def parse_parameters(text: str) -> tuple[list[str] | None, list[int] | None]:
-    """(slot names, slot ids) from a SendParameters XML reply, when it lists sensors.
+def parse_parameters(text: str) -> tuple[list[str] | None, list[int] | None, str | None]:
+    """(slot names, slot ids, axes) from a SendParameters XML reply, each None when it does not say.
 
     WaveFront's own schema is not known; this reads ``<Sensor>`` (or ``<Tool>``)
     elements in document order with a ``name`` and an ``id`` (or ``port``) attribute,
-    the layout :mod:`tonguevis.live.server` sends.  Anything else gives (None, None).
+    and an ``<Axes>`` element, the layout :mod:`tonguevis.live.server` sends.
     """
     try:
         root = ET.fromstring(text)
     except ET.ParseError:
-        return None, None
+        return None, None, None
+    axes = next((e.text.strip() for e in root.iter() if e.tag.lower() == "axes" and e.text), None)
     elements = [e for e in root.iter() if e.tag.lower() in ("sensor", "tool")]
     if not elements:
-        return None, None
+        return None, None, axes
     names = [e.get("name") or f"slot{k}" for k, e in enumerate(elements)]
     try:
         ids = [int(e.get("id", e.get("port"))) for e in elements]
     except (TypeError, ValueError):
         ids = None
-    return names, ids
+    return names, ids, axes
 
 
 class WaveFrontSource(ThreadedSource):
@@ -413,9 +419,10 @@ class WaveFrontSource(ThreadedSource):
                 self._event(f"{command!r} answered with an error: {reply.text}", error=True)
             elif reply.type == PacketType.XML and command.startswith("SendParameters"):
                 self.parameters_xml = reply.text
-                names, ids = parse_parameters(reply.text)
+                names, ids, axes = parse_parameters(reply.text)
                 if names is not None:
                     self.sensor_names, self.sensor_ids = names, ids
+                self.axes = axes
         if self._reader.detected:
             self._event(f"the device speaks {'little' if self._reader.detected == '<' else 'big'}-endian")
         self._send(sock, "StreamFrames AllFrames")
@@ -471,6 +478,7 @@ class RecordingSource(ThreadedSource):
         self.sensor_names = list(recording.sensor_names)
         ids = recording.metadata.get("ndi_ids")
         self.sensor_ids = list(ids) if ids is not None and len(ids) == len(self.sensor_names) else None
+        self.axes = "x,y,z" if recording.metadata.get("frame") == "tonguevis" else None
         self._frames = recording_frames(recording)
 
     def _run(self) -> None:
