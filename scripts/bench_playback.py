@@ -138,7 +138,7 @@ class Timings:
     """Wall and CPU time of the renders (per view too), the buffer updates and the plots' redraws."""
 
     def __init__(self, window, finish_views: bool = False):
-        from tonguevis.gui.scene import TongueScene
+        from tonguevis.render.scene import TongueScene
 
         self.window = window
         self.finish_views = finish_views

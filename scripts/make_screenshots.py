@@ -97,7 +97,7 @@ def closest_frame_time(session) -> float:
     """The time at which the tongue's upper surface comes closest to the palate (head frame)."""
     import numpy as np
 
-    from tonguevis.gui.drawing import contact_at
+    from tonguevis.render.drawing import contact_at
 
     closest = [contact_at(session, i)["closest_mm"] for i in range(session.frames.n_frames)]
     closest = np.array([np.inf if c is None else c for c in closest])

@@ -179,7 +179,7 @@ def test_a_silent_video_says_it_is_silent_and_why(monkeypatch, tmp_path, capsys)
 
     import tonguevis.workflows.session as session_module
     import tonguevis.workflows.simulation as simulation
-    import tonguevis.gui.video as video
+    import tonguevis.render.video as video
     from tonguevis.io import Audio, Recording
 
     sound = {"audio": None}

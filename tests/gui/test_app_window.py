@@ -235,7 +235,7 @@ def test_audio_device_drives_the_clock(qtbot, window):
 def test_jaw_and_palate_shown_and_hidden(qtbot, window):
     show_and_simulate(qtbot, window, demo_session())
     scene = window.view3d.scene
-    from tonguevis.gui.view3d import context_surfaces
+    from tonguevis.render.scene import context_surfaces
 
     if not context_surfaces():
         pytest.skip("no jaw/palate surfaces in meshes/")

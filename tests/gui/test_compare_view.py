@@ -86,7 +86,7 @@ def test_ghost_draws_b_translucent_in_each_of_a_views(qtbot, pair):
     renderers = window.view3d.plotter.renderers
     assert len(panel._ghosts) == len(renderers) == 4
     from tonguevis.render.surface_geometry import hidden_side
-    from tonguevis.gui.view3d import surface_faces
+    from tonguevis.render.scene import surface_faces
 
     # B's tongue is closed: the ghost is its near wall only (both walls, blended in triangle
     # order, showed the triangles as patches).
@@ -127,7 +127,7 @@ def _lit_b(panel):
 
 def test_b_is_lit_and_coloured_like_a_by_default(qtbot, pair):
     """Without any option B is drawn as A is: A's colouring through A's colour map, lit by A's lights."""
-    from tonguevis.gui.scene import LIGHTS, TONGUE_COLOUR, TONGUE_MATERIAL, mapped_colours
+    from tonguevis.render.scene import LIGHTS, TONGUE_COLOUR, TONGUE_MATERIAL, mapped_colours
     from tonguevis.render.shading import shade
 
     window, _a, b, panel = pair

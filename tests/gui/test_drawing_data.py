@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tests.gui.fakes import FakeModel, box_mesh, fake_motion, fake_recording
-from tonguevis.gui.energy_density import EnergyDensity
+from tonguevis.render.energy_density import EnergyDensity
 from tonguevis.sim.assembly import assemble_stiffness
 
 
@@ -55,7 +55,7 @@ def test_nodal_average_is_volume_weighted_mean():
 
 
 def test_motion_frames_match_the_motion(fake):
-    from tonguevis.gui.frames import MotionFrames
+    from tonguevis.render.frames import MotionFrames
 
     model, _, motion = fake
     frames = MotionFrames(motion, block=7)  # blocks that do not divide the frame count
@@ -84,7 +84,7 @@ def test_motion_frames_match_the_motion(fake):
 
 
 def test_motion_frames_cache_stays_bounded_and_colours_come_from_a_sample(fake):
-    from tonguevis.gui.frames import MotionFrames
+    from tonguevis.render.frames import MotionFrames
 
     model, _, motion = fake
     frames = MotionFrames(motion, block=8, cache_frames=32, colour_frames=20)
@@ -154,7 +154,7 @@ def test_spectrogram_of_long_sound_is_scipys_columns_spread_over_it():
 
 
 def test_video_frame_times():
-    from tonguevis.gui.video import frame_times
+    from tonguevis.render.video import frame_times
 
     t = frame_times(1.0, 2.0, 25)
     assert len(t) == 25 and t[0] == 1.0 and t[-1] < 2.0
@@ -205,8 +205,8 @@ def test_draw_frame_in_the_head_and_the_jaw_frame(fake):
     from dataclasses import replace
     from types import SimpleNamespace
 
-    from tonguevis.gui.drawing import draw_frame, generic_shown, speaker_palate
-    from tonguevis.gui.frames import MotionFrames
+    from tonguevis.render.drawing import draw_frame, generic_shown, speaker_palate
+    from tonguevis.render.frames import MotionFrames
     from tonguevis.palate import PalateSurface
 
     model, _, still = fake
@@ -240,7 +240,7 @@ def test_draw_frame_in_the_head_and_the_jaw_frame(fake):
 
 
 def test_midline_profile_runs_from_the_tip_back_along_the_mid_plane():
-    from tonguevis.gui.drawing import MIDLINE_BIN_MM, MidlineProfile
+    from tonguevis.render.drawing import MIDLINE_BIN_MM, MidlineProfile
 
     model = FakeModel(box_mesh(8, 4, 3, size=(0.07, 0.04, 0.03)))
     model.dorsal_nodes = np.flatnonzero(np.isclose(model.mesh.points[:, 2], 0.03))

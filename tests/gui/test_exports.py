@@ -45,7 +45,7 @@ def test_window_screenshot_is_not_blank_and_shows_the_3d_views(qtbot, window, tm
 
 
 def test_video_has_video_and_audio_streams(qtbot, window, tmp_path):
-    from tonguevis.gui.video import export_video, probe_streams
+    from tonguevis.render.video import export_video, probe_streams
 
     session = show_and_simulate(qtbot, window, demo_session())
     out = tmp_path / "clip.mp4"
@@ -56,7 +56,7 @@ def test_video_has_video_and_audio_streams(qtbot, window, tmp_path):
 
 
 def test_video_of_empty_range_is_an_error(qtbot, window, tmp_path):
-    from tonguevis.gui.video import ExportError, export_video
+    from tonguevis.render.video import ExportError, export_video
 
     session = show_and_simulate(qtbot, window, demo_session(3.5, 5.5))
     with pytest.raises(ExportError, match="empty time range"):
@@ -67,7 +67,7 @@ def test_video_of_empty_range_is_an_error(qtbot, window, tmp_path):
 def test_vtk_series_round_trip(qtbot, window, tmp_path):
     import pyvista as pv
 
-    from tonguevis.gui.video import export_vtk_series
+    from tonguevis.render.video import export_vtk_series
 
     session = show_and_simulate(qtbot, window, demo_session(3.5, 5.6))
     frames = session.frames

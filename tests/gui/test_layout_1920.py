@@ -48,7 +48,7 @@ def test_no_sound_is_one_thin_line(qtbot, window):
 def test_the_colour_maps_low_end_stands_off_the_background():
     import pyvista as pv
 
-    from tonguevis.gui.scene import BACKGROUND, colour_map, contrast_ratio
+    from tonguevis.render.scene import BACKGROUND, colour_map, contrast_ratio
 
     lut = pv.LookupTable(cmap=colour_map(), n_values=256)
     lut.scalar_range = (0.0, 1.0)
@@ -62,7 +62,7 @@ def test_the_colour_bar_sits_beside_the_tongue_not_on_its_tip(size):
     of the tongue, as the main view draws it, lies left of the colour bar."""
     import pyvista as pv
 
-    from tonguevis.gui.scene import TongueScene
+    from tonguevis.render.scene import TongueScene
     from tonguevis.sim import TongueModel
 
     model = TongueModel.default()

@@ -37,7 +37,7 @@ def tiled_session(minutes: float):
 
 
 def test_a_two_minute_recording_opens_without_precomputing_every_frame(qtbot, window):
-    from tonguevis.gui.frames import CACHE_FRAMES, COLOUR_FRAMES
+    from tonguevis.render.frames import CACHE_FRAMES, COLOUR_FRAMES
 
     session = show_and_simulate(qtbot, window, tiled_session(2.0), timeout=240000)
     frames = session.frames
@@ -92,7 +92,7 @@ def test_a_long_recording_shows_its_first_seconds_while_the_rest_simulates(qtbot
     assert window.worker.dialog is None  # closed at the preview: the window was usable from then on
     assert energy_motions and all(m is whole for batch in energy_motions for m in batch.values())
     # the preview's colour ranges from a small sample of its frames, the whole motion's from its own
-    from tonguevis.gui.frames import MotionFrames
+    from tonguevis.render.frames import MotionFrames
     from tonguevis.workflows.simulation import PREVIEW_COLOUR_FRAMES
 
     assert ranges[0] == MotionFrames(preview, colour_frames=PREVIEW_COLOUR_FRAMES).clim != \

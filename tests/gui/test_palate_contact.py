@@ -75,7 +75,7 @@ def test_head_frame_moves_the_tongue_and_jaw_by_the_jaw_offset_and_the_toggle_re
 
 
 def test_the_analysis_tabs_say_they_are_in_the_jaw_frame(qtbot, window):
-    from tonguevis.gui.segmentation_view import frame_caption
+    from tonguevis.render.segmentation_view import frame_caption
     from tonguevis.gui.tabs import add_feature_tabs
 
     add_feature_tabs(window)
@@ -249,7 +249,7 @@ def test_the_midline_plot_follows_the_cursor(qtbot, window, tmp_path):
 def test_vtk_and_video_exports_in_the_head_and_the_jaw_frame(qtbot, window, tmp_path):
     import pyvista as pv
 
-    from tonguevis.gui.video import export_video, export_vtk_series, probe_streams
+    from tonguevis.render.video import export_video, export_vtk_series, probe_streams
 
     session = show_and_simulate(qtbot, window, demo_session(3.5, 5.6))
     motion = session.motion
@@ -323,7 +323,7 @@ def test_view_and_export_video_against_the_generic_palate_in_either_frame(tmp_pa
     """The commands on the demo /ta/: --palate generic (contact on), the jaw frame, the contact colouring."""
     from tests.gui.test_midsagittal_and_cli import _default_model_available, _run
     from tests.gui.conftest import DEMO
-    from tonguevis.gui.video import probe_streams
+    from tonguevis.render.video import probe_streams
 
     if not (DEMO.exists() and _default_model_available()):
         pytest.skip("needs the demo corpus and the shipped mesh")

@@ -14,8 +14,8 @@ from tests.gui.fakes import FakeModel, box_mesh, fake_motion, fake_recording
 def test_paraview_export_holds_what_the_app_shows(tmp_path, surface_only):
     import meshio
 
-    from tonguevis.gui.energy_density import EnergyDensity
-    from tonguevis.gui.paraview_export import export_paraview
+    from tonguevis.render.energy_density import EnergyDensity
+    from tonguevis.render.paraview import export_paraview
 
     model = FakeModel(box_mesh())
     motion = fake_motion(model, fake_recording(duration=1.0))
@@ -37,8 +37,8 @@ def test_paraview_export_holds_what_the_app_shows(tmp_path, surface_only):
 
 
 def test_nothing_to_export_before_the_simulation(tmp_path):
-    from tonguevis.gui.paraview_export import export_paraview
-    from tonguevis.gui.video import ExportError
+    from tonguevis.render.paraview import export_paraview
+    from tonguevis.render.video import ExportError
 
     with pytest.raises(ExportError, match="not been simulated"):
         export_paraview(SimpleNamespace(motion=None, path=None), tmp_path / "x.xdmf")

@@ -107,7 +107,7 @@ def test_three_d_views_are_painted_in_software_one_render_per_frame(qtbot, windo
     from PySide6.QtOpenGLWidgets import QOpenGLWidget
 
     from tonguevis.gui.image_views import ImageInteractor
-    from tonguevis.gui.scene import BACKGROUND
+    from tonguevis.render.scene import BACKGROUND
     from tonguevis.gui.view3d import image_views
 
     if QGuiApplication.platformName() != "xcb" or not image_views():
@@ -269,7 +269,7 @@ def test_playback_draws_each_frame_for_the_time_it_is_shown_and_the_status_line_
     of the clock by about a frame, since it is painted a frame later), and the status line is
     made at most ten times a second; once stopped, the picture and the status line are those of
     the time playback stopped at, exactly."""
-    from tonguevis.gui.drawing import contact_line
+    from tonguevis.render.drawing import contact_line
     from tonguevis.gui.view3d import DESCRIBE_INTERVAL_S
 
     session = show_and_simulate(qtbot, window, demo_session())

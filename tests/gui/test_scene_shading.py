@@ -9,7 +9,7 @@ import pytest
 
 pv = pytest.importorskip("pyvista")
 
-from tonguevis.gui.scene import LIGHTS, MAIN, TONGUE_COLOUR, TONGUE_MATERIAL, TOP, TongueScene, set_lights  # noqa: E402
+from tonguevis.render.scene import LIGHTS, MAIN, TONGUE_COLOUR, TONGUE_MATERIAL, TOP, TongueScene, set_lights  # noqa: E402
 from tonguevis.render.shading import shade  # noqa: E402
 from tonguevis.render.surface_geometry import is_closed, outward_normals  # noqa: E402
 
@@ -246,7 +246,7 @@ def test_contact_colours_say_inside_and_no_palate_above_in_their_own_colours(plo
     """Distance to the palate: a node inside the palate (below the range) is magenta, one with no
     palate above (NaN) neutral grey, the others on the red-to-blue map; the lit colours start
     from these (the lookup table's special colours are brought up to date before mapping)."""
-    from tonguevis.gui.scene import INSIDE_COLOUR, NO_PALATE_COLOUR
+    from tonguevis.render.scene import INSIDE_COLOUR, NO_PALATE_COLOUR
 
     plotter, scene, points = _scene(plotters, context=False)
     scene.set_mode("contact")

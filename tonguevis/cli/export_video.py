@@ -45,7 +45,7 @@ def run(args) -> int:
     from tonguevis.errors import RecordingError
     from tonguevis.workflows.session import demo_recording_path, load_session
     from tonguevis.workflows.simulation import simulate_session
-    from tonguevis.gui.video import export_video
+    from tonguevis.render.video import export_video
 
     path = args.file or demo_recording_path()
     if path is None:

@@ -7,7 +7,7 @@ import numpy as np
 from scipy.signal import spectrogram
 
 from tonguevis.appstate import AppState
-from tonguevis.gui.label_tiers import draw_tiers, fit_texts, tiers
+from tonguevis.render.label_tiers import draw_tiers, fit_texts, tiers
 from tonguevis.gui.timeplot import TimePlot
 from tonguevis.render.production_marks import mark_landmarks, shade_productions
 

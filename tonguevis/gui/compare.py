@@ -192,9 +192,9 @@ class ComparePanel(QWidget):
         (:mod:`tonguevis.render.shading`, A's lights and material) and coloured as A is coloured."""
         import pyvista as pv
 
-        from tonguevis.gui.scene import SENSOR_COLOUR, add_lit_surface, faces_to_vtk
+        from tonguevis.render.scene import SENSOR_COLOUR, add_lit_surface, faces_to_vtk
         from tonguevis.render.surface_geometry import VertexNormals, hidden_side
-        from tonguevis.gui.view3d import surface_faces
+        from tonguevis.render.scene import surface_faces
 
         frames = session.frames
         faces = surface_faces(frames.motion.model)
@@ -222,7 +222,7 @@ class ComparePanel(QWidget):
         A's lookup table (same colour, same value), or the plain tongue colour."""
         import pyvista as pv
 
-        from tonguevis.gui.scene import TONGUE_COLOUR, mapped_colours
+        from tonguevis.render.scene import TONGUE_COLOUR, mapped_colours
 
         lut = self.view_a.scene.lookup_table
         if lut is None or self._b_values is None:
@@ -236,7 +236,7 @@ class ComparePanel(QWidget):
             return
         from vtkmodules.util.numpy_support import vtk_to_numpy
 
-        from tonguevis.gui.scene import LIGHTS, TONGUE_MATERIAL
+        from tonguevis.render.scene import LIGHTS, TONGUE_MATERIAL
         from tonguevis.render.shading import shade
 
         camera = self.plotter.renderer.GetActiveCamera()
@@ -382,7 +382,7 @@ class ComparePanel(QWidget):
         """Show B at the moment matched with A's frame ``i``."""
         if self.comparison is None or self._surface is None or not self.isVisible():
             return
-        from tonguevis.gui.drawing import draw_frame
+        from tonguevis.render.drawing import draw_frame
 
         session_a, session_b = self.session_a, self.session_b
         t_a = float(session_a.frames.times[i])
@@ -438,6 +438,6 @@ def _subplot_index(plotter, index: int) -> tuple[int, ...]:
 
 
 def _background() -> str:
-    from tonguevis.gui.scene import BACKGROUND
+    from tonguevis.render.scene import BACKGROUND
 
     return BACKGROUND if isinstance(BACKGROUND, str) else BACKGROUND[0]

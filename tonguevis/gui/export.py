@@ -95,7 +95,7 @@ def run_with_progress(window, title: str, function, done_message: str, path, on_
 
 
 def ask_video(window):
-    from tonguevis.gui.video import export_video
+    from tonguevis.render.video import export_video
 
     session = window.session
     if session is None or session.frames is None:
@@ -116,7 +116,7 @@ def ask_video(window):
 
 
 def ask_vtk(window):
-    from tonguevis.gui.video import export_vtk_series
+    from tonguevis.render.video import export_vtk_series
 
     session = window.session
     if session is None or session.frames is None:
@@ -155,7 +155,7 @@ class ParaViewDialog(QDialog):
 def ask_paraview(window):
     """File ▸ Export motion for ParaView: one .xdmf + .h5 (the mesh once, displacement and energy
     density per frame), in the frame of reference the views show.  Returns the export's job, or None."""
-    from tonguevis.gui.paraview_export import export_paraview
+    from tonguevis.render.paraview import export_paraview
 
     session = window.session
     if session is None or session.motion is None:

@@ -70,7 +70,7 @@ class PalateMixin:
 
     @staticmethod
     def _palate_name(palate) -> str:
-        from tonguevis.gui.drawing import palate_label
+        from tonguevis.render.drawing import palate_label
 
         return "none (no contact)" if palate is None else palate_label(palate)
 

@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from PySide6.QtWidgets import QLabel, QSizePolicy, QVBoxLayout, QWidget
 
 from tonguevis.appstate import AppState
-from tonguevis.gui.drawing import TOUCH_MM, MidlineProfile, head_points
+from tonguevis.render.drawing import TOUCH_MM, MidlineProfile, head_points
 from tonguevis.gui.timeplot import FACE, TimePlot
 
 PENETRATION_COLOUR = "#c0392b"

@@ -19,7 +19,7 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from tonguevis.errors import TonguevisError
-from tonguevis.gui.segmentation_view import (TARGETS, draw_frame, draw_result, draw_seed_markers, make_target,
+from tonguevis.render.segmentation_view import (TARGETS, draw_frame, draw_result, draw_seed_markers, make_target,
                                              move_frame, partition_table)
 
 log = logging.getLogger("tonguevis")

@@ -2,20 +2,17 @@
 
 from __future__ import annotations
 
-import logging
 import time
 
 import numpy as np
 from PySide6.QtCore import QElapsedTimer, Signal
 from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
-from tonguevis.appstate import COLOR_MODES, REFERENCE_FRAMES, AppState, interval_at
-from tonguevis.gui.drawing import CONTACT_RANGE_MM, contact_line, draw_frame
+from tonguevis.appstate import COLOR_MODES, REFERENCE_FRAMES, AppState
+from tonguevis.render.drawing import contact_line, draw_frame
 from tonguevis.gui.elastic_label import ElasticComboBox, ElasticLabel
-from tonguevis.gui.frames import SCALARS
-from tonguevis.gui.scene import SPEAKER_PALATE_STYLE, TongueScene
+from tonguevis.render.scene import TongueScene, frame_text, scene_setup, surface_faces
 
-log = logging.getLogger("tonguevis")
 COLOUR_LABELS = {"displacement": "displacement magnitude", "energy": "elastic energy density",
                  "contact": "distance to palate", "plain": "plain",
                  "difference": "distance to B (compared recording)"}
@@ -24,84 +21,6 @@ COLOUR_LABELS = {"displacement": "displacement magnitude", "energy": "elastic en
 #: the palate distances of the frame.  A paused frame's line is always its own.
 DESCRIBE_INTERVAL_S = 0.1
 REFERENCE_LABELS = {"head": "head frame (jaw moving, palate fixed)", "jaw": "jaw frame (jaw's motion removed)"}
-
-
-def context_surfaces(palate=None) -> dict:
-    """Jaw and palate surfaces shipped in meshes/ (empty if absent or unreadable); ``palate``
-    (a :class:`~tonguevis.gui.drawing.ShownPalate`) replaces the shipped palate."""
-    import pyvista as pv
-
-    from tonguevis.paths import MESH_DIR
-
-    out = {}
-    try:
-        from tonguevis.mesh import read_surface
-    except ImportError:
-        return out
-    for name in ("jaw", "palate"):
-        for path in sorted(MESH_DIR.glob(f"{name}.*")):
-            try:
-                points, faces = _as_points_faces(read_surface(path))
-            except Exception as exc:  # context is optional: never block the app on it
-                log.warning("context surface %s not shown: %s", path, exc)
-                continue
-            from tonguevis.gui.scene import faces_to_vtk
-
-            out[name] = pv.PolyData(np.asarray(points, dtype=np.float32), faces_to_vtk(faces))
-            break
-    if palate is not None and not palate.generic:
-        from tonguevis.gui.scene import faces_to_vtk
-
-        out["palate"] = pv.PolyData(np.asarray(palate.points, dtype=np.float32), faces_to_vtk(palate.faces))
-    return out
-
-
-def _as_points_faces(surface):
-    if isinstance(surface, tuple):
-        return surface[0], surface[1]
-    for names in (("points", "faces"), ("vertices", "faces"), ("points", "triangles")):
-        if all(hasattr(surface, n) for n in names):
-            return getattr(surface, names[0]), getattr(surface, names[1])
-    raise TypeError(f"unknown surface type {type(surface).__name__}")
-
-
-def surface_faces(model) -> np.ndarray:
-    faces = getattr(model, "surface_faces", None)
-    if callable(faces):
-        faces = faces()
-    return np.asarray(faces if faces is not None else model.mesh.boundary_faces())
-
-
-def scene_titles() -> dict[str, str]:
-    titles = {name: f"{label}\n({unit})" for name, (label, unit) in SCALARS.items()}
-    titles["contact"] = "distance to\npalate (mm)"
-    return titles
-
-
-def scene_setup(session) -> dict:
-    """The keyword arguments of :meth:`TongueScene.build` for a simulated session (window and video alike)."""
-    frames = session.frames
-    palate = getattr(session, "shown_palate", None)
-    clim = dict(frames.clim)
-    if palate is not None:
-        clim["contact"] = CONTACT_RANGE_MM
-    style = {} if palate is None or palate.generic else {"palate": SPEAKER_PALATE_STYLE}
-    return dict(n_sensors=len(frames.motion.sensor_names), context=context_surfaces(palate), clim=clim,
-                titles=scene_titles(), context_style=style)
-
-
-def frame_text(frames, i: int, productions, caption: str | None = None) -> str:
-    t = frames.times[i]
-    text = f"t = {t:.3f} s   frame {i + 1}/{frames.n_frames}"
-    production = interval_at(productions, t)
-    if production is not None:
-        text += f"   production {productions.index(production) + 1}"
-    residual = getattr(frames.motion, "sensor_residual", None)
-    if residual is not None and len(residual):
-        text += f"\nsensor residual max {1e3 * float(np.nanmax(residual[i])):.2f} mm"
-    if caption:
-        text += f"\n{caption}"
-    return text
 
 
 def image_views() -> bool:

@@ -1,6 +1,6 @@
 """What the 3D scene draws for one frame, in the head or the jaw frame, against which palate (no Qt).
 
-The tongue is simulated in the jaw frame; :class:`~tonguevis.gui.frames.MotionFrames`
+The tongue is simulated in the jaw frame; :class:`~tonguevis.render.frames.MotionFrames`
 holds it so.  :func:`draw_frame` turns one frame into what the scene shows in
 the chosen frame of reference (:mod:`tonguevis.sim.reference`): in the head frame
 the tongue, its sensors and the jaw surface move by the jaw's translation and the

@@ -19,7 +19,7 @@ from collections import OrderedDict
 import numpy as np
 
 from tonguevis._progress import ProgressCallback, report
-from tonguevis.gui.energy_density import EnergyDensity
+from tonguevis.render.energy_density import EnergyDensity
 
 #: Frames reconstructed together when the cursor reaches one not in the cache.
 BLOCK = 16
@@ -208,7 +208,7 @@ class NodalEnergy:
     The strains of the unwarped modal displacement Φq are linear in q, so with the
     strain operator B of the tets around the nodes, every frame's strains are one
     dense product q (BΦ)ᵀ; each node's value is the volume-weighted mean of its tets'
-    (:class:`~tonguevis.gui.energy_density.EnergyDensity`, whose ``nodal`` is the
+    (:class:`~tonguevis.render.energy_density.EnergyDensity`, whose ``nodal`` is the
     plain reference).  ``NodalEnergy(model, m, nodes)(q)`` : (f, m) -> (f, k) float32.
     """
 

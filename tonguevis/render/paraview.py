@@ -3,9 +3,9 @@
 What :func:`tonguevis.sim.xdmf.write_xdmf` writes (the mesh once, every
 exported frame's displacement in metres), plus the elastic energy density
 (J/m³) per node that the app colours by, made from q chunk by chunk
-(:class:`~tonguevis.gui.frames.NodalEnergy`): memory does not grow with the
+(:class:`~tonguevis.render.frames.NodalEnergy`): memory does not grow with the
 recording, and a 30-minute recording is a few GB instead of the 38 GB of one
-``.vtu`` per frame (:func:`tonguevis.gui.video.export_vtk_series`, still there).
+``.vtu`` per frame (:func:`tonguevis.render.video.export_vtk_series`, still there).
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ def export_paraview(session, path, frame: str = "head", surface_only: bool = Fal
     triangles only; stride : every ``stride``-th frame.  Point data: ``displacement`` (m)
     and ``energy_density`` (J/m³, of the unwarped modal displacement, as the app shows it).
     """
-    from tonguevis.gui.frames import NodalEnergy
-    from tonguevis.gui.video import ExportError
+    from tonguevis.render.frames import NodalEnergy
+    from tonguevis.render.video import ExportError
     from tonguevis.sim.xdmf import export_nodes, write_xdmf
 
     motion = getattr(session, "motion", None)

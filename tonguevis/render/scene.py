@@ -571,3 +571,88 @@ def _contact_lut(clim: tuple[float, float]) -> "pv.LookupTable":
     lut.below_range_color = INSIDE_COLOUR
     lut.nan_color = NO_PALATE_COLOUR
     return lut
+
+
+# -- what the four views show for a simulated session (the app's views and the video alike) -----------
+def context_surfaces(palate=None) -> dict:
+    """Jaw and palate surfaces shipped in meshes/ (empty if absent or unreadable); ``palate``
+    (a :class:`~tonguevis.render.drawing.ShownPalate`) replaces the shipped palate."""
+    import logging
+
+    from tonguevis.paths import MESH_DIR
+
+    log = logging.getLogger("tonguevis")
+    out = {}
+    try:
+        from tonguevis.mesh import read_surface
+    except ImportError:
+        return out
+    for name in ("jaw", "palate"):
+        for path in sorted(MESH_DIR.glob(f"{name}.*")):
+            try:
+                points, faces = _as_points_faces(read_surface(path))
+            except Exception as exc:  # context is optional: never block the app on it
+                log.warning("context surface %s not shown: %s", path, exc)
+                continue
+            out[name] = pv.PolyData(np.asarray(points, dtype=np.float32), faces_to_vtk(faces))
+            break
+    if palate is not None and not palate.generic:
+        out["palate"] = pv.PolyData(np.asarray(palate.points, dtype=np.float32), faces_to_vtk(palate.faces))
+    return out
+
+
+def _as_points_faces(surface):
+    if isinstance(surface, tuple):
+        return surface[0], surface[1]
+    for names in (("points", "faces"), ("vertices", "faces"), ("points", "triangles")):
+        if all(hasattr(surface, n) for n in names):
+            return getattr(surface, names[0]), getattr(surface, names[1])
+    raise TypeError(f"unknown surface type {type(surface).__name__}")
+
+
+def surface_faces(model) -> np.ndarray:
+    """(f, 3) int triangles of the model's surface (its ``surface_faces``, else the mesh's boundary)."""
+    faces = getattr(model, "surface_faces", None)
+    if callable(faces):
+        faces = faces()
+    return np.asarray(faces if faces is not None else model.mesh.boundary_faces())
+
+
+def scene_titles() -> dict[str, str]:
+    """Colour-bar title per colouring, with its unit."""
+    from tonguevis.render.frames import SCALARS
+
+    titles = {name: f"{label}\n({unit})" for name, (label, unit) in SCALARS.items()}
+    titles["contact"] = "distance to\npalate (mm)"
+    return titles
+
+
+def scene_setup(session) -> dict:
+    """The keyword arguments of :meth:`TongueScene.build` for a simulated session (window and video alike)."""
+    from tonguevis.render.drawing import CONTACT_RANGE_MM
+
+    frames = session.frames
+    palate = getattr(session, "shown_palate", None)
+    clim = dict(frames.clim)
+    if palate is not None:
+        clim["contact"] = CONTACT_RANGE_MM
+    style = {} if palate is None or palate.generic else {"palate": SPEAKER_PALATE_STYLE}
+    return dict(n_sensors=len(frames.motion.sensor_names), context=context_surfaces(palate), clim=clim,
+                titles=scene_titles(), context_style=style)
+
+
+def frame_text(frames, i: int, productions, caption: str | None = None) -> str:
+    """The main view's caption at frame ``i``: time, frame number, production, largest sensor residual (mm)."""
+    from tonguevis.appstate import interval_at
+
+    t = frames.times[i]
+    text = f"t = {t:.3f} s   frame {i + 1}/{frames.n_frames}"
+    production = interval_at(productions, t)
+    if production is not None:
+        text += f"   production {productions.index(production) + 1}"
+    residual = getattr(frames.motion, "sensor_residual", None)
+    if residual is not None and len(residual):
+        text += f"\nsensor residual max {1e3 * float(np.nanmax(residual[i])):.2f} mm"
+    if caption:
+        text += f"\n{caption}"
+    return text

@@ -35,7 +35,7 @@ Light = tuple
 def light_vectors(lights) -> tuple[np.ndarray, np.ndarray]:
     """(k, 3) unit vectors towards each light in view coordinates and (k,) intensities.
 
-    ``lights``: ((direction or None, intensity), ...) as :data:`tonguevis.gui.scene.LIGHTS`,
+    ``lights``: ((direction or None, intensity), ...) as :data:`tonguevis.render.scene.LIGHTS`,
     where a direction is the light's position relative to the focal point in VTK's
     camera-light frame (the camera at +z looking at the origin, y up) and None is a headlight.
     """

@@ -1,7 +1,7 @@
 """Closed or open, wound which way, and the vertex normals of a triangle surface (NumPy/SciPy only).
 
 The 3D views light every surface at its vertices and skip the faces nobody can
-see (:mod:`tonguevis.gui.scene`): for that they need smooth vertex normals that
+see (:mod:`tonguevis.render.scene`): for that they need smooth vertex normals that
 point out of a closed surface whichever way its triangles are wound, and which
 side of it is the hidden inside.
 """

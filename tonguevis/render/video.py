@@ -62,9 +62,8 @@ def export_video(session, out, start: float | None = None, end: float | None = N
     """
     import pyvista as pv
 
-    from tonguevis.gui.drawing import draw_frame
-    from tonguevis.gui.scene import TongueScene
-    from tonguevis.gui.view3d import frame_text, scene_setup, surface_faces
+    from tonguevis.render.drawing import draw_frame
+    from tonguevis.render.scene import TongueScene, frame_text, scene_setup, surface_faces
     from tonguevis.sim.reference import check_reference
 
     check_reference(frame)

@@ -94,13 +94,13 @@ class Session:
     productions : [(start_s, end_s)] CV productions, possibly empty.
     production_table : the ProductionTable they come from (None if none found).
     motion : the simulated Motion, or None until the simulation ran.
-    frames : per-frame drawing data (:class:`tonguevis.gui.frames.MotionFrames`).
+    frames : per-frame drawing data (:class:`tonguevis.render.frames.MotionFrames`).
     given_rest : (start_s, end_s) the user gave for the rest, or None to find it.
     rest : the :class:`~tonguevis.preprocess.RestChoice` the simulation used (None before).
     notes : what else the user should know about how it was simulated.
     palate : the palate the motion was simulated against (a PalateSurface or "generic"; None: no contact).
     shown_palate : the palate the views draw and measure against, in the model frame
-        (:class:`tonguevis.gui.drawing.ShownPalate`: ``palate`` placed as the simulation
+        (:class:`tonguevis.render.drawing.ShownPalate`: ``palate`` placed as the simulation
         placed it, else the generic one drawn only), or None.
     """
 

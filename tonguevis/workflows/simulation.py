@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from tonguevis._progress import ProgressCallback
-from tonguevis.gui.frames import MotionFrames
+from tonguevis.render.frames import MotionFrames
 from tonguevis.io.recording import Recording
 from tonguevis.preprocess.rest import RestChoice
 from tonguevis.workflows.session import Session
@@ -151,13 +151,13 @@ def simulate_session(session: Session, settings: RunSettings | None = None, mode
 
 
 def shown_palate(recording, motion, model, palate):
-    """The palate the views draw for ``motion`` (:class:`tonguevis.gui.drawing.ShownPalate`), or None.
+    """The palate the views draw for ``motion`` (:class:`tonguevis.render.drawing.ShownPalate`), or None.
 
     ``palate`` as given to the simulation: placed in the model frame by the same core
     function the simulation used (:func:`tonguevis.sim.simulate.placed_palate`, with the
     motion's landmarks and rest); None: the generic palate, drawn and measured only.
     """
-    from tonguevis.gui.drawing import generic_shown, palate_label, speaker_palate
+    from tonguevis.render.drawing import generic_shown, palate_label, speaker_palate
 
     if palate is None:
         return generic_shown(simulated=False)
