@@ -96,6 +96,8 @@ class ReplayServer:
         self.finished = threading.Event()
         self.connections = 0
         self.frames_sent = 0
+        #: (connection number, command text) of every command received, in order (for tests and logs).
+        self.commands: list[tuple[int, str]] = []
         self._clock: float | None = None
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -274,6 +276,8 @@ class _Client:
             self.reply(f"Error-expected a command packet, got type {packet.type}", PacketType.ERROR)
             return True
         text = packet.text
+        with self.server._lock:
+            self.server.commands.append((self.number, text))
         words = text.split()
         verb = words[0].lower() if words else ""
         arg = words[1] if len(words) > 1 else ""
