@@ -357,18 +357,19 @@ class Sweep:
         if not self.n_samples:
             raise SweepError(f"sweep {self.number} ({self.name}) has no samples to save")
         profile = self.profile
-        if profile is not None and any(r.number == self.number for r in profile.sweeps):
-            new = profile.next_sweep_number()
+        number = self.number
+        if profile is not None and update_profile and any(r.number == number for r in profile.sweeps):
+            number = profile.next_sweep_number()
             log.info("sweep %d (%s) is saved as %d: the profile already has a sweep %d", self.number, self.name,
-                     new, self.number)
-            self.number = new
+                     number, self.number)
         if folder is None:
             if profile is None:
                 raise SweepError("say where to save a sweep that has no profile (folder=...)")
-            folder = profile.sweep_folder(self.number, self.name, profiles_root)
+            folder = profile.sweep_folder(number, self.name, profiles_root)
         folder = Path(folder)
         if (folder / SUMMARY_FILE).exists() and not overwrite:
             raise SweepError("a sweep is already saved here (pass overwrite=True to replace it)", folder)
+        self.number = number
         folder.mkdir(parents=True, exist_ok=True)
         files = {k: folder / v for k, v in (("raw", RAW_FILE), ("head_corrected", CORRECTED_FILE),
                                            ("sensor_map", SENSOR_MAP_FILE), ("targets", TARGETS_FILE),
