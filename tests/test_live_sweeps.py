@@ -11,8 +11,8 @@ import pytest
 from tonguevis.cli import main
 from tonguevis.io import read_recording
 from tonguevis.live.profiles import Profile, load_profile
-from tonguevis.live.sweeps import Sweep, SweepError, load_sweep_targets
-from tonguevis.live.targets import OscillatingTarget, StaticTarget
+from tonguevis.live.sweeps import Sweep, SweepError, load_sweep_targets, open_sweep
+from tonguevis.live.targets import OscillatingTarget, ReplayTarget, StaticTarget
 from tonguevis.paths import DEMO_RECORDING
 from tonguevis.preprocess.correction import head_corrected
 from tonguevis.workflows import open_recording
@@ -216,3 +216,19 @@ def test_a_sweep_of_the_demo_opens_in_every_command(tmp_path, capsys):
     assert "300 (3.000 s" in out and "TT" in out
     assert main(["simulate", str(saved.files["head_corrected"]), "--quiet", "--modes", "20"]) == 0
     assert "max sensor residual" in capsys.readouterr().out
+
+
+def test_slot_names_and_a_ghost_from_a_saved_sweep(tmp_path):
+    """Sensors named by slot (S<n>) keep their Ids; a saved sweep replays as a ghost template."""
+    times, positions, _ = _stream(4)
+    names = ["S0", "S3", "S4", "S1", "S2"]
+    sweep = Sweep("slots", names)
+    sweep.add(times, positions)
+    folder = sweep.save(tmp_path / "slots").folder
+    rec = open_sweep(folder, corrected=False)
+    assert sorted(rec.sensor_names) == sorted(names) and rec.metadata["ndi_ids"] == [0, 1, 2, 3, 4]
+    np.testing.assert_allclose(rec.sensors["S1"], positions[:, 3], rtol=F32, atol=1e-9)
+    ghost = ReplayTarget.from_recording(open_sweep(folder), "S1", 0.004, start_s=0.2, end_s=0.8)
+    assert set(ghost.template) == set(names) and ghost.period == pytest.approx(0.6)
+    with pytest.raises(SweepError, match="not a saved sweep"):
+        open_sweep(tmp_path)

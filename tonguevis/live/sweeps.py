@@ -483,6 +483,20 @@ class Sweep:
         return out.getvalue()
 
 
+def open_sweep(folder: str | os.PathLike, corrected: bool = True):
+    """A saved sweep's positions as a :class:`~tonguevis.io.recording.Recording` (m), with its sound and sensor names.
+
+    corrected : ``head_corrected.tsv`` (default: what a replay target or ghost tongue should use),
+    else ``raw.tsv``.  Read by :func:`tonguevis.io.read_recording` like any recording.
+    """
+    from tonguevis.io.registry import read_recording
+
+    path = Path(folder) / (CORRECTED_FILE if corrected else RAW_FILE)
+    if not path.is_file():
+        raise SweepError(f"not a saved sweep: no {path.name} in it", folder)
+    return read_recording(path)
+
+
 def load_sweep_targets(path: str | os.PathLike) -> list[Target]:
     """The targets a saved sweep's ``targets.json`` (or its folder) holds; SweepError naming the file when bad."""
     path = Path(path)
