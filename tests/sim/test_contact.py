@@ -233,7 +233,7 @@ def test_a_sensor_above_the_palate_is_counted_as_penetration():
     assert tip["frames"] > 20 and tip["deepest_mm"] > 0.5
     # the measured tip, on its node's rest, really is above the lowered palate by that much
     k = motion.sensor_names.index("TT")
-    gap, _ = low.clearance(motion.targets[:, k] + motion.jaw_offset)
+    gap, _ = motion.palate.clearance(motion.targets[:, k] + motion.jaw_offset)
     assert np.nanmax(-gap) * 1e3 == pytest.approx(tip["deepest_mm"], rel=1e-6)
     assert np.sum(gap < 0) == tip["frames"]
     assert c["penetration_max_mm"] >= tip["deepest_mm"] and c["frames_in_contact"] >= 20

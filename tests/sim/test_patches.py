@@ -54,7 +54,7 @@ def test_the_energy_is_that_of_the_shape_drawn(model, patched):
     """½ qᵀK_r q with the patches' coupling equals ½ uᵀKu of the (linear) displacement field."""
     q = patched.q[::97]
     u = patched.model.displacements(q, warping=False).reshape(len(q), -1)
-    direct = 0.5 * np.einsum("fi,fi->f", u, (model.stiffness @ u.T).T)
+    direct = 0.5 * np.einsum("fi,fi->f", u, (patched.model.stiffness @ u.T).T)
     np.testing.assert_allclose(patched.model.energy(q), direct, rtol=1e-9)
 
 

@@ -43,7 +43,7 @@ def model():
 
 
 def test_sensors_follow_the_recording_and_the_tongue_returns_to_rest(model):
-    motion = simulate(_recording(model), model, modes=20, landmarks="rule", sensor_stiffness=None)
+    motion = simulate(_recording(model), model, modes=20, landmarks="rule", sensor_stiffness=None, frame="model")
     assert motion.converged.all()
     assert np.nanmax(motion.sensor_residual) < 1e-5  # 0.01 mm
     assert motion.metadata["alignment_scale"] == pytest.approx(1.15, rel=1e-6)

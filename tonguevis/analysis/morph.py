@@ -196,10 +196,18 @@ def morph_between(source_motion, source_time: float, target_motion, target_time:
                   difference: str = "eq14") -> Morph:
     """A :class:`Morph` from the frame of ``source_motion`` nearest ``source_time`` (s)
     to the frame of ``target_motion`` nearest ``target_time``; both motions on the same model."""
-    if not same_model(source_motion.model, target_motion.model):
-        raise MorphError("source and target motions are on different tongue models (mesh, anchors or "
-                         "material differ); morphing needs the same model")
     from tonguevis.sim.patches import global_part
+    from tonguevis.sim.placement import modal_scale, source_model
+
+    # Two speakers (or frames) place the same tongue differently: the target's shape is carried onto the
+    # source's placement through the model they share (its strain field, in the source's size).
+    rescale = 1.0
+    if not same_model(source_motion.model, target_motion.model):
+        a, b = global_part(source_motion)[0], global_part(target_motion)[0]
+        if not same_model(source_model(a), source_model(b)):
+            raise MorphError("source and target motions are on different tongue models (mesh, anchors or "
+                             "material differ); morphing needs the same model")
+        rescale = modal_scale(a) / modal_scale(b)
 
     if global_part(source_motion)[1].shape[1] != global_part(target_motion)[1].shape[1]:
         raise MorphError(f"source motion has {global_part(source_motion)[1].shape[1]} modes, target "
@@ -217,7 +225,7 @@ def morph_between(source_motion, source_time: float, target_motion, target_time:
     from tonguevis.sim.patches import global_part
 
     model, q_source = global_part(source_motion)
-    q_target = global_part(target_motion)[1]
+    q_target = rescale * global_part(target_motion)[1]
     morph = Morph(model, q_source[i], q_target[j], warping=source_motion.warping, difference=difference)
     morph.source_frame, morph.target_frame = i, j
     return morph

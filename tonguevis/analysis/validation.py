@@ -99,6 +99,7 @@ def validate(
     sensor_stiffness: float | None | str = "default",
     progress: ProgressCallback | None = None,
     sensor_patches: float | None | str = None,
+    frame: str = "speaker",
 ) -> ValidationResult:
     """Leave-one-sensor-out validation of ``model`` (default: the shipped tongue) on ``recording``.
 
@@ -109,19 +110,19 @@ def validate(
     the CLI's words: a positive number, "default" or "hard" (:mod:`tonguevis.sensor_stiffness`).
     ``sensor_patches`` as :func:`tonguevis.sim.simulate`: in each run the patches of the driving
     sensors only close their gaps, and the held-out node moves with the modes and those patches.
+    ``frame`` as :func:`tonguevis.sim.simulate`: "speaker" (default) scores in the speaker's millimetres
+    (the model placed in the speaker), "model" in the generic tongue's (the speaker scaled onto it).
     """
     from tonguevis.sim import TongueModel
     from tonguevis.io.sensor_map import how_to_map
-    from tonguevis.preprocess.targets import TONGUE_SENSORS, prepare_targets, working_tongue_sensors
+    from tonguevis.preprocess.targets import TONGUE_SENSORS, working_tongue_sensors
+    from tonguevis.sim.placement import targets_in_frame
     from tonguevis.sim.simulate import DEFAULT_SENSOR_STIFFNESS, drive_schedule, simulate
 
     from tonguevis.sensor_stiffness import sensor_stiffness_value
 
     sensor_stiffness = sensor_stiffness_value(sensor_stiffness, recording.metadata.get("file"))
-    if sensor_patches == "default":
-        from tonguevis.sim.patches import PATCH_RADIUS
-
-        sensor_patches = PATCH_RADIUS
+    patch_option = sensor_patches
     model = model or TongueModel.default()
     recording = recording.on_uniform_grid()  # as simulate: dropped frames back as missing samples
     file = recording.metadata.get("file")
@@ -135,16 +136,21 @@ def validate(
             f"leave-one-sensor-out needs at least 3 tongue sensors with model landmarks, found "
             f"{candidates or 'none'} (recording sensors: {', '.join(recording.sensor_names)}); "
             + how_to_map(recording), file)
-    prep = prepare_targets(recording, model, landmarks, rest_interval)
+    given = model
+    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest_interval)  # model in the frame
+    if sensor_patches == "default":  # 3 mm on the generic tongue, as simulate() takes it
+        from tonguevis.sim.patches import PATCH_RADIUS
+
+        sensor_patches = PATCH_RADIUS / (fit["scale"] if frame == "speaker" else 1.0)
     names, nodes = prep.names, np.asarray(prep.nodes)
     basis = model.basis(modes)
     w_full = model.rotation_matrix(basis)
     report(progress, 0, 4, "simulating with every sensor")
     if sensor_stiffness == "default":
         sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
-    motion = simulate(recording, model, modes=modes, warping=True, landmarks=landmarks,
+    motion = simulate(recording, given, modes=modes, warping=True, landmarks=landmarks,
                       rest_interval=prep.rest, tolerance=tolerance, sensor_stiffness=sensor_stiffness,
-                      sensor_patches=sensor_patches)
+                      sensor_patches=patch_option, frame=frame)
     centres = prep.aligned_rest
     s = len(names)
     dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
@@ -208,7 +214,7 @@ def validate(
     summary["plausibility"] = dict(motion.metadata.get("plausibility", {}))
     for key in ("recovered_frames", "implausible_frames"):
         summary[key] = list(motion.metadata.get(key, []))
-    settings = _settings(model, basis, modes, landmarks, quasi_static, tolerance)
+    settings = _settings(model, basis, modes, landmarks, quasi_static, tolerance, frame)
     settings["sensor_stiffness"] = sensor_stiffness
     settings["sensor_stiffness_n_per_m"] = motion.metadata.get("sensor_stiffness_n_per_m")
     return ValidationResult(scores, settings, summary, held_out)
@@ -268,7 +274,7 @@ def _node_trajectory(basis, w_full, node: int, q: np.ndarray, warping: bool) -> 
     return rotate_accumulated(q @ w_full[rows].T, d)
 
 
-def _settings(model, basis, modes, landmarks, quasi_static, tolerance) -> dict[str, Any]:
+def _settings(model, basis, modes, landmarks, quasi_static, tolerance, frame: str = "model") -> dict[str, Any]:
     from tonguevis.analysis.validation_scores import MIN_AXIS_STD_MM
 
     mesh = model.mesh
@@ -285,7 +291,9 @@ def _settings(model, basis, modes, landmarks, quasi_static, tolerance) -> dict[s
         "highest_frequency_hz": float(np.sqrt(max(basis.eigenvalues[-1], 0.0)) / (2 * np.pi)),
         "newton_tolerance_m": tolerance,
         "kinematic": "RBFInterpolator, linear kernel + degree-1 polynomial, in the driving sensors' affine hull",
-        "units": "displacements in mm in the model frame (after the similarity fit)",
+        "frame": frame,
+        "units": ("displacements in mm in the speaker's frame (the model placed in the speaker)" if frame == "speaker"
+                  else "displacements in mm in the model frame (after the similarity fit)"),
         "correlation": ("per-axis Pearson r of predicted vs measured displacement, averaged over the axes "
                         f"whose measured standard deviation is at least {MIN_AXIS_STD_MM} mm"),
     }

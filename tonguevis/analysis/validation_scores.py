@@ -110,7 +110,8 @@ def recording_summary(recording: Recording, motion, prep, interval, rest_how: st
         "ignored_sensors": list(prep.ignored),
         "rest_interval_s": [float(interval[0]), float(interval[1])],
         "rest_interval_from": rest_how,
-        "alignment_scale": float(prep.transform.scale),
+        "alignment_scale": float(motion.metadata.get("alignment_scale", prep.transform.scale)),  # the fit, either frame
+        "frame": motion.metadata.get("frame", "model"),
         "alignment_rms_mm": float(1e3 * prep.alignment_rms),
         "midsagittal_alignment": bool(prep.midsagittal),
         "volume_change_max_pct": float(np.nanmax(np.abs(vol))),

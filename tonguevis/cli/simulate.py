@@ -52,6 +52,8 @@ def _modes_text(motion) -> str:
 
 def summary(motion) -> list[str]:
     """The lines ``tonguevis simulate`` prints."""
+    from tonguevis.sim.placement import describe_fit
+
     res = np.nanmax(motion.sensor_residual) if np.isfinite(motion.sensor_residual).any() else float("nan")
     peak = int(np.argmax(motion.energy))
     end = motion.displacement(motion.n_frames - 1)
@@ -64,6 +66,7 @@ def summary(motion) -> list[str]:
         "driving sensors: " + ", ".join(f"{n}->node {int(k)}" for n, k in zip(motion.sensor_names, motion.sensor_nodes)),
         f"alignment: scale {meta['alignment_scale']:.3f}, rest fit RMS {1e3 * meta['alignment_rms_m']:.2f} mm"
         + (" (midsagittal)" if meta.get("midsagittal_alignment") else ""),
+        *([describe_fit(meta["fit"])] if "fit" in meta else []),
         f"frames: {motion.n_frames} ({motion.times[-1] - motion.times[0]:.2f} s); "
         f"Newton iterations per frame: {meta['newton_iterations_mean']:.2f}; unconverged frames: {unconverged}",
         f"max sensor residual: {1e3 * res:.2e} mm ({_stiffness_text(meta)})",

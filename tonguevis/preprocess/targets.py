@@ -67,6 +67,7 @@ def prepare_targets(
     landmarks: str = "speaker",
     rest: RestChoice | tuple[float, float] | None = None,
     smooth_window: int | None = None,
+    transform=None,
 ) -> PreparedTargets:
     """Rest interval, head and jaw correction, rest pose, similarity fit, sensor-node choice (§3.1).
 
@@ -77,6 +78,9 @@ def prepare_targets(
         across speakers, as the paper); "speaker" gives each sensor a dorsal-surface
         node near its own aligned rest position, a different node for each sensor
         (:func:`assign_sensor_nodes`).
+    transform : a :class:`~tonguevis.preprocess.alignment.SimilarityTransform` (recording -> model) to use
+        instead of fitting one, e.g. the identity for a model already placed in the speaker
+        (:mod:`tonguevis.sim.placement`); ``alignment_rms`` is still measured against the rule nodes.
     """
     from tonguevis import preprocess as pp
 
@@ -116,7 +120,8 @@ def prepare_targets(
     midsagittal = not any(n in LATERAL_SENSORS for n in names)
     if not midsagittal and len(names) < 3:
         raise SimulationError(f"a 3-D alignment needs at least 3 tongue sensors, got {names}", file)
-    transform = pp.fit_similarity(source, target, midsagittal=midsagittal)
+    if transform is None:
+        transform = pp.fit_similarity(source, target, midsagittal=midsagittal)
     aligned_rest = transform.apply(source)
     alignment_rms = float(np.sqrt(np.mean(np.sum((aligned_rest - target) ** 2, axis=1))))
     if landmarks == "speaker":

@@ -150,6 +150,12 @@ class Motion:
             "format": "tonguevis-motion",
             "version": 1,
         }
+        from tonguevis.sim.placement import placed_model_of
+
+        placed = placed_model_of(model)
+        if placed is not None:  # placed in a speaker: the source mesh and the move, so load derives the modes
+            meta["placement"] = {"matrix": placed.placement.matrix.tolist(), "keep_frequencies": placed.keep_frequencies,
+                                 "source_material": placed.source.material.as_dict()}
         def write(tmp):
             with open(tmp, "wb") as fh:
                 np.savez(
@@ -167,6 +173,7 @@ class Motion:
                     points=model.mesh.points,
                     tets=model.mesh.tets,
                     anchors=model.anchors,
+                    **({"source_points": placed.source.mesh.points} if placed is not None else {}),
                     meta=np.array(json.dumps(meta, default=_json_default)),
                 )
 
@@ -193,8 +200,19 @@ class Motion:
         except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
             raise SimulationError(f"cannot read motion file: {exc}", path) from exc
         landmarks = SimpleNamespace(sensors=meta["landmark_sensors"], anchors=arrays["anchors"])
-        mesh = TetMesh(arrays["points"], arrays["tets"], metadata={"file": str(path)})
-        model = TongueModel(mesh, landmarks, Material(**meta["material"]))
+        placement = meta.get("placement")
+        if placement is not None:  # a model placed in the speaker: the shipped modes (cache), moved
+            from tonguevis.preprocess.alignment import SimilarityTransform
+
+            matrix = np.asarray(placement["matrix"], dtype=np.float64)
+            scale = float(np.cbrt(np.linalg.det(matrix[:3, :3])))
+            move = SimilarityTransform(scale, matrix[:3, :3] / scale, matrix[:3, 3])
+            source = TongueModel(TetMesh(arrays["source_points"], arrays["tets"], metadata={"file": str(path)}),
+                                 landmarks, Material(**placement["source_material"]))
+            model = source.placed(move, keep_frequencies=placement["keep_frequencies"])
+        else:
+            mesh = TetMesh(arrays["points"], arrays["tets"], metadata={"file": str(path)})
+            model = TongueModel(mesh, landmarks, Material(**meta["material"]))
         patches = meta["metadata"].get("sensor_patches")
         if patches:  # the same Ritz basis again: the modes (cache) and the patch shapes (deterministic)
             from tonguevis.sim.patches import augmented_basis, augmented_model

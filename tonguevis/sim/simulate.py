@@ -45,6 +45,7 @@ def simulate(
     preview=None,
     preview_seconds: float = 20.0,
     sensor_patches: float | None | str = None,
+    frame: str = "speaker",
 ) -> Motion:
     """Drive ``model`` (default: our shipped tongue) with ``recording``.
 
@@ -81,6 +82,13 @@ def simulate(
         (3 mm on the model, fading out by 5 mm); None (default): the modes alone (the sensors then
         sit up to a few mm off the surface on real recordings).
 
+    frame : "speaker" (default): the model placed in the speaker by the inverse of the rest
+        alignment (:mod:`tonguevis.sim.placement`), so the motion, its figures, the palate and
+        every view are in the speaker's head-corrected frame and millimetres; "model": the
+        paper's way, the speaker scaled and turned onto the generic tongue (figures in the
+        model's millimetres).  The two are the same motion seen through the alignment (lengths
+        differ by its scale); ``metadata["frame"]`` and ``metadata["fit"]`` say which and how well.
+
     preview : called once, from the simulating thread, with the :class:`Motion` of the first
         ``preview_seconds`` s (a little more: whole segments) as soon as they are final, before
         the rest is simulated (``metadata["preview"]``: frames shown and of how many); its frames
@@ -102,7 +110,9 @@ def simulate(
     model = model or TongueModel.default()
     # Frames the recorder dropped come back as missing samples: every step is 1/rate apart.
     recording = recording.on_uniform_grid()
-    prep = prepare_targets(recording, model, landmarks, rest_interval, smooth_window)
+    from tonguevis.sim.placement import targets_in_frame
+
+    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest_interval, smooth_window)
     basis = model.basis(modes, progress=_stage(progress, 0, 3))
     w_full = model.rotation_matrix(basis)
     dofs = (3 * prep.nodes[:, None] + np.arange(3)).ravel()
@@ -123,15 +133,17 @@ def simulate(
     report(progress, 1, 3, "integrating")
     run = _Run(model, recording, prep, basis, phi_s, w_s, targets, compliance, schedule, warping, backend, modes,
                landmarks, sensor_stiffness, k_ref, contact)
-    if sensor_patches == "default":
-        from tonguevis.sim.patches import PATCH_RADIUS
+    run.fit = fit
+    from tonguevis.sim.patches import PATCH_RADIUS, PATCH_REACH
 
-        sensor_patches = PATCH_RADIUS
+    length = 1.0 / fit["scale"] if frame == "speaker" else 1.0  # the model's millimetres in this frame
+    if sensor_patches == "default":
+        sensor_patches = PATCH_RADIUS * length
     if sensor_patches is not None:
         if not (np.isfinite(sensor_patches) and sensor_patches > 0):
             raise SimulationError(f"the sensor patches' radius must be a positive number of metres or None, got "
                                   f"{sensor_patches!r}", recording.metadata.get("file"))
-        run.prepare_patches(sensor_patches)
+        run.prepare_patches(sensor_patches, sensor_patches * PATCH_REACH / PATCH_RADIUS)
     if backend == "warp" and contact is None:
         from tonguevis.sim.pipeline import integrate_and_measure
 
@@ -190,13 +202,13 @@ class _Run:
         self.previewed = False
         self.patches: dict | None = None
 
-    def prepare_patches(self, radius: float) -> None:
-        """Use the sensor patches (:mod:`tonguevis.sim.patches`): the run's model, basis and sensor
-        rows become the augmented ones (the frame loop keeps the modes alone)."""
+    def prepare_patches(self, radius: float, reach: float) -> None:
+        """Use the sensor patches (:mod:`tonguevis.sim.patches`) of ``radius`` fading out by ``reach`` (m): the
+        run's model, basis and sensor rows become the augmented ones (the frame loop keeps the modes alone)."""
         from tonguevis.sim.patches import augmented_basis, augmented_model
 
         self.global_rows = (self.basis, self.phi_s)  # what the frame loop (and a recovery) solves with
-        basis = augmented_basis(self.model, self.basis, self.prep.nodes, radius)
+        basis = augmented_basis(self.model, self.basis, self.prep.nodes, radius, reach)
         self.model = augmented_model(self.model, basis)
         self.rotation = self.model.rotation_matrix(basis)
         dofs = (3 * np.asarray(self.prep.nodes)[:, None] + np.arange(3)).ravel()
@@ -286,9 +298,11 @@ class _Run:
             "ignored_sensors": prep.ignored,
             "rest": prep.rest.as_dict(),
             "midsagittal_alignment": prep.midsagittal,
-            "alignment_scale": prep.transform.scale,
-            "alignment_matrix": prep.transform.matrix.tolist(),
-            "alignment_rms_m": prep.alignment_rms,
+            "frame": self.fit["frame"],
+            "fit": self.fit,
+            "alignment_scale": self.fit["scale"],  # the fit recording -> model, in either frame
+            "alignment_matrix": self.fit["matrix"],
+            "alignment_rms_m": prep.alignment_rms,  # in the frame's metres
             "sensor_stiffness": stiffness,
             "sensor_stiffness_n_per_m": None if stiffness is None else float(stiffness * self.k_ref),
             "point_stiffness_n_per_m": self.k_ref,
@@ -399,9 +413,11 @@ def place_palate(palate, prep: PreparedTargets, quiet: bool = False, model: Tong
     """
     from tonguevis.palate import load_palate
 
+    from tonguevis.sim.placement import in_model_frame
+
     palate = load_palate(palate)
-    if palate.metadata.get("frame") == "model":
-        return palate, 0.0
+    if palate.metadata.get("frame") == "model":  # the generic palate: placed with the model
+        return palate if model is None else in_model_frame(palate, model), 0.0
     from tonguevis.palate import generic_palate, joined_palate
 
     t = prep.transform
@@ -409,14 +425,19 @@ def place_palate(palate, prep: PreparedTargets, quiet: bool = False, model: Tong
     if model is not None and not shipped_tongue(model):  # the generic palate is our tongue's roof, not this mesh's
         return placed, shift
     # A traced palate covers the front of the roof: the generic one, moved to meet it, completes it.
-    return joined_palate(placed, generic_palate()), shift
+    generic = generic_palate() if model is None else in_model_frame(generic_palate(), model)
+    return joined_palate(placed, generic), shift
 
 
 def shipped_tongue(model: TongueModel) -> bool:
-    """Whether ``model`` is on the shipped tongue mesh (the one the generic palate belongs to)."""
+    """Whether ``model`` is on the shipped tongue mesh (the one the generic palate belongs to), also
+    placed in a speaker (:mod:`tonguevis.sim.placement`)."""
     from pathlib import Path
 
     from tonguevis.mesh.default import default_mesh_path
+    from tonguevis.sim.placement import source_model
+
+    model = source_model(model)
 
     source = model.mesh.metadata.get("source")
     try:
@@ -426,15 +447,21 @@ def shipped_tongue(model: TongueModel) -> bool:
 
 
 def placed_palate(recording: Recording, palate, model: TongueModel | None = None, landmarks: str = "speaker",
-                  rest_interval: RestChoice | tuple[float, float] | None = None, smooth_window: int | None = None):
-    """The palate as :func:`simulate` places it for ``recording`` on ``model``: (surface in the model frame, raised by m).
+                  rest_interval: RestChoice | tuple[float, float] | None = None, smooth_window: int | None = None,
+                  frame: str = "speaker"):
+    """The palate as :func:`simulate` places it for ``recording`` on ``model`` (unplaced, as given to
+    :func:`simulate`): (surface in the motion's ``frame``, raised by m).
 
-    For drawing a motion against its palate: pass the motion's landmarks and rest
-    (``motion.metadata["landmarks"]``, :func:`tonguevis.workflows.rest_of`) so the
-    alignment is the one the simulation used.
+    For drawing a motion against its palate: pass the motion's landmarks, rest and frame
+    (``motion.metadata["landmarks"]``, :func:`tonguevis.workflows.rest_of`,
+    ``motion.metadata.get("frame", "model")``: motions saved before the speaker frame are in the
+    model's) so the alignment is the one the simulation used.
     """
-    prep = prepare_targets(recording, model or TongueModel.default(), landmarks, rest_interval, smooth_window)
-    return place_palate(palate, prep, quiet=True, model=model)  # the simulation said it once
+    from tonguevis.sim.placement import targets_in_frame
+
+    framed, prep, _ = targets_in_frame(recording, model or TongueModel.default(), frame, landmarks, rest_interval,
+                                       smooth_window)
+    return place_palate(palate, prep, quiet=True, model=framed)  # the simulation said it once
 
 
 def _contact_context(palate, prep, model, basis, recording) -> dict:

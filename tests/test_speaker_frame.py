@@ -1,0 +1,157 @@
+"""The model placed in the speaker (tonguevis.sim.placement): derived modes, the same motion in the speaker's units."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from tests.sim._models import bar_model
+from tests.sim.test_simulate import SENSORS, _recording
+from tonguevis.preprocess.alignment import SimilarityTransform
+from tonguevis.sim import Motion, simulate
+from tonguevis.sim.modal import free_dofs_for, solve_modes
+from tonguevis.sim.placement import PlacedModel, placed_basis
+
+MOVE = SimilarityTransform(1.8, Rotation.from_rotvec([0.3, -0.5, 0.7]).as_matrix(), np.array([0.01, -0.02, 0.03]))
+
+
+def _solved(model, m):
+    """(phi (3n, m), eigenvalues) by a direct eigen-solve of ``model``'s own K and M."""
+    free = free_dofs_for(model.mesh.n_nodes, model.anchors)
+    phi_free, vals, _ = solve_modes(model.stiffness, model.mass, free, m)
+    phi = np.zeros((3 * model.mesh.n_nodes, m))
+    phi[free] = phi_free
+    return phi, vals
+
+
+def _same_modes(derived, solved, vals, mass):
+    """The same modes: C = Φ_solvedᵀ M Φ_derived is orthogonal and couples only equal eigenvalues (the bar's
+    square section makes pairs of equal ones, whose modes are any rotation within the pair)."""
+    c = solved.T @ (mass @ derived)
+    np.testing.assert_allclose(c.T @ c, np.eye(len(vals)), atol=1e-7)
+    apart = ~np.isclose(vals[:, None], vals[None, :], rtol=1e-6)
+    assert np.abs(c[apart]).max() < 1e-7
+    assert apart.sum() > 0.8 * apart.size  # most eigenvalues distinct: the check has teeth
+
+
+@pytest.mark.parametrize("keep_frequencies", [True, False])
+def test_the_placed_basis_is_the_eigen_solve_of_the_moved_mesh(keep_frequencies):
+    model = bar_model(nx=6, sensors=SENSORS)
+    m = 12
+    placed = model.placed(MOVE, keep_frequencies=keep_frequencies)
+    derived = placed.basis(m, cache=False)
+    phi, vals = _solved(placed, m)  # K and M assembled on the moved mesh, with its density
+    np.testing.assert_allclose(derived.eigenvalues, vals, rtol=1e-8)
+    _same_modes(derived.phi, phi, vals, placed.mass)
+    source = model.basis(m, cache=False).eigenvalues
+    if keep_frequencies:  # the moved tongue vibrates as the model does
+        np.testing.assert_allclose(vals, source, rtol=1e-8)
+    else:  # same tissue, c times larger: c times slower
+        np.testing.assert_allclose(vals, source / MOVE.scale ** 2, rtol=1e-8)
+    # Modal warping's W = CΦ of the moved mesh: the same rotations (turned by the move) per modal
+    # displacement of the same shape, i.e. W' = Q_b W / √(f c⁵)
+    w, w_moved = model.rotation_matrix(model.basis(m, cache=False)), placed.rotation_matrix(derived)
+    n = model.mesh.n_nodes
+    turned = np.einsum("ij,njm->nim", MOVE.rotation, w.reshape(n, 3, m)).reshape(3 * n, m)
+    factor = np.sqrt(placed.density_factor * MOVE.scale ** 3) * MOVE.scale
+    np.testing.assert_allclose(w_moved * factor, turned, atol=1e-9 * np.abs(w).max())
+
+
+def test_placed_basis_pure_rotation_and_scale_formula():
+    """placed_basis on its own: Q_b φ / √(f c³), λ / (f c²)."""
+    model = bar_model(nx=4)
+    basis = model.basis(5, cache=False)
+    out = placed_basis(basis, MOVE.rotation, 2.0, 0.5)
+    np.testing.assert_allclose(out.eigenvalues, basis.eigenvalues / 2.0)
+    node = 7
+    np.testing.assert_allclose(out.phi[3 * node:3 * node + 3], MOVE.rotation @ basis.phi[3 * node:3 * node + 3] / 2.0)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return bar_model(sensors=SENSORS)
+
+
+@pytest.mark.parametrize("patches", [None, "default"])
+def test_a_speaker_frame_motion_is_the_model_frame_one_seen_through_the_fit(model, patches):
+    recording = _recording(model, jaw_m=0.004)
+    options = dict(modes=20, landmarks="speaker", backend="numpy", sensor_patches=patches)
+    in_model = simulate(recording, model, frame="model", **options)
+    in_speaker = simulate(recording, model, frame="speaker", **options)
+    fit = in_speaker.metadata["fit"]
+    back = SimilarityTransform(fit["scale"], np.array(fit["rotation"]), np.array(fit["translation_m"])).inverse()
+    assert isinstance(in_speaker.model, PlacedModel) or isinstance(in_speaker.model.base_model, PlacedModel)
+    assert in_speaker.metadata["frame"] == "speaker" and in_model.metadata["frame"] == "model"
+    assert fit["scale"] == pytest.approx(1.15, rel=1e-6)  # the synthetic speaker is 1/1.15 of the model
+    np.testing.assert_array_equal(in_speaker.sensor_nodes, in_model.sensor_nodes)
+    extent = np.ptp(in_speaker.model.mesh.points, axis=0).max()
+    for frame in (0, 250, 280, len(recording.times) - 1):
+        expected = back.apply(in_model.deformed_points(frame))
+        np.testing.assert_allclose(in_speaker.deformed_points(frame), expected, atol=1e-9 * extent)
+    np.testing.assert_allclose(in_speaker.volume_change, in_model.volume_change, atol=1e-10)
+    np.testing.assert_allclose(in_speaker.sensor_residual, in_model.sensor_residual / fit["scale"], atol=1e-10)
+    for key in ("amplification", "volume_change_max_percent"):
+        assert in_speaker.metadata["plausibility"][key] == pytest.approx(in_model.metadata["plausibility"][key],
+                                                                         rel=1e-6, abs=1e-9)
+    # The targets are the speaker's own sensors (jaw-corrected): TT rose 15 mm on the model, 15 / 1.15 in the speaker.
+    tt = in_speaker.sensor_names.index("TT")
+    rise = np.linalg.norm(in_speaker.targets[:, tt] - in_speaker.targets[0, tt], axis=1).max()
+    assert rise == pytest.approx(0.015 / 1.15, rel=1e-6)
+
+
+def test_the_fit_is_in_the_metadata_and_the_motion_reloads_in_its_frame(model, tmp_path):
+    recording = _recording(model)
+    motion = simulate(recording, model, modes=20, backend="numpy")
+    fit = motion.metadata["fit"]
+    assert motion.metadata["frame"] == "speaker"
+    for key in ("scale", "rotation", "translation_m", "residual_rms_mm", "residual_max_mm"):
+        assert key in fit
+    assert fit["residual_max_mm"] >= fit["residual_rms_mm"] >= 0
+    path = tmp_path / "m.npz"
+    motion.save(path)
+    loaded = Motion.load(path)
+    assert isinstance(loaded.model, PlacedModel)
+    np.testing.assert_allclose(loaded.model.mesh.points, motion.model.mesh.points, atol=1e-15)
+    np.testing.assert_allclose(loaded.deformed_points(300), motion.deformed_points(300), atol=1e-12)
+    assert loaded.metadata["fit"]["scale"] == pytest.approx(fit["scale"])
+
+
+def test_morphing_across_frames_carries_the_shape_onto_the_source_tongue(model):
+    """A speaker-frame motion morphed to the model-frame one of the same recording: the target's q, carried
+    onto the placed model, is the source's own (the same shape), so the morph does not change it."""
+    from tonguevis.analysis.morph import morph_between
+
+    recording = _recording(model)
+    in_speaker = simulate(recording, model, modes=20, backend="numpy")
+    in_model = simulate(recording, model, modes=20, backend="numpy", frame="model")
+    morph = morph_between(in_speaker, 2.5, in_model, 2.5)
+    assert morph.model is in_speaker.model
+    # equal to the Newton tolerance (1e-8 m on the sensors), not bit for bit: the two runs stop their iterations apart
+    np.testing.assert_allclose(morph.q_target, morph.q_source, rtol=1e-6, atol=1e-6 * np.abs(morph.q_source).max())
+
+
+def test_the_demo_runs_in_the_speakers_millimetres():
+    """The shipped demo: the model placed in the speaker (its tongue scaled by 1/s), the fit said, the
+    generic palate placed with it, and the summary saying the frame."""
+    from tonguevis.cli.simulate import summary
+    from tonguevis.io import read_recording
+    from tonguevis.paths import DATA_DIR
+    from tonguevis.sim import TongueModel
+
+    model = TongueModel.default()
+    recording = read_recording(DATA_DIR / "spk1_ta.tsv")
+    motion = simulate(recording, model, modes=40, palate="generic")
+    fit = motion.metadata["fit"]
+    scale = fit["scale"]
+    assert motion.metadata["frame"] == "speaker"
+    assert motion.model.rest_volume == pytest.approx(model.rest_volume / scale ** 3, rel=1e-9)
+    # the generic palate moved with the model: the same clearance over the placed tongue's nodes
+    placed_gap, _ = motion.palate.clearance(motion.model.mesh.points[model.dorsal_nodes])
+    from tonguevis.palate import generic_palate
+
+    model_gap, _ = generic_palate().clearance(model.mesh.points[model.dorsal_nodes])
+    ok = np.isfinite(model_gap)
+    assert ok.sum() > 20
+    np.testing.assert_allclose(placed_gap[ok] * scale, model_gap[ok], atol=1e-9)
+    assert any(line.startswith("frame: the speaker's") for line in summary(motion))
