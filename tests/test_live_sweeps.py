@@ -232,3 +232,18 @@ def test_slot_names_and_a_ghost_from_a_saved_sweep(tmp_path):
     assert set(ghost.template) == set(names) and ghost.period == pytest.approx(0.6)
     with pytest.raises(SweepError, match="not a saved sweep"):
         open_sweep(tmp_path)
+
+
+def test_frames_as_the_sources_give_them_in_mm(tmp_path):
+    from types import SimpleNamespace
+
+    times, positions, q = _stream(5)
+    sweep = Sweep("frames", NAMES, targets=[StaticTarget([0.08, 0.02, 0.04], 0.004)])
+    for i in range(N):
+        frame = SimpleNamespace(frame=7 + i, timestamp_s=times[i],
+                                positions=(positions[i] * 1000).astype(np.float32).astype(float), quaternions=q[i])
+        sweep.add_frame(frame)
+    np.testing.assert_allclose(sweep.raw, positions, rtol=4 * F32)  # mm in, metres kept
+    back = open_sweep(sweep.save(tmp_path).folder, corrected=False)
+    np.testing.assert_allclose(back.sensors["TT"], positions[:, 3], rtol=4 * F32, atol=1e-9)
+    np.testing.assert_allclose(back.orientations["TD"], q[:, 4], atol=1e-6)

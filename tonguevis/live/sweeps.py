@@ -289,6 +289,16 @@ class Sweep:
         self._accuracy.append(acc)
         return acc[0] if single else acc
 
+    def add_frame(self, frame, corrected=None) -> np.ndarray:
+        """Add one live frame as the sources give it (:class:`tonguevis.live.source.LiveFrame` or alike:
+        ``timestamp_s``, ``positions`` (S, 3) in **mm**, optional ``quaternions`` (S, 4) and ``frame``);
+        ``corrected`` (S, 3) in **metres** as in :meth:`add`.  Returns the accuracy per target (T,)."""
+        quats = getattr(frame, "quaternions", None)
+        if self._has_quats is False:
+            quats = None  # the first frames had none: keep the sweep consistent
+        return self.add(frame.timestamp_s, np.asarray(frame.positions, dtype=float) / 1000.0, corrected=corrected,
+                        quaternions=quats, frame=getattr(frame, "frame", None))
+
     def colours(self, accuracy=None) -> np.ndarray:
         """(T, 3) RGB for each target: the last sample's accuracy (or ``accuracy``), grey when missing."""
         if accuracy is None:
