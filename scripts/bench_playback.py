@@ -358,7 +358,9 @@ def main() -> int:
         profiler = cProfile.Profile()
         profiler.enable()
     QTimer.singleShot(int(1000 * args.seconds), loop.quit)
-    unsubscribe = state.subscribe("playing", lambda e: None if e.value else loop.quit())
+    from tonguevis.appstate import connected
+
+    unsubscribe = connected(state.events.playing, lambda e: None if e.value else loop.quit())
     loop.exec()
     unsubscribe()
     if event_times is not None:

@@ -9,13 +9,13 @@ import textwrap
 
 import pytest
 
-from tonguevis.appstate import MAX_SPEED, MIN_SPEED, AppState, interval_at
+from tonguevis.appstate import MAX_SPEED, MIN_SPEED, AppState, connected, interval_at
 
 
 def recorder(state: AppState, *names: str) -> list:
     events: list = []
     for name in names:
-        state.subscribe(name, events.append)
+        getattr(state.events, name).connect(events.append)
     return events
 
 
@@ -97,13 +97,13 @@ def test_new_range_clears_loop_and_clamps_time():
 def test_unsubscribe_and_unknown_event():
     state = AppState(0.0, 1.0)
     seen = []
-    unsubscribe = state.subscribe("time", seen.append)
+    unsubscribe = connected(state.events.time, seen.append)
     state.set_time(0.3)
     unsubscribe()
     state.set_time(0.4)
     assert len(seen) == 1
-    with pytest.raises(ValueError, match="unknown AppState event"):
-        state.subscribe("tiem", seen.append)
+    with pytest.raises(AttributeError, match="tiem"):  # typed events: a misspelt name fails at once
+        state.events.tiem.connect(seen.append)
 
 
 def test_observer_writing_back_does_not_recurse_forever():
@@ -116,7 +116,7 @@ def test_observer_writing_back_does_not_recurse_forever():
         seen.append(event.value)
         state.set_time(round(event.value, 1))
 
-    state.subscribe("time", snapping_view)
+    state.events.time.connect(snapping_view)
     state.set_time(0.33)
     assert seen == [0.33, 0.3]
     assert state.time == 0.3

@@ -38,6 +38,13 @@ of several slots changed, where there are several):
 ``tongue_model``  the tongue model every simulation uses (value: the model or None: built on need)
 ``run_settings``  how the app simulates (value: a :class:`tonguevis.workflows.settings.RunSettings`)
 ``status``        a line for the status bar (str); sent every time, even when the text repeats
+``frame_drawn``   a 3D view drew the motion's frame ``value`` (int; ``source`` is the view): what
+                  another view draws in step with it (the compare panel's B, its difference colours)
+
+The events are typed signals (psygnal, as napari's evented models): ``state.events.time``
+is a signal of :class:`Event`; ``state.events.time.connect(callback)`` subscribes and
+``.disconnect(callback)`` stops.  A misspelt event name is an AttributeError at once,
+where a string name failed only when the event was first sent.
 """
 
 from __future__ import annotations
@@ -46,6 +53,8 @@ import logging
 import math
 from dataclasses import dataclass
 from typing import Any, Callable
+
+from psygnal import EmitLoopError, Signal, SignalGroup
 
 log = logging.getLogger("tonguevis")
 
@@ -61,7 +70,8 @@ SESSION_ROLES = ("primary", "compare")
 #: The morph's ends: t = 0 and t = 1.
 MORPH_ENDS = ("source", "target")
 EVENT_NAMES = ("time", "playing", "speed", "loop", "range", "selection", "color", "reference",
-               "session", "motion", "productions", "motions", "morph_ends", "tongue_model", "run_settings", "status")
+               "session", "motion", "productions", "motions", "morph_ends", "tongue_model", "run_settings", "status",
+               "frame_drawn")
 
 
 @dataclass(frozen=True)
@@ -79,6 +89,46 @@ class Event:
 Callback = Callable[[Event], None]
 
 
+class AppEvents(SignalGroup):
+    """The app model's events: one signal of :class:`Event` per name of the module's table."""
+
+    time = Signal(Event)
+    playing = Signal(Event)
+    speed = Signal(Event)
+    loop = Signal(Event)
+    range = Signal(Event)
+    selection = Signal(Event)
+    color = Signal(Event)
+    reference = Signal(Event)
+    session = Signal(Event)
+    motion = Signal(Event)
+    productions = Signal(Event)
+    motions = Signal(Event)
+    morph_ends = Signal(Event)
+    tongue_model = Signal(Event)
+    run_settings = Signal(Event)
+    status = Signal(Event)
+    frame_drawn = Signal(Event)
+
+
+def connected(signal, callback: Callback) -> Callable[[], None]:
+    """Connect ``callback`` to ``signal`` (e.g. ``state.events.time``); returns the function that
+    disconnects it (views that close keep it).
+
+    The signal holds ``callback`` strongly: psygnal would hold a bound method weakly, and a Qt
+    view's Python wrapper may be collected while its widget lives on, silently deafening it.
+    """
+    def relay(event: Event) -> None:
+        callback(event)
+
+    signal.connect(relay)
+
+    def disconnect() -> None:
+        signal.disconnect(relay, missing_ok=True)
+
+    return disconnect
+
+
 class AppState:
     """Open sessions, motions, morph ends, status; current time, playback, loop range,
     selection; observers get :class:`Event`s.
@@ -89,7 +139,7 @@ class AppState:
     """
 
     def __init__(self, start: float = 0.0, end: float = 0.0, frame_period: float = 0.01):
-        self._observers: dict[str, list[Callback]] = {name: [] for name in EVENT_NAMES}
+        self.events = AppEvents()
         self._start = float(start)
         self._end = max(float(end), float(start))
         self._frame_period = float(frame_period)
@@ -109,24 +159,16 @@ class AppState:
         self._run_settings = RunSettings()
         self._status = ""
 
-    # -- observers ---------------------------------------------------------
-    def subscribe(self, name: str, callback: Callback) -> Callable[[], None]:
-        """Call ``callback(event)`` on every ``name`` event; returns an unsubscribe function."""
-        if name not in self._observers:
-            raise ValueError(f"unknown AppState event {name!r}; known: {', '.join(EVENT_NAMES)}")
-        self._observers[name].append(callback)
-
-        def unsubscribe() -> None:
-            if callback in self._observers[name]:
-                self._observers[name].remove(callback)
-
-        return unsubscribe
-
+    # -- events ----------------------------------------------------------
     def _emit(self, name: str, value: Any, source: Any, key: str | None = None) -> None:
-        event = Event(name, value, source, key)
-        # Copy: an observer may unsubscribe while we iterate.
-        for callback in list(self._observers[name]):
-            callback(event)
+        try:
+            getattr(self.events, name).emit(Event(name, value, source, key))
+        except EmitLoopError as exc:  # a view's own error, as it raised it (psygnal wraps it)
+            raise (exc.__cause__ or exc) from None
+
+    def frame_drawn(self, index: int, source: Any) -> None:
+        """``source`` (a 3D view) drew frame ``index``: a ``frame_drawn`` event."""
+        self._emit("frame_drawn", int(index), source)
 
     # -- time --------------------------------------------------------------
     @property
@@ -320,7 +362,7 @@ class AppState:
             if event.key == role:
                 callback(event.value)
 
-        stops = [self.subscribe("session", relay), self.subscribe("motion", relay)]
+        stops = [connected(self.events.session, relay), connected(self.events.motion, relay)]
 
         def unsubscribe() -> None:
             for stop in stops:

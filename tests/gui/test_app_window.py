@@ -94,7 +94,7 @@ def test_loop_current_production(qtbot, window):
     window.state.set_playing(True)
     # Playing past the production's end wraps to its start.
     wrapped = []
-    window.state.subscribe("time", lambda e: wrapped.append(e.value))
+    window.state.events.time.connect(lambda e: wrapped.append(e.value))
     qtbot.waitUntil(lambda: any(b < a for a, b in zip(wrapped, wrapped[1:])), timeout=5000)
     window.state.set_playing(False)
     assert all(start <= t <= end for t in wrapped)

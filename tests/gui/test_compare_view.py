@@ -176,7 +176,7 @@ def test_stop_comparing_hides_the_panel_and_the_difference_colouring(qtbot, pair
     window.state.set_color("difference")
     window.stop_comparing()
     assert not panel.isVisible() and panel.comparison is None
-    assert "difference" not in window.view3d.frame_hooks and window.state.color == "displacement"
+    assert not window.compare_panel.difference_shown and window.state.color == "displacement"
 
 
 def test_a_recording_compared_with_itself_under_the_linear_model(qtbot, window):

@@ -168,7 +168,7 @@ def test_models_are_built_in_the_job_and_handed_back_to_the_gui_thread(qtbot, wi
     threads = _Threads(monkeypatch)
     window.model = None  # nothing built yet: the job builds it
     models = []
-    window.state.subscribe("tongue_model", lambda event: models.append(event.value))
+    window.state.events.tongue_model.connect(lambda event: models.append(event.value))
     show_and_simulate(qtbot, window, demo_session(3.5, 5.8))
     assert built == [False]  # built once, in the job's thread
     assert window.model is models[-1] is window.session.motion.model  # handed back and kept
@@ -215,7 +215,7 @@ def test_the_tabs_talk_through_the_app_model(qtbot, window):
     assert window.state.motions == {"spk1_ta": session.motion} and morph.motions == window.state.motions
     curve = energy.curves[0]
     ends = []
-    window.state.subscribe("morph_ends", lambda event: ends.append((event.key, event.value, event.source)))
+    window.state.events.morph_ends.connect(lambda event: ends.append((event.key, event.value, event.source)))
     for k, button in ((0, energy.to_source), (len(curve.times) // 2, energy.to_target)):
         energy.pick(curve, k)
         button.click()

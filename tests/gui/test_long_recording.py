@@ -75,7 +75,7 @@ def test_a_long_recording_shows_its_first_seconds_while_the_rest_simulates(qtbot
         seen.append((session.motion, window.view3d.renders, window.state.end))
         ranges.append(dict(session.frames.clim))
 
-    window.state.subscribe("motion", on_motion)
+    window.state.events.motion.connect(on_motion)
     energy_motions = []
     window.energy_tab.motionsLoaded.connect(lambda motions: energy_motions.append(dict(motions)))
     session = show_and_simulate(qtbot, window, tiled_session(1.0), timeout=240000)

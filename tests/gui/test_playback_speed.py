@@ -53,7 +53,7 @@ def test_slow_frames_are_dropped_not_delayed(qtbot, monkeypatch):
     monkeypatch.setattr(controller, "_make_clock", lambda: (clock, "test clock"))
     shown = []
 
-    state.subscribe("time", lambda event: shown.append(event.value))
+    state.events.time.connect(lambda event: shown.append(event.value))
     state.set_time(1.0)
     state.set_playing(True)
     controller.timer.stop()  # ticks by hand
@@ -85,7 +85,7 @@ def test_playback_keeps_up_with_the_wall_clock_on_a_slow_view(qtbot, monkeypatch
         shown.append((event.value, controller.clock.time() if controller.clock else None))
         time.sleep(0.04)
 
-    state.subscribe("time", slow_view)
+    state.events.time.connect(slow_view)
     state.set_time(1.0)
     state.set_playing(True)
     qtbot.waitUntil(lambda: state.time > 1.6, timeout=5000)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import spectrogram
 
-from tonguevis.appstate import AppState
+from tonguevis.appstate import AppState, connected
 from tonguevis.render.label_tiers import draw_tiers, fit_texts, tiers
 from tonguevis.gui.timeplot import TimePlot
 from tonguevis.render.production_marks import mark_landmarks, shade_productions
@@ -74,7 +74,7 @@ class AudioPlot(TimePlot):
         self._time_range = (0.0, 1.0)
         self._marks: list = []  # the productions' artists, replaced when they are corrected
         self._layout(0)
-        state.subscribe("productions", self._on_productions)
+        connected(state.events.productions, self._on_productions)
 
     def _layout(self, n_tiers: int) -> None:
         """(Re)make the axes: waveform, spectrogram and, when there are tiers, their rows."""

@@ -30,6 +30,7 @@ from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QVBox
 
 from tonguevis.gui.elastic_label import ElasticLabel
 from tonguevis.errors import TonguevisError
+from tonguevis.appstate import connected
 
 log = logging.getLogger("tonguevis")
 
@@ -143,14 +144,15 @@ class ComparePanel(QWidget):
         self.layout_box.currentIndexChanged.connect(lambda _i: self.set_layout(self.layout_box.currentData()))
         self.time_box.currentIndexChanged.connect(lambda _i: self.set_time_mode(self.time_box.currentData()))
         self.close_button.clicked.connect(lambda: state.set_session(None, "compare", self))
-        # B follows the frame A draws (A's frame hook, called as A draws each frame, also for a new
-        # frame of reference or colouring): during playback A draws each frame ahead of the clock
-        # for the moment it is painted, and B (its ghost in A's views, or its own view, pipelined
-        # as A's) is drawn for the same moment.
-        view_a.frame_hooks["compare"] = lambda i, _drawn: self.show_frame(i)
-        state.subscribe("playing", self._on_playing)
-        state.subscribe("session", self._on_sessions)
-        state.subscribe("motion", self._on_sessions)
+        # B follows the frame A draws (the model's frame_drawn event, sent as A draws each frame, also
+        # for a new frame of reference or colouring): during playback A draws each frame ahead of the
+        # clock for the moment it is painted, and B (its ghost in A's views, or its own view,
+        # pipelined as A's) is drawn for the same moment.
+        self.difference_shown = False  # A's surface coloured by the distance to B
+        connected(state.events.frame_drawn, self._on_frame_drawn)
+        connected(state.events.playing, self._on_playing)
+        connected(state.events.session, self._on_sessions)
+        connected(state.events.motion, self._on_sessions)
         self.setVisible(False)
 
     # -- what is compared --------------------------------------------------------------------
@@ -339,9 +341,9 @@ class ComparePanel(QWidget):
         scene = self.view_a.scene
         if available:
             scene.set_colour_range("difference", self._clim, "distance to\nB (mm)")
-            self.view_a.frame_hooks["difference"] = self._colour_a
+            self.difference_shown = True
         else:
-            self.view_a.frame_hooks.pop("difference", None)
+            self.difference_shown = False
             if self.state.color == "difference":
                 self.state.set_color("displacement", self)
 
@@ -350,8 +352,16 @@ class ComparePanel(QWidget):
         """B's frame shown with time ``t_a`` of A (None before both are simulated)."""
         return None if self.comparison is None else self.comparison.frame_b(t_a)
 
-    def _colour_a(self, i: int, drawn) -> None:
-        """A's frame hook: with the colouring "distance to B", A's surface shows the distance."""
+    def _on_frame_drawn(self, event) -> None:
+        """A drew frame ``event.value``: B is drawn for the same moment, and A coloured by the distance."""
+        if event.source is not self.view_a:
+            return
+        self.show_frame(event.value)
+        if self.difference_shown:
+            self._colour_a(event.value)
+
+    def _colour_a(self, i: int) -> None:
+        """With the colouring "distance to B", A's surface shows the distance (A's frame ``i``)."""
         if self.state.color != "difference" or self.comparison is None:
             return
         j = self.comparison.frame_b(self.session_a.frames.times[i])

@@ -11,6 +11,7 @@ import logging
 from PySide6.QtWidgets import QFileDialog
 
 from tonguevis.errors import TonguevisError
+from tonguevis.appstate import connected
 
 log = logging.getLogger("tonguevis")
 
@@ -106,4 +107,4 @@ class CompareMixin:
         self.compare_panel = ComparePanel(self.state, self.view3d, self)
         splitter.insertWidget(1, self.compare_panel)
         splitter.setSizes([900, 450, 600])
-        self.state.subscribe("session", self._compare_closed)
+        connected(self.state.events.session, self._compare_closed)

@@ -30,6 +30,7 @@ import logging
 
 from tonguevis.analysis.energy import EnergyCurve
 from tonguevis.render.energy import plot_energy_curves
+from tonguevis.appstate import connected
 
 log = logging.getLogger("tonguevis")
 
@@ -133,7 +134,7 @@ class EnergyTab(QtWidgets.QWidget):
         layout.addWidget(side_widget)
         layout.addLayout(main, 1)
         self.redraw()
-        self._unsubscribe = state.subscribe("motion", self._on_simulated) if state is not None else None
+        self._unsubscribe = connected(state.events.motion, self._on_simulated) if state is not None else None
 
     def _shown_recording(self) -> str | None:
         session = None if self.state is None else self.state.session

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from PySide6.QtGui import QAction, QActionGroup, QKeySequence
 
-from tonguevis.appstate import COLOR_MODES, REFERENCE_FRAMES
+from tonguevis.appstate import COLOR_MODES, REFERENCE_FRAMES, connected
 from tonguevis.gui.view3d import COLOUR_LABELS, REFERENCE_LABELS
 
 MAX_RECENT = 8
@@ -62,7 +62,7 @@ class MenusMixin:
             action.setChecked(frame == self.state.reference)
             frames.addAction(action)
             self.reference_actions[frame] = action
-        self.state.subscribe("reference", lambda event: self.reference_actions[event.value].setChecked(True))
+        connected(self.state.events.reference, lambda event: self.reference_actions[event.value].setChecked(True))
         simulation = bar.addMenu("&Simulation")
         self.rest_action = self._action(simulation, "Set &rest interval…", self.ask_rest_interval)
         self.patches_action = QAction("Sensors on the &surface (sensor patches)", self)

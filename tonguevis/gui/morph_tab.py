@@ -20,6 +20,7 @@ from PySide6 import QtCore, QtWidgets
 from tonguevis.analysis.morph import Morph, morph_between
 from tonguevis.render.morph import COLORMAP, bar_args, morph_bounds, morph_surface, place_camera
 from tonguevis.errors import TonguevisError
+from tonguevis.appstate import connected
 
 SLIDER_STEPS = 200
 PLAY_STEPS = 60  # frames from source to target while playing
@@ -106,8 +107,8 @@ class MorphTab(QtWidgets.QWidget):
         self._update_label()
         self._subscriptions = []
         if state is not None:
-            self._subscriptions = [state.subscribe("motions", lambda event: self.set_motions(event.value)),
-                                   state.subscribe("morph_ends", lambda event: self.set_end(event.key, *event.value))]
+            self._subscriptions = [connected(state.events.motions, lambda event: self.set_motions(event.value)),
+                                   connected(state.events.morph_ends, lambda event: self.set_end(event.key, *event.value))]
             if state.motions:
                 self.set_motions(state.motions)
 

@@ -15,7 +15,7 @@ from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
 from matplotlib.figure import Figure
 from PySide6.QtWidgets import QLabel, QSizePolicy, QVBoxLayout, QWidget
 
-from tonguevis.appstate import AppState
+from tonguevis.appstate import AppState, connected
 from tonguevis.render.drawing import TOUCH_MM, MidlineProfile, head_points
 from tonguevis.gui.timeplot import FACE, TimePlot
 
@@ -118,7 +118,7 @@ class PalatePanel(QWidget):
         layout.addWidget(self.header)
         layout.addWidget(self.midline, 3)
         layout.addWidget(self.timeline, 2)
-        state.subscribe("time", lambda event: self.show_time(event.value))
+        connected(state.events.time, lambda event: self.show_time(event.value))
 
     @property
     def cursor_time(self) -> float:

@@ -15,7 +15,7 @@ import logging
 import numpy as np
 from PySide6.QtCore import QBuffer, QByteArray, QElapsedTimer, QIODevice, QObject, Qt, QTimer, Signal
 
-from tonguevis.appstate import AppState, Event
+from tonguevis.appstate import AppState, Event, connected
 
 log = logging.getLogger("tonguevis")
 TICK_MS = 15
@@ -139,10 +139,10 @@ class PlaybackController(QObject):
         self._last_clock_time = 0.0
         self._advanced = False
         self._last_advance = QElapsedTimer()
-        state.subscribe("playing", self._on_playing)
-        state.subscribe("speed", self._restart_if_playing)
-        state.subscribe("loop", self._restart_if_playing)
-        state.subscribe("time", self._on_time)
+        connected(state.events.playing, self._on_playing)
+        connected(state.events.speed, self._restart_if_playing)
+        connected(state.events.loop, self._restart_if_playing)
+        connected(state.events.time, self._on_time)
 
     def set_audio(self, audio) -> None:
         self.state.set_playing(False)

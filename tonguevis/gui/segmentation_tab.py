@@ -21,6 +21,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 from tonguevis.errors import TonguevisError
 from tonguevis.render.segmentation_view import (TARGETS, draw_frame, draw_result, draw_seed_markers, make_target,
                                              move_frame, partition_table)
+from tonguevis.appstate import connected
 
 log = logging.getLogger("tonguevis")
 
@@ -128,7 +129,7 @@ class SegmentationTab(QtWidgets.QWidget):
         self._update_seeding()
         self._subscriptions = []
         if state is not None:
-            self._subscriptions = [state.subscribe("time", self._on_time), state.follow_session(self.set_session)]
+            self._subscriptions = [connected(state.events.time, self._on_time), state.follow_session(self.set_session)]
             if state.session is not None:
                 self.set_session(state.session)
         app = QtWidgets.QApplication.instance()

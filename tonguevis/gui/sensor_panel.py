@@ -19,7 +19,7 @@ import numpy as np
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
-from tonguevis.appstate import AppState
+from tonguevis.appstate import AppState, connected
 from tonguevis.errors import TonguevisError
 from tonguevis.workflows.session import SIGNAL_KINDS, Session, tongue_sensors
 from tonguevis.gui.timeplot import TimePlot
@@ -74,7 +74,7 @@ class SensorPlot(TimePlot):
         self.editing = False
         self._grabbed: tuple[int, str] | None = None
         self.set_time_axes(list(self.axes))
-        state.subscribe("selection", lambda e: self._highlight())
+        connected(state.events.selection, lambda e: self._highlight())
 
     def show_signals(self, times: np.ndarray, signals: dict[str, np.ndarray], label: str, unit: str,
                      productions: list[tuple[float, float]], colours: dict[str, str] | None = None,
@@ -190,11 +190,11 @@ class SensorPanel(QWidget):
         self.save_button.clicked.connect(self.save_productions)
         self.plot.boundary_moved.connect(self.move_boundary)
         self._on_edit_toggled(False)
-        state.subscribe("productions", self._on_productions)
+        connected(state.events.productions, self._on_productions)
         self.kind.currentIndexChanged.connect(lambda _i: self.refresh())
         self.others.toggled.connect(lambda _on: self.refresh())
         self.sensor.currentIndexChanged.connect(lambda _i: state.select(self.sensor.currentData(), source=self))
-        state.subscribe("selection", self._on_selection)
+        connected(state.events.selection, self._on_selection)
 
     @property
     def cursor_time(self) -> float:

@@ -20,7 +20,7 @@ from PySide6.QtCore import QPoint, QRect, Qt
 from PySide6.QtGui import QColor, QImage, QPainter, QPen
 from PySide6.QtWidgets import QSizePolicy, QWidget
 
-from tonguevis.appstate import AppState, Event
+from tonguevis.appstate import AppState, Event, connected
 
 CURSOR_COLOUR = "#e74c3c"
 FACE = "#fbfbfb"
@@ -68,7 +68,7 @@ class TimePlot(FigureCanvasQTAgg):
         self._columns: list = []  # the time axes' pixel geometry at the last draw (see _axis_columns)
         self._picture: QImage | None = None  # the figure as drawn last, in the screen's pixel format
         self._dragging = False
-        self._unsubscribe = [state.subscribe("time", self._on_time)]
+        self._unsubscribe = [connected(state.events.time, self._on_time)]
         self.mpl_connect("draw_event", self._on_draw)
         self.mpl_connect("button_press_event", self._on_press)
         self.mpl_connect("motion_notify_event", self._on_motion)

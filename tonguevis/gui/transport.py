@@ -5,7 +5,7 @@ from __future__ import annotations
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QSlider, QToolButton, QWidget
 
-from tonguevis.appstate import AppState, interval_at
+from tonguevis.appstate import AppState, connected, interval_at
 from tonguevis.gui.elastic_label import ElasticLabel
 
 SPEEDS = (0.25, 0.5, 0.75, 1.0)
@@ -40,12 +40,12 @@ class TransportBar(QWidget):
         self.loop.toggled.connect(self._on_loop_toggled)
         self.slider.valueChanged.connect(self._on_slider)
         self.cursor_time = state.time
-        state.subscribe("time", self._on_time)
-        state.subscribe("playing", lambda e: self.play.setText("❚❚" if e.value else "▶"))
-        state.subscribe("range", lambda e: self._on_range())
-        state.subscribe("speed", self._on_speed)
-        state.subscribe("loop", lambda e: self._on_loop_changed(e.value))
-        state.subscribe("productions", lambda e: self.set_productions(e.value.productions) if e.key == "primary"
+        connected(state.events.time, self._on_time)
+        connected(state.events.playing, lambda e: self.play.setText("❚❚" if e.value else "▶"))
+        connected(state.events.range, lambda e: self._on_range())
+        connected(state.events.speed, self._on_speed)
+        connected(state.events.loop, lambda e: self._on_loop_changed(e.value))
+        connected(state.events.productions, lambda e: self.set_productions(e.value.productions) if e.key == "primary"
                         else None)
 
     def set_productions(self, productions: list[tuple[float, float]]) -> None:

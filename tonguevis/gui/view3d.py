@@ -8,7 +8,7 @@ import numpy as np
 from PySide6.QtCore import QElapsedTimer, Signal
 from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
-from tonguevis.appstate import COLOR_MODES, REFERENCE_FRAMES, AppState
+from tonguevis.appstate import AppState, COLOR_MODES, REFERENCE_FRAMES, connected
 from tonguevis.render.drawing import contact_line, draw_frame
 from tonguevis.gui.elastic_label import ElasticComboBox, ElasticLabel
 from tonguevis.render.scene import TongueScene, frame_text, scene_setup, surface_faces
@@ -122,11 +122,10 @@ class View3D(QWidget):
         self.drawn = None  # the FrameDrawing shown (tests read it)
         #: name -> hook(i, drawn) called with each new frame before it is painted (the compare
         #: view colours A's surface by the distance to B there).
-        self.frame_hooks: dict = {}
-        state.subscribe("time", self._on_time)
-        state.subscribe("playing", self._on_playing)
-        state.subscribe("color", self._on_colour)
-        state.subscribe("reference", self._on_reference)
+        connected(state.events.time, self._on_time)
+        connected(state.events.playing, self._on_playing)
+        connected(state.events.color, self._on_colour)
+        connected(state.events.reference, self._on_reference)
 
     def set_session(self, session) -> None:
         self.session = session
@@ -214,8 +213,7 @@ class View3D(QWidget):
         elif time.perf_counter() - self._described_at >= DESCRIBE_INTERVAL_S:
             self._described_at = time.perf_counter()
             line = contact_line(self.session, i, reference)
-        for hook in list(self.frame_hooks.values()):
-            hook(i, drawn)
+        self.state.frame_drawn(i, self)  # views drawn in step with this one (the compare panel)
         # One render per frame: the image view renders now and paints later (the frame
         # rasterises meanwhile; pipelined, its description is told when it is shown);
         # pyvistaqt's paintGL always renders, so there a repaint is asked.

@@ -18,7 +18,7 @@ from pathlib import Path
 from PySide6.QtCore import QSettings, Qt, Signal
 from PySide6.QtWidgets import QFileDialog, QMainWindow, QSplitter, QTabWidget, QVBoxLayout, QWidget
 
-from tonguevis.appstate import AppState
+from tonguevis.appstate import AppState, connected
 from tonguevis.errors import TonguevisError
 from tonguevis.gui.audio_panel import AudioPlot
 from tonguevis.gui.compare_actions import CompareMixin
@@ -76,10 +76,10 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         self.export_job: Job | None = None  # the latest export or palate fit
         self.last_dialog = None
         self.feature_tabs: dict[str, QWidget] = {}
-        self.state.subscribe("status", lambda event: self.statusBar().showMessage(event.value))
+        connected(self.state.events.status, lambda event: self.statusBar().showMessage(event.value))
         # The window's own reactions first: the time range is the new motion's before any view redraws.
-        self.state.subscribe("session", self._session_opened)
-        self.state.subscribe("motion", self._motion_ready)
+        connected(self.state.events.session, self._session_opened)
+        connected(self.state.events.motion, self._motion_ready)
         self._build_views()
         self._build_menus()
         self.playback = PlaybackController(self.state, self)
