@@ -331,7 +331,7 @@ class WaveFrontSource(ThreadedSource):
                 sock = socket.create_connection((self.host, self.port), timeout=self.connect_timeout)
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                 self._event(f"connected to {self.host}:{self.port}")
-                self._reader = PacketReader(self.byte_order)
+                self._reader = PacketReader(BIG)  # the protocol's default until SetByteOrder
                 self._handshake(sock)
                 self._set_state("streaming")
                 got_frames = self._stream(sock)
@@ -392,9 +392,10 @@ class WaveFrontSource(ThreadedSource):
                 raise _Closed(f"connection closed by the device{what}")
             return data, arrival
 
-    def _reply(self, sock: socket.socket, command: str):
+    def _reply(self, sock: socket.socket, command: str, send: bool = True):
         """The next non-data packet after sending ``command`` (None if none came in time)."""
-        self._send(sock, command)
+        if send:
+            self._send(sock, command)
         deadline = time.perf_counter() + self.command_timeout
         while not self._stop.is_set():
             try:
@@ -410,7 +411,15 @@ class WaveFrontSource(ThreadedSource):
 
     def _handshake(self, sock: socket.socket) -> None:
         if self.byte_order != BIG:
+            # Asked in the default order; the reply may come in either (ours: the new one), so the
+            # reader may still detect it, and from then on both directions are little-endian.
             self._send(sock, "SetByteOrder LittleEndian")
+            self._reader.byte_order = self.byte_order
+            reply = self._reply(sock, "SetByteOrder LittleEndian", send=False)
+            if reply is not None and reply.type == PacketType.ERROR:
+                self._event(f"'SetByteOrder LittleEndian' answered with an error: {reply.text}", error=True)
+            self._reader.byte_order = self.byte_order
+            self._reader.detected = None
         for command in ("Version 1.0", "SendParameters All"):
             reply = self._reply(sock, command)
             if reply is None:
