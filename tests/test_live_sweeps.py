@@ -109,7 +109,7 @@ def test_live_head_correction_and_offsets_are_what_is_scored_and_saved(tmp_path)
     # A target exactly where the corrected, offset tip is in frame 0: 100 % there.
     target = StaticTarget(corrected[0, 3] + offset, 0.002, sensor="TT")
     sweep = Sweep("offset", NAMES, targets=[target], sensor_offsets={"TT": offset})
-    acc = sweep.add(times, positions, corrected=corrected)
+    acc = sweep.add(times, positions, corrected=corrected, quaternions=np.tile([1.0, 0, 0, 0], (N, 5, 1)))
     assert acc.shape == (N, 1) and acc[0, 0] == 100.0
     d = np.linalg.norm(corrected[:, 3] + offset - target.point, axis=1)
     np.testing.assert_allclose(acc[:, 0], np.clip((0.004 - d) / 0.002, 0, 1) * 100)
@@ -117,6 +117,9 @@ def test_live_head_correction_and_offsets_are_what_is_scored_and_saved(tmp_path)
     fixed = _read(saved.files["head_corrected"])
     for i, name in enumerate(NAMES):
         np.testing.assert_allclose(fixed.sensors[name], corrected[:, i], rtol=F32, atol=1e-9)
+    # Quaternions are kept raw but not beside positions corrected live (they would not match them).
+    assert all(np.isnan(q).all() for q in fixed.orientations.values())
+    np.testing.assert_array_equal(_read(saved.files["raw"]).orientations["TT"][:10], [[1.0, 0, 0, 0]] * 10)
     assert saved.summary["head_correction"].startswith("live")
     assert "offsets" in saved.summary["scored_on"]
 

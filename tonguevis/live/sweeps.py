@@ -330,7 +330,8 @@ class Sweep:
     def recording(self, corrected: bool = False):
         """The sweep as a :class:`~tonguevis.io.recording.Recording` (m, times on the sweep's clock).
 
-        corrected : the head-corrected positions (given live, else computed as every command does).
+        corrected : the head-corrected positions (given live, else computed as every command does,
+            which rotates the quaternions too; positions corrected live are saved without orientations).
         """
         from tonguevis.io._common import estimate_rate
         from tonguevis.io.recording import Recording
@@ -342,8 +343,9 @@ class Sweep:
         rate = self.rate or estimate_rate(times, default=DEFAULT_RATE)
         data = self._corrected.array if (corrected and self._live_correction) else self.raw
         sensors = {n: data[:, i].copy() for i, n in enumerate(self.sensor_names)}
+        # Positions corrected live come without their rotated quaternions: the raw ones would be wrong there.
         orientations = ({n: self._quats.array[:, i].copy() for i, n in enumerate(self.sensor_names)}
-                        if self._has_quats else {})
+                        if self._has_quats and not (corrected and self._live_correction) else {})
         rec = Recording(rate=float(rate), times=times.copy(), sensors=sensors, orientations=orientations,
                         audio=self.audio,
                         metadata={"format": "ndi_wave", "file": f"sweep {self.number} ({self.name})",

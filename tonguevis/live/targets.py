@@ -120,7 +120,10 @@ def _check_radius(radius: float) -> float:
 
 
 def _check_opacity(opacity: float) -> float:
-    o = float(opacity)
+    try:
+        o = float(opacity)
+    except (TypeError, ValueError):
+        raise TargetError(f"a target's opacity must be a number between 0 and 1, got {opacity!r}") from None
     if not 0.0 <= o <= 1.0:
         raise TargetError(f"a target's opacity must be between 0 and 1, got {opacity!r}")
     return o
