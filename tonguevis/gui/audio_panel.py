@@ -75,6 +75,7 @@ class AudioPlot(TimePlot):
         self._marks: list = []  # the productions' artists, replaced when they are corrected
         self._layout(0)
         connected(state.events.productions, self._on_productions)
+        connected(state.events.session, self._on_session)
 
     def _layout(self, n_tiers: int) -> None:
         """(Re)make the axes: waveform, spectrogram and, when there are tiers, their rows."""
@@ -180,6 +181,16 @@ class AudioPlot(TimePlot):
             self._marks += mark_landmarks(self.wave_ax, landmarks, size=5.0)
         if draw:
             self.draw_idle()
+
+    def _on_session(self, event) -> None:
+        """A recording opened in the primary slot: its sound, productions, landmarks and labels."""
+        session = event.value
+        if event.key != "primary" or session is None:
+            return
+        start, end, _period = session.time_range
+        table = session.production_table
+        self.show_audio(session.recording.audio, (start, end), session.productions, session.recording.labels,
+                        list(getattr(table, "landmarks", []) or []))
 
     def _on_productions(self, event) -> None:
         if event.key == "primary":

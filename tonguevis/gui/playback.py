@@ -143,6 +143,12 @@ class PlaybackController(QObject):
         connected(state.events.speed, self._restart_if_playing)
         connected(state.events.loop, self._restart_if_playing)
         connected(state.events.time, self._on_time)
+        connected(state.events.session, self._on_session)
+
+    def _on_session(self, event) -> None:
+        """A recording opened in the primary slot: its sound is what plays."""
+        if event.key == "primary" and event.value is not None:
+            self.set_audio(event.value.recording.audio)
 
     def set_audio(self, audio) -> None:
         self.state.set_playing(False)

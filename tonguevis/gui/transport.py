@@ -41,6 +41,8 @@ class TransportBar(QWidget):
         self.slider.valueChanged.connect(self._on_slider)
         self.cursor_time = state.time
         connected(state.events.time, self._on_time)
+        connected(state.events.session, lambda e: self.set_productions(e.value.productions)
+                  if e.key == "primary" and e.value is not None else None)
         connected(state.events.playing, lambda e: self.play.setText("❚❚" if e.value else "▶"))
         connected(state.events.range, lambda e: self._on_range())
         connected(state.events.speed, self._on_speed)

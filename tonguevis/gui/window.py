@@ -295,18 +295,14 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         self.state.set_session(session, source=self)
 
     def _session_opened(self, event) -> None:
-        """A recording was opened: the window's title, the time range, the sound, the productions."""
+        """A recording was opened: the window's title, the time range and the rest line (the sound, the
+        productions and the views follow the session themselves)."""
         session = event.value
         if event.key != "primary" or session is None:
             return
         self.setWindowTitle(f"tonguevis — {session.name}")
         start, end, period = session.time_range
-        self.state.set_range(start, end, period, self)
-        self.playback.set_audio(session.recording.audio)
-        self.transport.set_productions(session.productions)
-        table = session.production_table
-        self.audio.show_audio(session.recording.audio, (start, end), session.productions,
-                              session.recording.labels, list(getattr(table, "landmarks", []) or []))
+        self.state.set_range(start, end, period, self)  # first: the views follow the session after it
         self.show_rest(session)
 
     def _motion_ready(self, event) -> None:
