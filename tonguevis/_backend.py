@@ -11,12 +11,11 @@ stderr pointed at /dev/null for that call only.
 
 from __future__ import annotations
 
-import logging
 import os
 import sys
 import threading
 
-logger = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 _lock = threading.Lock()
 _warp = None
 

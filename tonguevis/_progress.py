@@ -8,11 +8,9 @@ cancel button.  :func:`tqdm_progress` builds such a callable around a tqdm bar.
 
 from __future__ import annotations
 
-import logging
 from contextlib import contextmanager
 from typing import Callable, Iterator, Optional
 
-logger = logging.getLogger("tonguevis")
 
 ProgressCallback = Callable[[int, int, str], None]
 

@@ -49,14 +49,12 @@ where a string name failed only when the event was first sent.
 
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass
 from typing import Any, Callable
 
 from psygnal import EmitLoopError, Signal, SignalGroup
 
-log = logging.getLogger("tonguevis")
 
 MIN_SPEED = 0.25
 MAX_SPEED = 1.0

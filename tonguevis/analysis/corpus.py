@@ -22,7 +22,6 @@ An empty label is unknown: :func:`unknown_labels` says which.
 from __future__ import annotations
 
 import csv
-import logging
 import os
 import re
 from dataclasses import dataclass, field, replace
@@ -31,7 +30,7 @@ from typing import Iterable, Sequence
 
 from tonguevis.errors import TonguevisError
 
-logger = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 
 class CorpusError(TonguevisError):

@@ -29,19 +29,18 @@ tables in :mod:`tonguevis.analysis.validation_report`.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from tonguevis._logging import verbose
 from tonguevis._progress import ProgressCallback, report
 from tonguevis.analysis.kinematic import interpolation_weights
 from tonguevis.analysis.validation_scores import recording_summary, trajectory_scores
 from tonguevis.errors import SimulationError
 from tonguevis.io.recording import Recording
 
-logger = logging.getLogger("tonguevis")
 
 METHODS = ("model", "linear", "static", "kinematic")
 
@@ -88,6 +87,7 @@ class ValidationResult:
         atomic_write_text(path, json.dumps(self.as_dict(), indent=1, allow_nan=False) + "\n")
 
 
+@verbose
 def validate(
     recording: Recording,
     model=None,

@@ -15,14 +15,12 @@ Definitions (docs/validation.md repeats them):
 
 from __future__ import annotations
 
-import logging
 from typing import Any
 
 import numpy as np
 
 from tonguevis.io.recording import Recording
 
-logger = logging.getLogger("tonguevis")
 
 MIN_AXIS_STD_MM = 1.0
 REST_TOLERANCE_MM = 0.5  # sensors this close to rest count as "returned to rest"

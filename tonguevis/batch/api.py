@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 import os
 import time
 from dataclasses import dataclass, field, replace
@@ -13,7 +12,7 @@ from tonguevis._progress import ProgressCallback, report
 from tonguevis.batch import store
 from tonguevis.batch.settings import BatchError, BatchSettings, ModelSpec, input_digest, model_key, step_keys
 
-logger = logging.getLogger("tonguevis")
+from tonguevis._logging import logger, verbose
 
 
 @dataclass
@@ -64,6 +63,7 @@ def _counts(done: int, failed: int, fresh: int, total: int) -> str:
         f" ({fresh} up to date)" if fresh else "")
 
 
+@verbose
 def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.PathLike, *, jobs: int = 1,
         client=None, model=None, mesh: str | os.PathLike | None = None, axes: str | None = None,
         labels: str | os.PathLike | None = None, settings: BatchSettings | None = None, force: bool = False,

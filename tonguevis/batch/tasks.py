@@ -29,7 +29,7 @@ from tonguevis.batch import store, tables
 from tonguevis.batch.settings import BatchSettings, ModelSpec
 from tonguevis.errors import Cancelled, TonguevisError
 
-logger = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 _models: dict[str, object] = {}
 _models_lock = threading.Lock()

@@ -42,7 +42,7 @@ def build_parser(available_only: bool = True) -> argparse.ArgumentParser:
         prog="tonguevis",
         description="Physics-based deformable tongue visualisation from EMA recordings.",
     )
-    parser.add_argument("-v", "--verbose", action="store_true", help="log what happens")
+    parser.add_argument("-v", "--verbose", action="store_true", help="say what happens (the log at level info)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for command, module_name, help_text in COMMANDS:
         try:
@@ -65,10 +65,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command is None:  # `tonguevis` or `tonguevis -v` alone: the app on the demo
         args = parser.parse_args([*argv, "view"])
-    logging.basicConfig(
-        level=logging.INFO if args.verbose else logging.WARNING,
-        format="tonguevis: %(levelname)s: %(message)s",
-    )
+    from tonguevis._logging import set_log_level
+
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="tonguevis: %(levelname)s: %(message)s")
+    set_log_level(args.verbose)
     if getattr(args, "_run", None) is None:
         parser.print_help()
         return 2

@@ -18,10 +18,8 @@ recording (its ``NAME.TextGrid``, or MVIEW's words/phones) instead.
 from __future__ import annotations
 
 import argparse
-import logging
 from pathlib import Path
 
-log = logging.getLogger("tonguevis")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -13,10 +13,8 @@ source–target difference, eq. (14): blue = alike, red = most different.
 from __future__ import annotations
 
 import argparse
-import logging
 from pathlib import Path
 
-log = logging.getLogger("tonguevis")
 
 
 def _frame_spec(text: str) -> tuple[Path, float]:

@@ -11,10 +11,8 @@ approximation per node), optionally a PNG and the full result as ``.npz``.
 from __future__ import annotations
 
 import argparse
-import logging
 from pathlib import Path
 
-log = logging.getLogger("tonguevis")
 
 MODE_KINDS = ("rigid", "constraint")
 DEFAULT_MODES = 100

@@ -15,10 +15,9 @@ point tier ``events``, a point tier per landmark, beside the recording's own tie
 from __future__ import annotations
 
 import argparse
-import logging
 from pathlib import Path
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -97,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     for note in table.notes:
         print(f"note: {note}")
     if not table.clear:
-        log.warning("%s: the syllables are unclear (see the notes): the productions above are a guess", args.file)
+        logger.warning("%s: the syllables are unclear (see the notes): the productions above are a guess", args.file)
     if args.csv is not None:
         table.to_csv(args.csv)
         print(f"wrote {args.csv}")

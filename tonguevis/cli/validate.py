@@ -66,9 +66,9 @@ def run(args: argparse.Namespace) -> int:
     recording = read_recording_args(args)
     advice = long_static_advice(recording, args.no_static)
     if advice:
-        import logging
+        from tonguevis._logging import logger
 
-        logging.getLogger("tonguevis").warning(advice)
+        logger.warning(advice)
     model = load_model_args(args)
     with tqdm_progress("validating", disable=args.quiet) as progress:
         result = validate(recording, model, modes=args.modes, landmarks=args.landmarks,

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import json
-import logging
 import os
 import sys
 import traceback
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 
 def application():
@@ -26,7 +25,7 @@ def install_error_hook(window) -> None:
     """Unexpected exceptions in Qt callbacks become a dialog; the app keeps running."""
 
     def hook(kind, value, tb):
-        log.error("unexpected error:\n%s", "".join(traceback.format_exception(kind, value, tb)))
+        logger.error("unexpected error:\n%s", "".join(traceback.format_exception(kind, value, tb)))
         try:
             window.show_error("Unexpected error", f"{kind.__name__}: {value}")
         except Exception:  # never let the hook itself raise

@@ -21,7 +21,6 @@ at the matched moment.
 
 from __future__ import annotations
 
-import logging
 from types import SimpleNamespace
 
 import numpy as np
@@ -32,7 +31,6 @@ from tonguevis.gui.elastic_label import ElasticLabel
 from tonguevis.errors import TonguevisError
 from tonguevis.appstate import connected
 
-log = logging.getLogger("tonguevis")
 
 #: How B is shown: beside A (its own view, A's camera) or as a translucent ghost in A's views.
 LAYOUTS = {"side": "side by side", "ghost": "ghost in A's views"}

@@ -7,13 +7,11 @@ its own job (the first one's simulation is not cancelled by it); the
 
 from __future__ import annotations
 
-import logging
 from PySide6.QtWidgets import QFileDialog
 
 from tonguevis.errors import TonguevisError
 from tonguevis.appstate import connected
 
-log = logging.getLogger("tonguevis")
 
 
 class CompareMixin:

@@ -26,13 +26,12 @@ from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
 from matplotlib.figure import Figure
 from PySide6 import QtCore, QtWidgets
 
-import logging
 
 from tonguevis.analysis.energy import EnergyCurve
 from tonguevis.render.energy import plot_energy_curves
 from tonguevis.appstate import connected
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 UNIT_SCALE = 1e3  # the axis shows mJ
 
@@ -148,7 +147,7 @@ class EnergyTab(QtWidgets.QWidget):
         try:
             self.add_motion(session.name, session.motion, session.production_table)
         except Exception as exc:  # the main views must not suffer from a tab's problem
-            log.warning("energy curves of %s not added: %s", session.name, exc)
+            logger.warning("energy curves of %s not added: %s", session.name, exc)
 
     def _list(self, title: str) -> QtWidgets.QListWidget:
         widget = QtWidgets.QListWidget()

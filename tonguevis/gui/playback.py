@@ -10,14 +10,12 @@ or without audio, playback runs silently on a wall clock and says so.
 
 from __future__ import annotations
 
-import logging
 
 import numpy as np
 from PySide6.QtCore import QBuffer, QByteArray, QElapsedTimer, QIODevice, QObject, Qt, QTimer, Signal
 
 from tonguevis.appstate import AppState, Event, connected
 
-log = logging.getLogger("tonguevis")
 TICK_MS = 15
 PAD_S = 0.3
 #: An audio clock that has not moved for this long (device stalled, e.g. a virtual

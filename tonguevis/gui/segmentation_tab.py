@@ -13,7 +13,6 @@ are coloured by partition, or by the local error sqrt(e_E) in mm.
 
 from __future__ import annotations
 
-import logging
 
 import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
@@ -23,7 +22,7 @@ from tonguevis.render.segmentation_view import (TARGETS, draw_frame, draw_result
                                              move_frame, partition_table)
 from tonguevis.appstate import connected
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 
 class SegmentationTab(QtWidgets.QWidget):
@@ -267,7 +266,7 @@ class SegmentationTab(QtWidgets.QWidget):
     def show_error(self, title: str, message: str, path=None):
         from tonguevis.gui.dialogs import error_box
 
-        log.warning("%s: %s", title, message)
+        logger.warning("%s: %s", title, message)
         self.status.setText(f"{title}: {message}")
         self.last_dialog = error_box(self, title, message, path)
         return self.last_dialog

@@ -13,9 +13,8 @@ each other nor to the window:
 
 from __future__ import annotations
 
-import logging
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 
 def add_feature_tabs(window) -> None:
@@ -23,7 +22,7 @@ def add_feature_tabs(window) -> None:
         from tonguevis.gui.energy_tab import EnergyTab
         from tonguevis.gui.morph_tab import MorphTab
     except ImportError as exc:  # a feature not installed must not stop the app
-        log.warning("energy/morph tabs not available: %s", exc)
+        logger.warning("energy/morph tabs not available: %s", exc)
         return
     from tonguevis.gui.segmentation_tab import SegmentationTab
 

@@ -11,7 +11,6 @@ the status bar shows the model's ``status`` events.
 
 from __future__ import annotations
 
-import logging
 import os
 from pathlib import Path
 
@@ -36,7 +35,7 @@ from tonguevis.gui.transport import TransportBar
 from tonguevis.gui.view3d import View3D
 from tonguevis.gui.worker import Job, run_job
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 MESH_SUFFIXES = (".vtu", ".vtk", ".msh", ".node", ".ele", ".mesh", ".npz", ".inp", ".xdmf")
 
 #: Tabs other features add to every new window: (title, factory(state, window) -> QWidget).
@@ -183,7 +182,7 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
 
     # -- errors ---------------------------------------------------------------
     def show_error(self, title: str, message: str, path=None):
-        log.warning("%s: %s", title, message)
+        logger.warning("%s: %s", title, message)
         self.last_dialog = error_box(self, title, message, path)
         self.state.set_status(f"{title}: {message}", self)
         return self.last_dialog

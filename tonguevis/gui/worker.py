@@ -15,7 +15,6 @@ error dialog titled "<title> failed" (the parent's ``show_error`` when it has on
 
 from __future__ import annotations
 
-import logging
 import time
 import traceback
 from typing import Any, Callable
@@ -24,7 +23,7 @@ from PySide6.QtCore import QThread, Signal
 
 from tonguevis.errors import Cancelled, TonguevisError
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 #: Outcomes of a job, as :attr:`Job.ended` reports them.
 OUTCOMES = ("ok", "failed", "cancelled")
@@ -94,7 +93,7 @@ class Job(QThread):
             self.outcome = "failed"
             self.failed.emit(str(exc))
         except Exception as exc:  # a bug: keep the app alive, show the trace in the log
-            log.error("%s failed:\n%s", self.title, traceback.format_exc())
+            logger.error("%s failed:\n%s", self.title, traceback.format_exc())
             self.outcome = "failed"
             self.failed.emit(f"unexpected {type(exc).__name__}: {exc}")
         else:

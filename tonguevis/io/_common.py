@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 import os
 from pathlib import Path
 from typing import Sequence
@@ -11,7 +10,6 @@ import numpy as np
 
 from tonguevis.errors import RecordingError
 
-log = logging.getLogger("tonguevis")
 
 #: metres per unit, for the units EMA files use.
 UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}

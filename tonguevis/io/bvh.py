@@ -24,7 +24,6 @@ missing samples are written as ``nan`` (our reader reads them back as NaN).
 
 from __future__ import annotations
 
-import logging
 import re
 from pathlib import Path
 
@@ -39,7 +38,7 @@ from tonguevis.io._common import (
 from tonguevis.io.recording import Recording
 from tonguevis.io.registry import RecordingFormat, register_format
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 _POS = {"xposition": 0, "yposition": 1, "zposition": 2}
 _ROT = {"xrotation": "X", "yrotation": "Y", "zrotation": "Z"}
@@ -154,11 +153,11 @@ def read_bvh(path, unit: str = "mm", rotations: str = "raw", axes=None) -> Recor
         partial = n_channels  # the last number was cut: the last frame is incomplete
         n_frames -= 1
     if partial:
-        log.warning("%s: dropped a partial last frame (%d of %d values; file truncated?)", path, partial, n_channels)
+        logger.warning("%s: dropped a partial last frame (%d of %d values; file truncated?)", path, partial, n_channels)
     if n_frames > declared:
         raise RecordingError(f"{n_frames} frames of data but 'Frames: {declared}'", path)
     if n_frames < declared:
-        log.warning("%s: 'Frames: %d' but only %d complete frames (file truncated?)", path, declared, n_frames)
+        logger.warning("%s: 'Frames: %d' but only %d complete frames (file truncated?)", path, declared, n_frames)
     if n_frames == 0:
         raise RecordingError("no complete frame of motion data", path)
     try:

@@ -21,7 +21,6 @@ phi, theta in degrees in the device frame; ``metadata['rms']`` holds the
 
 from __future__ import annotations
 
-import logging
 import re
 from pathlib import Path
 
@@ -32,7 +31,7 @@ from tonguevis.io._common import parse_axes, read_bytes
 from tonguevis.io.recording import Recording
 from tonguevis.io.registry import RecordingFormat, register_format
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 MAGIC = b"AG50xDATA_V00"
 VALUES_PER_CHANNEL = 7
@@ -123,7 +122,7 @@ def read_carstens(path, channels: int | None = None, rate: float | None = None, 
     if n_frames == 0:
         raise RecordingError(f"no complete frame ({len(body)} data bytes, a frame has {frame_bytes})", path)
     if partial:
-        log.warning("%s: dropped a partial last frame of %d bytes (file truncated?)", path, partial)
+        logger.warning("%s: dropped a partial last frame of %d bytes (file truncated?)", path, partial)
     with np.errstate(invalid="ignore"):  # signalling-NaN payloads in damaged files
         values = np.frombuffer(body[: n_frames * frame_bytes], dtype="<f4").astype(np.float64)
     values = values.reshape(n_frames, n_channels, VALUES_PER_CHANNEL)

@@ -28,14 +28,13 @@ tier of the same name.
 
 from __future__ import annotations
 
-import logging
 import os
 from pathlib import Path
 
 from tonguevis.errors import RecordingError
 from tonguevis.io.recording import Recording
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 AUDIO_SUFFIX = ".wav"
 LABEL_SUFFIX = ".textgrid"
@@ -108,7 +107,7 @@ def attach_audio(rec: Recording, path: Path, audio=None) -> Recording:
         if not wav.is_file():
             raise RecordingError(f"audio file {wav} does not exist", path)
         if rec.audio is not None:
-            log.info("%s: audio from %s instead of the file's own", path, wav)
+            logger.info("%s: audio from %s instead of the file's own", path, wav)
     elif audio is None or audio is True:
         if rec.audio is not None:
             rec.metadata.setdefault("audio_file", None)
@@ -119,7 +118,7 @@ def attach_audio(rec: Recording, path: Path, audio=None) -> Recording:
         if wav is None:
             rec.metadata.setdefault("audio_file", None)
             return rec
-        log.info("%s: audio from %s", path, wav)
+        logger.info("%s: audio from %s", path, wav)
     else:
         raise RecordingError(f"audio= wants True, False, None or a WAV path, not {audio!r}", path)
     rec.audio = read_wav(wav)
@@ -133,7 +132,7 @@ def _warn_mismatch(rec: Recording, path: Path) -> None:
     problem = length_mismatch(rec)
     if problem is not None:
         source = rec.metadata.get("audio_file") or "embedded audio"
-        log.warning("%s: %s (%s)", path, problem, source)
+        logger.warning("%s: %s (%s)", path, problem, source)
         rec.metadata["audio_mismatch"] = problem
 
 
@@ -154,14 +153,14 @@ def attach_labels(rec: Recording, path: Path, labels=None) -> Recording:
         if grid is None:
             rec.metadata.setdefault("labels_file", None)
             return rec
-        log.info("%s: labels from %s", path, grid)
+        logger.info("%s: labels from %s", path, grid)
     else:
         raise RecordingError(f"labels= wants True, False, None or a TextGrid path, not {labels!r}", path)
     read = read_textgrid(grid)
     replaced = set(tier_names(read))
     kept = [lab for lab in rec.labels if lab.tier not in replaced]
     if len(kept) < len(rec.labels):
-        log.info("%s: tiers %s of %s replace the file's own", path, ", ".join(sorted(replaced)), grid)
+        logger.info("%s: tiers %s of %s replace the file's own", path, ", ".join(sorted(replaced)), grid)
     rec.labels = kept + read
     rec.metadata["labels_file"] = str(grid)
     return rec

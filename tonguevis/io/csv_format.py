@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import csv
 import io
-import logging
 import re
 from pathlib import Path
 
@@ -44,7 +43,7 @@ from tonguevis.io._common import (
 from tonguevis.io.recording import Recording
 from tonguevis.io.registry import RecordingFormat, register_format
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 TIME_NAMES = ("time", "time_s", "time[s]", "t")
 _AXIS = re.compile(r"^(.+)_([xyz])$", re.IGNORECASE)
@@ -114,7 +113,7 @@ def read_csv(path, unit: str | None = None, rate: float | None = None) -> Record
     ended = text.endswith(("\n", "\r"))
     previous = rows[-2] if len(rows) > 1 else None
     if len(rows[-1]) < len(header) or (not ended and not unterminated_row_complete(rows[-1], previous)):
-        log.warning("%s: dropped the incomplete last line %d (file truncated?)", path, numbers[-1])
+        logger.warning("%s: dropped the incomplete last line %d (file truncated?)", path, numbers[-1])
         rows.pop()
         numbers.pop()
         if not rows:
@@ -131,7 +130,7 @@ def read_csv(path, unit: str | None = None, rate: float | None = None) -> Record
         stated = float(keys["rate"]) if _is_positive(keys.get("rate")) else None
         rate = estimate_rate(times, default=stated, path=path) if len(times) > 1 or stated is None else stated
         if stated is not None and abs(stated - rate) > 0.01 * rate:
-            log.warning("%s: '# rate: %s' disagrees with the time column (%.6g Hz); using the times",
+            logger.warning("%s: '# rate: %s' disagrees with the time column (%.6g Hz); using the times",
                         path, keys["rate"], rate)
     metadata = {
         "format": "csv",

@@ -19,7 +19,6 @@ the articulograph's frame unless ``axes=`` maps them to ours.
 
 from __future__ import annotations
 
-import logging
 import re
 from pathlib import Path
 
@@ -33,7 +32,7 @@ from tonguevis.io._common import (
 from tonguevis.io.recording import Recording
 from tonguevis.io.registry import RecordingFormat, register_format
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 HEADER_END = b"EST_Header_End"
 MAX_CHANNELS = 100_000
@@ -101,13 +100,13 @@ def _ascii_frames(data: bytes, offset: int, width: int, path) -> np.ndarray:
             numbers.append(first_line + i)
     ended = data.endswith((b"\n", b"\r"))
     if rows and len(rows[-1]) < width:
-        log.warning("%s: dropped the incomplete last line %d (file truncated?)", path, numbers[-1])
+        logger.warning("%s: dropped the incomplete last line %d (file truncated?)", path, numbers[-1])
         rows.pop()
     for row, line_no in zip(rows, numbers):
         if len(row) != width:
             raise RecordingError(f"line {line_no} has {len(row)} fields, expected {width}", path)
     if not ended and rows and not unterminated_row_complete(rows[-1], rows[-2] if len(rows) > 1 else None):
-        log.warning("%s: dropped the unterminated last line %d, cut inside a number", path, numbers[len(rows) - 1])
+        logger.warning("%s: dropped the unterminated last line %d, cut inside a number", path, numbers[len(rows) - 1])
         rows.pop()
     return parse_number_table(rows, path, numbers[0] if numbers else first_line).reshape(len(rows), width)
 
@@ -140,7 +139,7 @@ def read_est_track(path, unit: str = "mm", axes=None) -> Recording:
         body = data[offset:]
         got, partial = divmod(len(body), 4 * width)
         if partial:
-            log.warning("%s: dropped a partial last frame of %d bytes (file truncated?)", path, partial)
+            logger.warning("%s: dropped a partial last frame of %d bytes (file truncated?)", path, partial)
         with np.errstate(invalid="ignore"):  # signalling-NaN payloads in damaged files
             table = np.frombuffer(body[: got * 4 * width], dtype=dtype).astype(np.float64).reshape(got, width)
     elif kind == "ascii":
@@ -152,7 +151,7 @@ def read_est_track(path, unit: str = "mm", axes=None) -> Recording:
     if table.shape[0] > n_frames:
         raise RecordingError(f"{table.shape[0]} frames but the header says NumFrames {n_frames}", path)
     if table.shape[0] < n_frames:
-        log.warning("%s: %d of the %d frames the header announces are present", path, table.shape[0], n_frames)
+        logger.warning("%s: %d of the %d frames the header announces are present", path, table.shape[0], n_frames)
     times = table[:, 0]
     check_times(times, path, "EST frame time")
     values = table[:, 1 + int(breaks):].copy()

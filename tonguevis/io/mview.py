@@ -21,7 +21,6 @@ first (audio) channel, ``SENTENCE``, ``WORDS`` and ``PHONES`` (struct arrays of
 
 from __future__ import annotations
 
-import logging
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -33,7 +32,7 @@ from tonguevis.io._common import parse_axes
 from tonguevis.io.recording import Audio, Label, Recording
 from tonguevis.io.registry import RecordingFormat, register_format
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 REQUIRED_FIELDS = ("NAME", "SRATE", "SIGNAL")
 
@@ -223,7 +222,7 @@ def read_mview(path, variable: str | None = None, axes=None) -> Recording:
     sensors, orientations = {}, {}
     for ch in sensors_raw:
         if (float(ch["srate"][0]), ch["signal"].shape[0]) != (rate, n):
-            log.warning("%s: skipped channel %s (%g Hz, %d samples; the others %g Hz, %d)",
+            logger.warning("%s: skipped channel %s (%g Hz, %d samples; the others %g Hz, %d)",
                         path, ch["name"], ch["srate"][0], ch["signal"].shape[0], rate, n)
             continue
         if ch["name"] in sensors:

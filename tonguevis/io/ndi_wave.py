@@ -27,7 +27,6 @@ Layout (one header line, then one tab-separated row per frame)::
 
 from __future__ import annotations
 
-import logging
 import re
 from pathlib import Path
 
@@ -44,7 +43,7 @@ from tonguevis.io.recording import Audio, Recording
 from tonguevis.io.registry import RecordingFormat, register_format
 from tonguevis.io.wav import write_wav
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 STATUS_OK = 55
 STATUS_MISSING = 119
@@ -146,7 +145,7 @@ def _checked_fast_table(fast, path: Path) -> tuple[np.ndarray, bool] | None:
         return table, False
     if len(table) == 1:
         return None  # no complete data row: the careful path's error
-    log.warning("%s: dropped the incomplete last line %d (file truncated?)", path, fast.last_lines[-1][0])
+    logger.warning("%s: dropped the incomplete last line %d (file truncated?)", path, fast.last_lines[-1][0])
     return table[:-1], True
 
 
@@ -192,7 +191,7 @@ def _read_table_carefully(data: bytes, path: Path) -> tuple[list[str], np.ndarra
             truncated = body[parsed + len(rows) - 1][0]
             rows.pop()
     if truncated is not None:
-        log.warning("%s: dropped the incomplete last line %d (file truncated?)", path, truncated)
+        logger.warning("%s: dropped the incomplete last line %d (file truncated?)", path, truncated)
     if not rows and not tables:
         raise RecordingError("no complete data row", path)
     if rows:
@@ -286,7 +285,7 @@ def _assign_ids(names: list[str], sensor_map) -> dict[str, int]:
     for name in names:
         if name not in ids:
             ids[name] = next(free)
-            log.info("NDI Wave writer: sensor %s gets Id %d (not in the sensor map)", name, ids[name])
+            logger.info("NDI Wave writer: sensor %s gets Id %d (not in the sensor map)", name, ids[name])
     return ids
 
 
@@ -333,7 +332,7 @@ def write_ndi_wave(rec: Recording, path, sensor_map=None, audio: bool = True) ->
         if shift > 0:
             samples = np.concatenate([np.zeros(shift), samples])
         elif shift < 0:
-            log.warning("%s: audio starts %.3f s before AudioTime 0; the WAV drops that part",
+            logger.warning("%s: audio starts %.3f s before AudioTime 0; the WAV drops that part",
                         path, -rec.audio.offset)
             samples = samples[-shift:]
         write_wav(Audio(samples=samples, rate=rec.audio.rate), path.with_suffix(".wav"))

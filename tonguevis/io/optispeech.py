@@ -41,7 +41,6 @@ was done.  There is no audio in these exports.
 
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +50,7 @@ from tonguevis.io._common import decode_text, parse_number_table, read_bytes, ro
 from tonguevis.io.recording import Recording
 from tonguevis.io.registry import RecordingFormat, register_format
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 #: ours = AXES_UNITY @ (Unity x right, y up, z forward).
 AXES_UNITY = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -126,7 +125,7 @@ def read_optispeech(path, rate: float = DEFAULT_RATE, max_gap: float = DEFAULT_M
     width = len(header)
     rows = [line.rstrip("\r\n").split("\t") for line in lines[1:]]
     if len(rows[-1]) < width:
-        log.warning("%s: dropped the incomplete last line (file truncated?)", path)
+        logger.warning("%s: dropped the incomplete last line (file truncated?)", path)
         rows.pop()
     rows = [r[:width] + [""] * (width - len(r)) if len(r) != width else r for r in rows]
     short = [i for i, r in enumerate(rows) if not any(c.strip() for c in r[width // 2:])]
@@ -138,7 +137,7 @@ def read_optispeech(path, rate: float = DEFAULT_RATE, max_gap: float = DEFAULT_M
         raise RecordingError("timestamp column holds a non-number", path)
     order = np.argsort(times, kind="stable")
     if np.any(np.diff(times) < 0):
-        log.warning("%s: timestamps go backwards; rows sorted by time", path)
+        logger.warning("%s: timestamps go backwards; rows sorted by time", path)
         table, times = table[order], times[order]
 
     raw_pos, raw_q, ids = {}, {}, {}
@@ -156,7 +155,7 @@ def read_optispeech(path, rate: float = DEFAULT_RATE, max_gap: float = DEFAULT_M
             continue  # constant placeholders
         name = names.get(marker, f"M{marker}")
         if bad.all():
-            log.info("%s: channel %s (%d) holds no valid sample; dropped", path, name, marker)
+            logger.info("%s: channel %s (%d) holds no valid sample; dropped", path, name, marker)
             continue
         if name in raw_pos:
             raise RecordingError(f"sensor {marker} ({name}) appears in two blocks", path)
@@ -175,7 +174,7 @@ def read_optispeech(path, rate: float = DEFAULT_RATE, max_gap: float = DEFAULT_M
     raw_q = dict(zip(raw_q, merged[len(raw_pos):]))
     repeated_time_rows = n_rows - len(times)
     if repeated_time_rows:
-        log.info("%s: %d of %d rows repeat the previous row's timestamp; merged into it (each sensor keeps "
+        logger.info("%s: %d of %d rows repeat the previous row's timestamp; merged into it (each sensor keeps "
                  "the first valid sample of that time)", path, repeated_time_rows, n_rows)
 
     stacked = np.stack(list(raw_pos.values()), axis=1)  # (N, S, 3)
@@ -206,7 +205,7 @@ def read_optispeech(path, rate: float = DEFAULT_RATE, max_gap: float = DEFAULT_M
         "audio_file": None,
         "truncated": not ended,
     }
-    log.info("%s: %d distinct samples of %d rows (median step %.0f ms) resampled to %g Hz", path,
+    logger.info("%s: %d distinct samples of %d rows (median step %.0f ms) resampled to %g Hz", path,
              keep.sum(), n_rows, 1e3 * np.median(steps), rate)
     return Recording(rate=float(rate), times=grid, sensors=sensors, orientations=orientations,
                      metadata=metadata)

@@ -11,7 +11,6 @@ Carstens channel number ...) into the default name the reader gives it.
 from __future__ import annotations
 
 import inspect
-import logging
 import os
 import struct
 import zlib
@@ -24,7 +23,7 @@ import numpy as np
 from tonguevis.errors import RecordingError
 from tonguevis.io.recording import Recording
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 SNIFF_BYTES = 4096
 
@@ -113,7 +112,7 @@ def _safe_sniff(fmt: RecordingFormat, head: bytes, path: Path) -> bool:
     try:
         return bool(fmt.sniff(head, path))
     except Exception:  # a sniffer must never decide dispatch by crashing
-        log.debug("sniffer of %s failed on %s", fmt.name, path, exc_info=True)
+        logger.debug("sniffer of %s failed on %s", fmt.name, path, exc_info=True)
         return False
 
 
@@ -174,13 +173,13 @@ def read_recording(
         fmt = detect_format(path)
     if sensor_map is None and (path.parent / SENSOR_MAP_BESIDE).is_file():
         sensor_map = path.parent / SENSOR_MAP_BESIDE
-        log.info("%s: using the sensor map %s beside it", path, sensor_map)
+        logger.info("%s: using the sensor map %s beside it", path, sensor_map)
     mapping = load_sensor_map(sensor_map) if sensor_map else None
     if mapping is not None and mapping.axes is not None and "axes" not in format_options:
         if "axes" in inspect.signature(fmt.read).parameters:
             format_options = {**format_options, "axes": mapping.axes}
         else:
-            log.info("%s: the sensor map's axes %r do not apply to %s files (their reader places the axes itself)",
+            logger.info("%s: the sensor map's axes %r do not apply to %s files (their reader places the axes itself)",
                      path, mapping.axes, fmt.name)
     try:
         rec = fmt.read(path, **format_options)

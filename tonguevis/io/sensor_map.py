@@ -17,7 +17,6 @@ corpus folder says once how its recordings lie and no command warns about it.
 from __future__ import annotations
 
 import json
-import logging
 import os
 from pathlib import Path
 from typing import Any, Callable
@@ -27,7 +26,7 @@ from tonguevis.io.recording import Recording
 
 PRESET_DIR = Path(__file__).resolve().parents[1] / "presets"
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 #: Channel names that mean two things when no sensor map says which: name -> (our meaning,
 #: {format: that format's meaning}).  Haskins (MVIEW) files call the tongue *rear* TR, which is
@@ -204,7 +203,7 @@ def resolve_two_meanings(rec: Recording, path=None) -> Recording:
             continue  # the other meaning's name is taken: keep the channel's own name
         others = sorted({m for m in (ours, *by_format.values()) if m != meaning})
         how = ", ".join(f"{{\"{m}\": \"{name}\"}}" for m in others)
-        log.warning("%s: channel %s could mean %s; read as %s (%s)%s. If it is %s, give a sensor map "
+        logger.warning("%s: channel %s could mean %s; read as %s (%s)%s. If it is %s, give a sensor map "
                     "(--sensors MAP with %s%s)", where, name,
                     " or ".join(MEANING_WORDS.get(m, m) for m in (meaning, *others)),
                     MEANING_WORDS.get(meaning, meaning), meaning,

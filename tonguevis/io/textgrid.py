@@ -13,7 +13,6 @@ praatio is imported only when a TextGrid is read or written, so
 
 from __future__ import annotations
 
-import logging
 import os
 import warnings
 from pathlib import Path
@@ -23,7 +22,7 @@ from tonguevis._files import atomic_write
 from tonguevis.errors import RecordingError
 from tonguevis.io.recording import Label
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 SUFFIX = ".TextGrid"
 
@@ -70,7 +69,7 @@ def read_textgrid(path: str | os.PathLike) -> list[Label]:
         except Exception as exc:  # praatio fails with IndexError, ValueError ... on damaged files
             raise RecordingError(f"not a readable Praat TextGrid ({type(exc).__name__}: {exc})", path) from None
     for warning in caught:
-        log.warning("%s: %s", path, warning.message)
+        logger.warning("%s: %s", path, warning.message)
     labels: list[Label] = []
     for name in grid.tierNames:
         tier = grid.getTier(name)

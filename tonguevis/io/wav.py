@@ -22,7 +22,7 @@ from tonguevis.errors import RecordingError
 from tonguevis._files import atomic_write
 from tonguevis.io.recording import Audio
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 #: What scipy raises on a file it cannot parse (a cut header, zero channels, a frame cut in half).
 _PARSE_ERRORS = (ValueError, struct.error, EOFError, ZeroDivisionError, OverflowError, IndexError)
@@ -79,7 +79,7 @@ def read_wav(path: str | os.PathLike) -> Audio:
         elif cut is None:  # said once below when the file is cut short
             # A chunk scipy skips (bext, iXML, ...) loses nothing; anything else odd is worth a warning.
             level = logging.INFO if "not understood" in str(warning.message) else logging.WARNING
-            log.log(level, "%s: %s", path, warning.message)
+            logger.log(level, "%s: %s", path, warning.message)
     if rate <= 0:
         raise RecordingError(f"impossible WAV header ({rate} Hz)", path)
     samples = _to_unit_float(data, path)
@@ -88,7 +88,7 @@ def read_wav(path: str | os.PathLike) -> Audio:
     if cut is not None:
         if len(samples) == 0:
             raise RecordingError(f"truncated WAV file ({cut}): no complete sample", path)
-        log.warning("%s: truncated WAV file (%s); using the %d samples present", path, cut, len(samples))
+        logger.warning("%s: truncated WAV file (%s); using the %d samples present", path, cut, len(samples))
     return Audio(samples=samples, rate=float(rate))
 
 

@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import logging
 import os
 
 import numpy as np
@@ -20,7 +19,7 @@ import numpy as np
 from tonguevis.errors import MeshError
 from tonguevis.mesh.tetmesh import TET_FACES, face_keys, signed_tet_volumes
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 #: A tet whose |volume| is below this fraction of the mean |volume| is degenerate.
 DEGENERATE_RELATIVE_VOLUME = 1e-6
@@ -69,7 +68,7 @@ def checked_tets(points: np.ndarray, tets: np.ndarray, path: str | os.PathLike |
             path)
     inverted = np.nonzero(volumes < 0)[0]
     if inverted.size:
-        log.warning("%s: reoriented %d inverted tets (elements %s)", path or "mesh",
+        logger.warning("%s: reoriented %d inverted tets (elements %s)", path or "mesh",
                     inverted.size, _ids(inverted + id_offset))
         tets[inverted[:, None], [2, 3]] = tets[inverted[:, None], [3, 2]]
 

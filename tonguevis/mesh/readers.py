@@ -15,7 +15,6 @@ unless ``unit=`` says what the file uses.
 
 from __future__ import annotations
 
-import logging
 import os
 from pathlib import Path
 
@@ -26,7 +25,7 @@ from tonguevis.mesh.axes import apply_axes
 from tonguevis.mesh.checks import checked_tets
 from tonguevis.mesh.tetmesh import TetMesh
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 #: Metres per unit for the accepted ``unit=`` names.
 UNIT_SCALE = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
@@ -64,7 +63,7 @@ def read_mesh(path: str | os.PathLike, unit: str | None = None, axes: str | None
     extent = float(np.max(np.ptp(points, axis=0))) if points.size else 0.0
     if unit is None:
         if extent > 1.0:
-            log.warning("%s: extent %.4g is impossible in metres for a tongue; reading as millimetres",
+            logger.warning("%s: extent %.4g is impossible in metres for a tongue; reading as millimetres",
                         source, extent)
             unit = "mm"
             metadata["unit"] = "mm (guessed from the extent)"
@@ -91,7 +90,7 @@ def _found_axes(mesh: TetMesh, source) -> str:
         raise MeshError(f"cannot tell the mesh's axes from its shape (best mapping {fit.axes!r} fits only "
                         f"{fit.margin:.2f} times better than the next); give them, e.g. axes='-x,-z,-y' "
                         "(--mesh-axes=-x,-z,-y), new x anterior, y left, z up", source)
-    log.info("%s: axes %s found from the shape (fits %.1f times better than the next mapping, "
+    logger.info("%s: axes %s found from the shape (fits %.1f times better than the next mapping, "
              "%.1f times better than the file's own axes)", source, fit.axes, fit.margin,
              fit.identity_misfit / fit.misfit)
     return fit.axes

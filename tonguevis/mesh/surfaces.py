@@ -94,7 +94,7 @@ def read_surface(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     Coordinates are taken as metres, converted from millimetres (with a logged
     warning) when the extent exceeds 1.  Polygons are fan-triangulated.
     """
-    import logging
+    from tonguevis._logging import logger
 
     import meshio
 
@@ -127,6 +127,6 @@ def read_surface(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     if not np.all(np.isfinite(points)):
         raise MeshError("non-finite vertex coordinates", path)
     if np.max(np.ptp(points, axis=0)) > 1.0:
-        logging.getLogger("tonguevis").warning("%s: extent > 1 m; reading the surface as millimetres", path)
+        logger.warning("%s: extent > 1 m; reading the surface as millimetres", path)
         points = points * 1e-3
     return points, triangles

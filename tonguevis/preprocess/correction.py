@@ -9,7 +9,6 @@ reference sensors onto their rest pose is applied to every sensor.
 
 from __future__ import annotations
 
-import logging
 
 import numpy as np
 
@@ -19,7 +18,7 @@ from tonguevis.preprocess._names import JAW, is_reference, reference_names
 from tonguevis.preprocess._rigid import fit_rotations
 from tonguevis.preprocess.rest import find_rest_interval, rest_pose
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 
 def correct_jaw(rec: Recording, jaw: str = JAW, rest_interval=None, sensors=None) -> Recording:
@@ -93,7 +92,7 @@ def correct_head(rec: Recording, references=None, rest_interval=None) -> Recordi
             rest_interval = find_rest_interval(rec)
         except RecordingError as exc:
             rest_interval = None
-            log.info("head correction: %s; the head frame is the references' median pose instead", exc)
+            logger.info("head correction: %s; the head frame is the references' median pose instead", exc)
     if rest_interval is None:
         pose = _median_pose(rec, references)
     else:

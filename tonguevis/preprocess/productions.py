@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import csv
 import io
-import logging
 import math
 from dataclasses import astuple, dataclass, field
 from pathlib import Path
@@ -31,7 +30,7 @@ from tonguevis.preprocess import gestures
 from tonguevis.preprocess.gestures import GestureLandmarks
 from tonguevis.preprocess.trains import find_trains
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 #: Closures closer than this (s) without sound to separate them belong to one train.
 TRAIN_GAP = 1.0
@@ -264,7 +263,7 @@ def find_productions(rec: Recording, articulator: str | None = None, keep=(2, 3,
                            "paper's 2nd-4th")
     _judge_clarity(table, times, near, closures, scale, articulator)
     for note in table.notes:  # the table carries them; callers decide how loudly to report
-        log.info("%s: %s", file or "recording", note)
+        logger.info("%s: %s", file or "recording", note)
     return table
 
 

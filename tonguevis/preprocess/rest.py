@@ -12,7 +12,6 @@ which in a :class:`RestChoice`.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +21,7 @@ from tonguevis.io.recording import Recording
 from tonguevis.preprocess._localpoly import savgol
 from tonguevis.preprocess._names import is_reference, tongue_names
 
-logger = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 #: What a user can do when no rest is found: the command-line option and the app's menu item.
 HOW_TO_GIVE_REST = "give one with --rest START END (seconds) or, in the app, Simulation ▸ Set rest interval…"

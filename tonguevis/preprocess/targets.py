@@ -8,7 +8,6 @@ node.  The simulation, the validation and every front end go through it.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -22,7 +21,7 @@ from tonguevis.preprocess.rest import RestChoice, choose_rest_interval
 if TYPE_CHECKING:
     from tonguevis.sim.model import TongueModel
 
-logger = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 TONGUE_SENSORS = TONGUE
 LATERAL_SENSORS = ("TL", "TR")

@@ -15,14 +15,13 @@ model frame: the speaker's, placed exactly as the simulation placed it
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from tonguevis.sim.reference import describe, jaw_moves
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 #: Colour range of the "contact" mode: distance to the palate in mm (0 = touching).
 CONTACT_RANGE_MM = (0.0, 10.0)
@@ -84,7 +83,7 @@ def generic_shown(simulated: bool = False) -> ShownPalate | None:
         surface = generic_palate()
         points, faces = read_surface(context_surface_path("palate"))
     except Exception as exc:  # context is optional: never block the app on it
-        log.warning("generic palate not shown: %s", exc)
+        logger.warning("generic palate not shown: %s", exc)
         return None
     return ShownPalate(surface, np.asarray(points, dtype=np.float32), np.asarray(faces), "generic palate",
                        simulated, 0.0, True)

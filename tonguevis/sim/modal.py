@@ -11,7 +11,6 @@ depends on.
 from __future__ import annotations
 
 import hashlib
-import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +27,7 @@ from tonguevis._progress import ProgressCallback, report
 from tonguevis.errors import ModelError
 from tonguevis.sim.material import Material
 
-logger = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 CACHE_VERSION = 1
 RESIDUAL_TOLERANCE = 1e-6

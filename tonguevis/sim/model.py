@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 from contextlib import nullcontext
 import os
 import time
@@ -24,7 +23,7 @@ from tonguevis.sim.material import Material
 from tonguevis.sim.modal import ModalBasis, basis_key, free_dofs_for, load_basis, save_basis, solve_modes
 from tonguevis.sim.rotation import rotate_accumulated
 
-logger = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 CHUNK_FRAMES = 256  # frames reconstructed per batch: bounds memory at ~30 MB for 1,800 nodes
 SMALL_BATCH = 16  # up to this many frames the products run on one BLAS thread (see tonguevis._blas)

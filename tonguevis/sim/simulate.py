@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 
 import numpy as np
 
@@ -19,7 +18,7 @@ from tonguevis.sim.figures import frame_figures
 from tonguevis.sim.newmark import NewmarkSettings, integrate
 from tonguevis.sim.plausibility import ABSURD_AMPLIFICATION, ABSURD_VOLUME, plausibility_from_largest
 
-logger = logging.getLogger("tonguevis")
+from tonguevis._logging import logger, verbose
 
 VOLUME_WARNING = 0.05  # relative volume change past which the motion is flagged as implausible
 ABSURD_SHARE = 0.05  # a run with more absurd frames than this is refused rather than returned
@@ -29,6 +28,7 @@ RECOVERED_SHARE = 0.10  # ... or with more recovered frames than this: it is no 
 DEFAULT_SENSOR_STIFFNESS = 20.0
 
 
+@verbose
 def simulate(
     recording: Recording,
     model: TongueModel | None = None,

@@ -11,12 +11,14 @@ from __future__ import annotations
 import os
 from typing import Any
 
+from tonguevis._logging import verbose
 from tonguevis.io.recording import Recording
 from tonguevis.preprocess.correction import head_corrected, head_references
 
 __all__ = ["find_recording_productions", "head_corrected", "head_references", "open_recording"]
 
 
+@verbose
 def open_recording(path: str | os.PathLike, sensors: dict | str | os.PathLike | None = None, *,
                    audio: Any = None, labels: Any = None, **options: Any) -> Recording:
     """Read the recording at ``path`` (any supported format) with its sensor map, sound and labels.
@@ -35,6 +37,7 @@ def open_recording(path: str | os.PathLike, sensors: dict | str | os.PathLike | 
     return read_recording(path, sensor_map=sensors, audio=audio, labels=labels, **options)
 
 
+@verbose
 def find_recording_productions(recording: Recording, articulator: str | None = None, keep=(2, 3, 4), trains=None,
                                head_correction: bool = True, tier: str | None = None, syllable: str | None = None,
                                labelled: bool = True, tip: str | None = None):

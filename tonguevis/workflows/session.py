@@ -7,7 +7,6 @@ the worker thread and tests share them.
 
 from __future__ import annotations
 
-import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,7 +18,7 @@ from tonguevis._memory import release_freed_memory
 from tonguevis.errors import RecordingError, TonguevisError
 from tonguevis.io.recording import Recording
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 #: Canonical tongue sensor names (see tonguevis.io.sensor_map); a recording
 #: carrying none of them needs a sensor map before it can drive the model.
@@ -81,7 +80,7 @@ def find_production_table(recording: Recording):
     try:
         return find_recording_productions(recording, keep=None)
     except TonguevisError as exc:
-        log.warning("no productions found: %s", exc)
+        logger.warning("no productions found: %s", exc)
         return None
 
 
@@ -203,7 +202,7 @@ class Session:
             rest = self.rest or choose_rest_interval(self.recording, given=self.given_rest)
         except TonguevisError as exc:
             # Too short for any rest window: the first valid sample is the best "rest" there is.
-            log.info("no rest interval (%s); displacements from the first valid sample", exc)
+            logger.info("no rest interval (%s); displacements from the first valid sample", exc)
             rest = None
         out = {}
         for n in names:  # one by one: a channel lost at rest (a placeholder, a reference) spoils no other

@@ -11,10 +11,10 @@
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from typing import Any
 
+from tonguevis._logging import verbose
 from tonguevis._progress import ProgressCallback
 from tonguevis.render.frames import MotionFrames
 from tonguevis.io.recording import Recording
@@ -22,7 +22,6 @@ from tonguevis.preprocess.rest import RestChoice
 from tonguevis.workflows.session import Session
 from tonguevis.workflows.settings import RunSettings, build_model
 
-log = logging.getLogger("tonguevis")
 
 #: Frames sampled for the colour ranges of a preview (the whole motion samples up to frames.COLOUR_FRAMES).
 PREVIEW_COLOUR_FRAMES = 200
@@ -36,6 +35,7 @@ def run_settings(settings: RunSettings | None = None, **changes: Any) -> RunSett
     return settings.replace(**changes) if changes else settings
 
 
+@verbose
 def simulate_recording(recording: Recording, model=None, settings: RunSettings | None = None, *,
                        progress: ProgressCallback | None = None, **options: Any):
     """Drive ``model`` (default: built from ``settings``) with ``recording``; returns a
@@ -107,6 +107,7 @@ class Simulated:
         return session
 
 
+@verbose
 def simulate_motion(recording, settings: RunSettings | None = None, model=None, *,
                     progress: ProgressCallback | None = None, preview=None, **changes: Any) -> Simulated:
     """Simulate ``recording`` with ``settings`` on ``model`` (None: built from the settings); returns a

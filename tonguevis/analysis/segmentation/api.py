@@ -8,7 +8,6 @@ adjustment, and returns a :class:`SegmentationResult`.
 
 from __future__ import annotations
 
-import logging
 import time
 from typing import Any, Sequence
 
@@ -26,7 +25,7 @@ from tonguevis.analysis.segmentation.greedy import grow_partitions, seed_regions
 from tonguevis.analysis.segmentation.result import SegmentationResult
 from tonguevis.analysis.segmentation.target import SegmentationTarget
 
-logger = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 MODES = ("rigid", "constraint")
 DEFAULT_THRESHOLD = 0.05

@@ -9,7 +9,6 @@ rounds and recomputed only then (and the fitter's memo catches identical sets).
 
 from __future__ import annotations
 
-import logging
 
 import numpy as np
 
@@ -18,7 +17,7 @@ from tonguevis.analysis.segmentation.errors import SegmentationError
 from tonguevis.analysis.segmentation.fitter import LocalFitter
 from tonguevis.analysis.segmentation.graph import UNASSIGNED
 
-logger = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 
 def seed_regions(seeds, n_tets: int) -> list[np.ndarray]:

@@ -1,0 +1,81 @@
+"""tonguevis's one logger and its ``verbose`` convention (after MNE-Python's ``_logging``).
+
+Every module logs through :data:`logger` (the ``"tonguevis"`` logger); nothing makes its own.
+How much is said is set once for the session with :func:`set_log_level` (``tonguevis -v``
+does it), or for one call with the ``verbose`` keyword of the functions decorated by
+:func:`verbose`::
+
+    tonguevis.simulate(rec, verbose=True)      # this call says what it does
+    tonguevis.set_log_level("warning")          # from now on, warnings only
+
+``verbose`` takes a bool (True: "info", False: "warning"), a level name or number, or None
+(the session's level).  Warnings (a rest not found, a sensor ignored) are always shown
+unless the level is raised above them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import inspect
+import logging
+from typing import Any, Callable, Iterator, TypeVar
+
+#: The logger every module of tonguevis uses.
+logger = logging.getLogger("tonguevis")
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def _level(verbose: bool | str | int | None) -> int | None:
+    """The logging level ``verbose`` stands for (None: leave the level as it is)."""
+    if verbose is None:
+        return None
+    if isinstance(verbose, bool):
+        return logging.INFO if verbose else logging.WARNING
+    if isinstance(verbose, int):
+        return verbose
+    if isinstance(verbose, str):
+        level = logging.getLevelName(verbose.strip().upper())
+        if isinstance(level, int):
+            return level
+    raise ValueError(f"verbose must be a bool, a level name (debug, info, warning, error) or a number, "
+                     f"got {verbose!r}")
+
+
+def set_log_level(verbose: bool | str | int | None = None) -> None:
+    """Set how much tonguevis says from now on (see the module doc); None: "warning"."""
+    logger.setLevel(_level(verbose) if verbose is not None else logging.WARNING)
+
+
+@contextlib.contextmanager
+def use_log_level(verbose: bool | str | int | None) -> Iterator[None]:
+    """Within the block, tonguevis logs at ``verbose``'s level (None: unchanged)."""
+    level = _level(verbose)
+    if level is None:
+        yield
+        return
+    old = logger.level
+    logger.setLevel(level)
+    try:
+        yield
+    finally:
+        logger.setLevel(old)
+
+
+def verbose(function: F) -> F:
+    """Give ``function`` a keyword ``verbose`` (default None: the session's level) that sets the
+    log level for that call only.  A function that already has a ``verbose`` parameter receives it too."""
+    takes_it = "verbose" in inspect.signature(function).parameters
+
+    @functools.wraps(function)
+    def wrapper(*args: Any, verbose: bool | str | int | None = None, **kwargs: Any) -> Any:
+        if takes_it:
+            kwargs["verbose"] = verbose
+        with use_log_level(verbose):
+            return function(*args, **kwargs)
+
+    wrapper.__doc__ = (function.__doc__ or "").rstrip() + (
+        "\n\n    verbose : bool, level name or None: how much this call logs (see :mod:`tonguevis._logging`)."
+        if not takes_it else "")
+    return wrapper  # type: ignore[return-value]
