@@ -69,18 +69,3 @@ def interpolation_weights(centres, points) -> np.ndarray:
     rbf = RBFInterpolator(centre_xy, np.eye(n), kernel="linear", degree=1)
     return rbf(point_xy)
 
-
-def interpolate_displacements(centres, displacements, points) -> np.ndarray:
-    """Kinematic prediction (F, k, 3) of the displacement at ``points`` (k, 3).
-
-    centres : (n, 3) rest positions of the driving sensors; displacements :
-    (F, n, 3) their displacements from rest (metres).  A frame where any
-    driving sensor is NaN gives NaN.
-    """
-    displacements = np.asarray(displacements, dtype=np.float64)
-    weights = interpolation_weights(centres, points)
-    if displacements.ndim != 3 or displacements.shape[1:] != (weights.shape[1], 3):
-        raise TonguevisError(
-            f"displacements must be (F, {weights.shape[1]}, 3) for {weights.shape[1]} centres, "
-            f"got {displacements.shape}")
-    return np.einsum("kn,fnc->fkc", weights, displacements)

@@ -1,7 +1,6 @@
 """The feature tabs (Energy, Morph, Segmentation) and how they join the main window.
 
-Each feature registers a factory with :func:`tonguevis.gui.window.register_tab_factory`
-or is added here.  The tabs talk only to the app model (``window.state``), never to
+Each feature tab is added here (:func:`add_feature_tabs`).  The tabs talk only to the app model (``window.state``), never to
 each other nor to the window:
 
 - Energy hears ``motion`` (a recording of the app simulated: its production curves are
@@ -12,7 +11,6 @@ each other nor to the window:
 """
 
 from __future__ import annotations
-
 
 from tonguevis._logging import logger
 

@@ -38,20 +38,6 @@ from tonguevis.gui.worker import Job, run_job
 from tonguevis._logging import logger
 MESH_SUFFIXES = (".vtu", ".vtk", ".msh", ".node", ".ele", ".mesh", ".npz", ".inp", ".xdmf")
 
-#: Tabs other features add to every new window: (title, factory(state, window) -> QWidget).
-TAB_FACTORIES: list[tuple[str, object]] = []
-
-
-def register_tab_factory(title: str, factory) -> None:
-    """Add a tab to every window created from now on (Energy, Morph, Segmentation ...).
-
-    ``factory(state, window)`` returns the widget, which subscribes to the app model
-    ``state`` itself (e.g. ``state.follow_session(widget.set_session)``: called whenever a
-    recording is opened or its simulation finishes).
-    """
-    TAB_FACTORIES.append((title, factory))
-
-
 class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
     """The tonguevis window.  ``modes``, ``mesh_path`` and ``palate`` (None: no contact; "generic";
     a speaker's PalateSurface or palate file) configure the simulation."""
@@ -93,8 +79,6 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         self.statusBar().addPermanentWidget(self.frame_status)
         self.view3d.described.connect(self.frame_status.setText)
         self._build_rest_status()
-        for title, factory in TAB_FACTORIES:
-            self.register_tab(title, factory(self.state, self))
 
     # -- layout ---------------------------------------------------------------
     def _build_views(self) -> None:

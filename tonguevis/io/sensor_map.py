@@ -224,9 +224,3 @@ def resolve_two_meanings(rec: Recording, path=None) -> Recording:
     out.metadata["channel_meanings"] = chosen
     return out
 
-
-def inverse_channel(name: str, mapping: dict[str, Any] | None) -> Any:
-    """The file channel a writer should use for sensor ``name`` under ``mapping`` (or None)."""
-    if mapping and name in mapping:
-        return mapping[name]
-    return None

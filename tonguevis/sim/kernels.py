@@ -102,12 +102,6 @@ def _build():
         _kernel = {np.dtype(np.float64): (warp_rotate, wp.vec3d), np.dtype(np.float32): (warp_rotate32, wp.vec3f)}
 
 
-def warp_device() -> str:
-    """The device the kernels run on ("cpu" or "cuda:0")."""
-    _build()
-    return str(_wp.get_preferred_device())
-
-
 def rotate_accumulated_compiled(w: np.ndarray, d: np.ndarray, device: str | None = None) -> np.ndarray:
     """R̃(w) d for (..., 3) arrays, computed by the warp kernel.
 
