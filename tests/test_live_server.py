@@ -119,13 +119,11 @@ def test_stream_modes_and_stop(demo):
         c.send("StreamFrames AllFrames")
         numbers = [f.frame for f in c.frames(20)]
         assert numbers == list(range(numbers[0], numbers[0] + 20))
-        c.send("StreamFrames FrequencyDivisor:5")
-        frames = c.frames(30)
-        steps = np.diff([f.frame for f in frames[5:]])  # a few AllFrames packets may still be on the way
-        assert set(steps) == {5}
-        c.send("StreamFrames Frequency:20")  # 100 Hz / 20 Hz: every 5th frame too
-        frames = c.frames(15)
-        assert set(np.diff([f.frame for f in frames[5:]])) == {5}
+        for command, step in (("StreamFrames FrequencyDivisor:5", 5), ("StreamFrames Frequency:25", 4)):  # 100/25
+            c.send(command)
+            steps = np.diff([f.frame for f in c.frames(60)])
+            # Packets of the former mode still on the way come first; the last 30 are all of the new one.
+            assert set(steps[-30:]) == {step}
         c.send("StreamFrames Stop")
         c.frames(3, timeout=0.2)  # drain what was in flight
         c.send("Version 1.0")
@@ -146,7 +144,7 @@ def test_the_stream_keeps_the_recordings_rate():
         start = time.monotonic()
         frames = c.frames(1000, timeout=0.3)
         elapsed = time.monotonic() - start
-        assert 5 <= len(frames) <= 100 * elapsed + 10
+        assert 1 <= len(frames) <= 100 * elapsed + 10
         c.close()
 
 

@@ -338,8 +338,10 @@ class _Client:
         due = server.current_index()
         if due is None:
             return True
-        if due - self.next_k > 10:  # behind (a stall): resume at the live frame, as a device would
-            self.next_k = due
+        if self.stalled and self.stalled_until:
+            # After a stall the device goes on with the live frame (what it measured meanwhile is gone).
+            self.next_k = max(self.next_k, due)
+            self.stalled_until = 0.0
         while self.next_k <= due and not server.ended(self.next_k):
             k = self.next_k
             self.next_k += 1
