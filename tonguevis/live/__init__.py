@@ -1,1 +1,10 @@
-"""Live mode: streaming from an articulograph, biofeedback targets, sweeps."""
+"""Live mode: streaming from an articulograph, biofeedback targets, sweeps.
+
+The stream (no Qt here, see :mod:`tonguevis.gui` for the live view):
+
+* :mod:`tonguevis.live.rtc3d` — the NDI WaveFront real-time protocol's bytes (packets, 6D frames).
+* :mod:`tonguevis.live.source` — the :class:`~tonguevis.live.source.Source` interface, the
+  WaveFront client (reconnecting) and a recording played in-process.
+* :mod:`tonguevis.live.server` — a replay server speaking the protocol from any recording.
+* :mod:`tonguevis.live.recorder` — a stream written as an NDI Wave TSV as it arrives.
+"""
