@@ -111,6 +111,26 @@ def test_rows_are_on_disk_as_they_arrive(tmp_path):
         TsvRecorder(path).write(LiveFrame(1, 0.0, 0.0, np.zeros((1, 3)), np.zeros((1, 4)), np.zeros(1)))
 
 
+def test_ctrl_c_stops_cleanly_and_keeps_the_file(demo, tmp_path):
+    from tonguevis.live.source import RecordingSource
+
+    class Interrupted(RecordingSource):
+        calls = 0
+
+        def get(self, timeout=None):
+            self.calls += 1
+            if self.calls == 30:
+                raise KeyboardInterrupt
+            return super().get(timeout)
+
+    source = Interrupted(demo, speed=20.0).start()
+    result = record(source, tmp_path / "c.tsv")
+    assert result.interrupted and result.frames >= 29 and source.finished
+    rec = open_recording(result.path)
+    assert rec.n_samples == result.frames and result.head_corrected.exists()
+    assert_equals_stream(rec, demo)
+
+
 def test_frames_with_another_slot_count_are_fitted_and_counted(tmp_path):
     recorder = TsvRecorder(tmp_path / "a.tsv")
     shapes = [2, 3, 1]

@@ -82,7 +82,7 @@ class SourceStatus:
     state : "idle", "connecting", "streaming", "reconnecting", "finished" or "failed".
     frames : frames received.  dropped : frames lost because the queue was full.
     missed : frames the device numbered but never sent (gaps in the frame numbers).
-    reconnects : connections reopened after a stall, a drop or a bad packet.
+    reconnects : reconnection attempts (after a stall, a drop, a bad packet or a refused connection).
     errors : problems met (newest last, at most 20).  message : the last event.
     """
 
