@@ -276,7 +276,7 @@ def test_energy_reads_its_one_recording_with_the_given_sound(tmp_path, capsys, m
         pytest.skip(f"demo corpus not built: {DEMO}")
     seen = {}
 
-    def open_recording(path, sensors=None, **options):
+    def open_recording(path, sensor_map=None, **options):
         seen.update(options)
         raise RecordingError("stop here", path)
 

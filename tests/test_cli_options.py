@@ -99,7 +99,7 @@ def test_every_command_that_reads_a_recording_takes_reader_options(command, monk
 
     seen = []
 
-    def reader(path, sensors=None, **options):
+    def reader(path, sensor_map=None, **options):
         seen.append(options)
         raise _Read
 

@@ -122,7 +122,7 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
         table_labels = {"speaker": entry.speaker, "syllable": entry.syllable, "trial": entry.trial,
                         "source": entry.source}
         try:
-            digest = input_digest(entry.path, settings.sensors, table_labels)
+            digest = input_digest(entry.path, settings.sensor_map, table_labels)
         except OSError as exc:
             digest = f"unreadable: {exc}"
         k = step_keys(digest, spec.key, settings)

@@ -54,7 +54,7 @@ class BatchSettings(RunSettings):
     modes, landmarks, warping, sensor_stiffness, rest : as ``tonguevis simulate``
         (``sensor_stiffness`` "default", a number, or "hard"/None for hard constraints;
         ``rest`` (start_s, end_s) for every recording, None to find it).
-    sensors : sensor map for every recording (preset name, JSON path or dict);
+    sensor_map : sensor map for every recording (preset name, JSON path or dict);
         None uses a ``sensor_map.json`` beside each recording.
     read_options : reader options for every recording (``-O``: ``axes=``, ``audio=False`` ...), a dict
         or (key, value) pairs; kept as sorted pairs.
@@ -68,7 +68,7 @@ class BatchSettings(RunSettings):
     """
 
     steps: tuple[str, ...] = DEFAULT_STEPS
-    sensors: Any = None
+    sensor_map: Any = None
     read_options: tuple = ()
     keep: tuple[int, ...] | None = (2, 3, 4)
     window: str = "release"
@@ -116,7 +116,7 @@ class BatchSettings(RunSettings):
 
     def as_dict(self) -> dict:
         out = asdict(self)
-        out["sensors"] = _sensor_map_text(self.sensors)
+        out["sensor_map"] = _sensor_map_text(self.sensor_map)
         for name in ("mesh", "mesh_axes", "palate", "backend"):  # the model is the ModelSpec's; no contact
             out.pop(name, None)
         return out
@@ -190,7 +190,7 @@ def _hash_file(h, path: Path) -> None:
             h.update(chunk)
 
 
-def input_digest(path: str | os.PathLike, sensors=None, labels: dict | None = None) -> str:
+def input_digest(path: str | os.PathLike, sensor_map=None, labels: dict | None = None) -> str:
     """SHA-256 of one recording's inputs: its bytes, the WAV and TextGrid read with it, its sensor map, its labels."""
     from tonguevis.io.companions import find_audio, find_labels
     from tonguevis.io.registry import SENSOR_MAP_BESIDE
@@ -201,16 +201,16 @@ def input_digest(path: str | os.PathLike, sensors=None, labels: dict | None = No
     for companion in (find_audio(path), find_labels(path)):
         if companion is not None:
             _hash_file(h, Path(companion))
-    if sensors is None:
+    if sensor_map is None:
         beside = path.parent / SENSOR_MAP_BESIDE
         if beside.is_file():
             _hash_file(h, beside)
-    elif isinstance(sensors, dict):
-        h.update(json.dumps(sensors, sort_keys=True, default=str).encode())
-    elif Path(sensors).is_file():
-        _hash_file(h, Path(sensors))
+    elif isinstance(sensor_map, dict):
+        h.update(json.dumps(sensor_map, sort_keys=True, default=str).encode())
+    elif Path(sensor_map).is_file():
+        _hash_file(h, Path(sensor_map))
     else:  # a preset name
-        h.update(f"preset:{sensors}".encode())
+        h.update(f"preset:{sensor_map}".encode())
     h.update(json.dumps(labels or {}, sort_keys=True, default=str).encode())
     return h.hexdigest()
 

@@ -134,7 +134,7 @@ def process(task: Task, spec: ModelSpec) -> Outcome:
             model = model_for(spec)
             from tonguevis.analysis.corpus import open_entry
 
-            entry, rec = open_entry(task.entry, task.settings.sensors, dict(task.settings.read_options))
+            entry, rec = open_entry(task.entry, task.settings.sensor_map, dict(task.settings.read_options))
             motion = None
             for step in task.todo:
                 t0 = time.perf_counter()

@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     settings = BatchSettings(
         steps=args.steps, modes=args.modes, landmarks=args.landmarks, warping=not args.linear,
         sensor_stiffness=args.sensor_stiffness, sensor_patches=args.sensor_patches, rest=rest_arg(args),
-        sensors=args.sensors,
+        sensor_map=args.sensors,
         read_options=parse_options(args.option), keep=None if args.all else (2, 3, 4), window=args.window, tier=args.productions_from,
         segment_first=args.segment_first, quasi_static=not args.no_static, csv=args.csv)
     model, mesh = load_model(args)

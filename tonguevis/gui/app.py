@@ -34,7 +34,7 @@ def install_error_hook(window) -> None:
     sys.excepthook = hook
 
 
-def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings=None, feature_tabs: bool = True,
+def create_window(file=None, sensor_map=None, mesh=None, modes: int = 100, settings=None, feature_tabs: bool = True,
                   rest=None, audio=None, labels=None, palate=None, frame: str | None = None,
                   options: dict | None = None, sensor_patches=None):
     """A shown MainWindow that opens ``file`` (default: the demo), with ``rest`` (start_s, end_s) if given,
@@ -63,7 +63,7 @@ def create_window(file=None, sensors=None, mesh=None, modes: int = 100, settings
     else:
         from tonguevis.workflows.session import demo_recording_path
 
-        window.open_recording(file if file is not None else demo_recording_path(), sensor_map=sensors, rest=rest,
+        window.open_recording(file if file is not None else demo_recording_path(), sensor_map=sensor_map, rest=rest,
                               audio=audio, labels=labels, options=options)
     return window
 
@@ -90,7 +90,7 @@ def opening_problem(window, file):
     return TonguevisError(" ".join(dialog.text().split()))
 
 
-def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None,
+def run_view(file=None, sensor_map=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None,
              rest=None, audio=None, labels=None, palate=None, reference: str | None = None,
              color: str | None = None, compare: dict | None = None, options: dict | None = None,
              sensor_patches=None) -> int:
@@ -102,7 +102,7 @@ def run_view(file=None, sensors=None, mesh=None, modes: int = 100, screenshot=No
     second recording shown with the first (a screenshot waits for both simulations); ``options``: reader
     options (``-O``) of ``file``."""
     app = application()
-    window = create_window(file, sensors, mesh, modes, rest=rest, audio=audio, labels=labels, palate=palate,
+    window = create_window(file, sensor_map, mesh, modes, rest=rest, audio=audio, labels=labels, palate=palate,
                            frame=reference, options=options, sensor_patches=sensor_patches)
     if compare is not None and window.session is not None:
         if not window.open_compare(**compare) and screenshot is not None:

@@ -103,7 +103,7 @@ class PalateMixin:
                                         list(names), 0, False)
         return name if ok else None
 
-    def fit_palate(self, traces, out, probe: str = "PROBE", sensors=None) -> None:
+    def fit_palate(self, traces, out, probe: str = "PROBE", sensor_map=None) -> None:
         """Fit a palate to ``traces`` in a job (progress, cancel), save it at ``out`` and simulate with it."""
         from tonguevis.gui.export import run_with_progress
         from tonguevis.workflows.palate import palate_from_traces
@@ -114,7 +114,7 @@ class PalateMixin:
         traces = [Path(t) for t in traces]
 
         def work(progress):
-            surface = palate_from_traces(traces, probe, sensors, progress=progress)
+            surface = palate_from_traces(traces, probe, sensor_map, progress=progress)
             out.parent.mkdir(parents=True, exist_ok=True)
             surface.save(out)
             surface.metadata["file"] = str(out)

@@ -17,7 +17,7 @@ from tonguevis.palate import PalateError, PalateSurface, fit_palate, midline_of,
 __all__ = ["palate_from_traces"]
 
 
-def palate_from_traces(paths, probe: str = "PROBE", sensors=None, progress=None,
+def palate_from_traces(paths, probe: str = "PROBE", sensor_map=None, progress=None,
                        read_options: dict | None = None) -> PalateSurface:
     """The speaker's palate fitted to palate-trace recordings (``tonguevis palate`` and the app's
     File > Fit palate from traces): each read (with the reader's ``read_options``, ``-O``),
@@ -33,7 +33,7 @@ def palate_from_traces(paths, probe: str = "PROBE", sensors=None, progress=None,
     points, midlines, samples = [], [], {}
     for k, path in enumerate(paths):
         report(progress, k, len(paths) + 1, f"reading {Path(path).name}")
-        rec = open_recording(path, sensors, **{**(read_options or {}), "audio": False})  # traces: no sound needed
+        rec = open_recording(path, sensor_map, **{**(read_options or {}), "audio": False})  # traces: no sound needed
         pts = trace_points(rec, probe)
         points.append(pts)
         samples[str(path)] = int(len(pts))

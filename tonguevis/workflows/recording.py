@@ -19,11 +19,11 @@ __all__ = ["find_recording_productions", "head_corrected", "head_references", "o
 
 
 @verbose
-def open_recording(path: str | os.PathLike, sensors: dict | str | os.PathLike | None = None, *,
+def open_recording(path: str | os.PathLike, sensor_map: dict | str | os.PathLike | None = None, *,
                    audio: Any = None, labels: Any = None, **options: Any) -> Recording:
     """Read the recording at ``path`` (any supported format) with its sensor map, sound and labels.
 
-    sensors : a preset name (paper, haskins, mngu0), a JSON file or a dict of
+    sensor_map : a preset name (paper, haskins, mngu0), a JSON file or a dict of
         canonical name -> channel; None uses a ``sensor_map.json`` beside the
         file when there is one.
     audio : None (the file's own sound, else a WAV with the same name beside it
@@ -34,7 +34,7 @@ def open_recording(path: str | os.PathLike, sensors: dict | str | os.PathLike | 
     """
     from tonguevis.io.registry import read_recording
 
-    return read_recording(path, sensor_map=sensors, audio=audio, labels=labels, **options)
+    return read_recording(path, sensor_map=sensor_map, audio=audio, labels=labels, **options)
 
 
 @verbose
