@@ -142,6 +142,17 @@ def test_frames_with_another_slot_count_are_fitted_and_counted(tmp_path):
     assert np.isnan(rec.sensors["S1"][2]).all() and np.isfinite(rec.sensors["S1"][1]).all()
 
 
+def test_a_repeated_or_older_frame_is_not_written(tmp_path):
+    """Readers need increasing times: a frame repeated after a reconnection is counted, not written."""
+    recorder = TsvRecorder(tmp_path / "t.tsv")
+    written = [recorder.write(LiveFrame(k, t, 0.0, np.full((1, 3), float(k)), np.full((1, 4), 0.5), np.zeros(1)))
+               for k, t in enumerate([0.0, 0.01, 0.01, 0.005, 0.02], start=1)]
+    recorder.close()
+    assert written == [True, True, False, False, True] and recorder.out_of_order == 2
+    rec = read_ndi_wave(tmp_path / "t.tsv")
+    np.testing.assert_array_equal(rec.metadata["meas_id"], [1, 2, 5])
+
+
 def test_head_correction_needs_three_references(tmp_path):
     rec = synthetic(n=20, names=("TT", "REF1", "REF2"))
     from tonguevis.io.ndi_wave import write_ndi_wave

@@ -63,6 +63,10 @@ class TsvRecorder:
         self.sync_interval = float(sync_interval)
         self.rows = 0
         self.mismatched = 0
+        #: Frames not written because their time stamp did not follow the last row's (a repeated
+        #: frame after a reconnection, or a device whose clock went back): readers need increasing times.
+        self.out_of_order = 0
+        self._last_time = -np.inf
         self._file = None
         self._n_slots: int | None = None
         self._last_sync = 0.0
@@ -85,8 +89,13 @@ class TsvRecorder:
         self._file.flush()
         self._n_slots = n_slots
 
-    def write(self, frame: LiveFrame) -> None:
-        """Write one frame's row and flush it to the operating system."""
+    def write(self, frame: LiveFrame) -> bool:
+        """Write one frame's row and flush it to the operating system; False (not written) when its
+        time stamp does not come after the last row's (see :attr:`out_of_order`)."""
+        stamp = f"{frame.timestamp_s:.6f}"
+        if not float(stamp) > self._last_time:
+            self.out_of_order += 1
+            return False
         if self._file is None:
             self._open(frame.n_sensors)
         n = self._n_slots
@@ -95,7 +104,7 @@ class TsvRecorder:
             self.mismatched += 1
             positions = _fit(positions, n)
             quaternions = _fit(quaternions, n)
-        fields = [f"{frame.timestamp_s:.6f}", str(int(frame.frame)), str(int(np.floor(frame.timestamp_s * AUDIO_RATE)))]
+        fields = [stamp, str(int(frame.frame)), str(int(np.floor(frame.timestamp_s * AUDIO_RATE)))]
         ok = np.all(np.isfinite(positions), axis=1)
         for slot in range(n):
             if ok[slot]:
@@ -107,10 +116,12 @@ class TsvRecorder:
         self._file.write("\t".join(fields) + "\n")
         self._file.flush()
         self.rows += 1
+        self._last_time = float(stamp)
         now = time.monotonic()
         if now - self._last_sync > self.sync_interval:
             os.fsync(self._file.fileno())
             self._last_sync = now
+        return True
 
     def close(self) -> None:
         if self._file is not None and not self._file.closed:
@@ -217,6 +228,9 @@ def record(source: Source, path, *, seconds: float | None = None, stop: threadin
     if not recorder.rows:
         result.notes.append("no frame arrived: nothing written")
         return result
+    if recorder.out_of_order:
+        result.notes.append(f"{recorder.out_of_order} frames not written: their time stamps did not come after "
+                            "the last row's (repeated after a reconnection, or the device's clock went back)")
     if recorder.mismatched:
         result.notes.append(f"{recorder.mismatched} frames had a different number of sensor slots than the first")
     mapping = _slot_names(source, recorder.ids, sensor_map)
