@@ -44,7 +44,8 @@ SYLLABLE_COLOURS = {"ta": "#1f77b4", "ka": "#d62728", "la": "#2ca02c", "ra": "#9
 
 def simulate_corpus(data: Path, model, modes: int):
     from tonguevis._progress import tqdm_progress
-    from tonguevis.analysis.corpus import corpus_energy_curves, load_corpus
+    from tonguevis.analysis.corpus import load_corpus
+    from tonguevis.workflows.corpus import corpus_energy_curves
 
     corpus = load_corpus(sorted(data.glob("spk*_*.tsv")))
     t0 = time.perf_counter()

@@ -10,12 +10,8 @@ import numpy as np
 import pytest
 
 from tests.analysis.energy_support import MODES, box_tongue
-from tonguevis.analysis.corpus import (
-    CorpusError,
-    corpus_energy_curves,
-    labels_from_name,
-    load_corpus,
-)
+from tonguevis.analysis.corpus import CorpusError, labels_from_name, load_corpus
+from tonguevis.workflows.corpus import corpus_energy_curves
 from tonguevis.paths import DATA_DIR
 
 

@@ -25,14 +25,14 @@ __all__ = [
 ]
 
 # Energy curves, the corpus, MDS and morphing (§6.3-6.4).
-from tonguevis.analysis.corpus import Corpus, CorpusEntry, corpus_energy_curves, load_corpus  # noqa: E402
+from tonguevis.analysis.corpus import Corpus, CorpusEntry, load_corpus  # noqa: E402
 from tonguevis.analysis.energy import EnergyCurve, GroupSummary, modal_energy, production_curves, summarize  # noqa: E402
 from tonguevis.analysis.mds import MDSResult, smacof  # noqa: E402
 from tonguevis.analysis.morph import Morph, cdf_colour, morph_between  # noqa: E402
 
 __all__ += [
     "Corpus", "CorpusEntry", "EnergyCurve", "GroupSummary", "MDSResult", "Morph", "cdf_colour",
-    "corpus_energy_curves", "load_corpus", "modal_energy", "morph_between", "production_curves", "smacof",
+    "load_corpus", "modal_energy", "morph_between", "production_curves", "smacof",
     "summarize",
 ]
 

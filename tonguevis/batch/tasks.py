@@ -1,9 +1,9 @@
 """One recording's work, run in a worker: :func:`process` (open, then each step asked, results written as they finish).
 
 Every step goes through the same functions as the single-file commands:
-:func:`tonguevis.analysis.corpus.open_entry` and
+:func:`tonguevis.workflows.corpus.open_entry` and
 :func:`~tonguevis.workflows.simulate_recording` (``tonguevis simulate``),
-:func:`~tonguevis.analysis.corpus.entry_curves` (``tonguevis energy``),
+:func:`~tonguevis.workflows.corpus.entry_curves` (``tonguevis energy``),
 :func:`~tonguevis.analysis.segmentation.production_target` and
 :func:`~tonguevis.analysis.segmentation.segment` with the §5 defaults
 (``tonguevis segment --production K``), and
@@ -132,7 +132,7 @@ def process(task: Task, spec: ModelSpec) -> Outcome:
         with single_threaded_blas():
             task.folder.mkdir(parents=True, exist_ok=True)
             model = model_for(spec)
-            from tonguevis.analysis.corpus import open_entry
+            from tonguevis.workflows.corpus import open_entry
 
             entry, rec = open_entry(task.entry, task.settings.sensor_map, dict(task.settings.read_options))
             motion = None
@@ -184,7 +184,7 @@ def _simulate(task, entry, rec, model, motion, seconds):
 
 
 def _energy(task, entry, rec, model, motion, seconds):
-    from tonguevis.analysis.corpus import entry_curves
+    from tonguevis.workflows.corpus import entry_curves
     from tonguevis.analysis.energy import write_curves_csv
 
     s = task.settings

@@ -63,7 +63,8 @@ def load_model(args):
 
 def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
-    from tonguevis.analysis.corpus import CorpusError, corpus_energy_curves, load_corpus, unknown_labels, with_labels
+    from tonguevis.analysis.corpus import CorpusError, load_corpus, unknown_labels, with_labels
+    from tonguevis.workflows.corpus import corpus_energy_curves
     from tonguevis.analysis.energy import GROUP_KEYS, summarize, write_curves_csv, write_summary_csv
     from tonguevis.cli._common import reading_options, rest_arg
 

@@ -205,7 +205,8 @@ class EnergyTab(QtWidgets.QWidget):
 
     def load_paths(self, paths) -> None:
         """Simulate the recordings (files or folders) through the job runner, then add their curves."""
-        from tonguevis.analysis.corpus import corpus_energy_curves, load_corpus
+        from tonguevis.analysis.corpus import load_corpus
+        from tonguevis.workflows.corpus import corpus_energy_curves
         from tonguevis.errors import TonguevisError
         from tonguevis.gui.worker import run_job
 
