@@ -206,15 +206,17 @@ def test_stream_cli_serves_the_record_cli(tmp_path, capsys):
         thread.join(0.02)
     assert port is not None, "tonguevis stream printed no address"
     status = run_cli(["record", "--source", f"127.0.0.1:{port}", "--out", str(tmp_path / "rec"), "--name", "s",
-                      "--stall", "0.3", "--retries", "1"])
+                      "--stall", "0.3", "--retries", "1", "--sensors", "paper"])
     thread.join(10)
     assert status == 0 and out["status"] == 0
     text = capsys.readouterr().out
     assert "60 frames" in text
+    assert "1 head reference(s) (REF1); 3 are needed" in text
+    # --sensors paper named the three slots recorded (its other names are left out of the map saved beside).
     rec = open_recording(tmp_path / "rec" / "s.tsv")
-    streamed = open_recording(tmp_path / "short.tsv")
-    assert rec.sensor_names == streamed.sensor_names
-    assert_equals_stream(rec, streamed)
+    assert rec.sensor_names == ["REF1", "TT", "TD"]
+    assert json.loads((tmp_path / "rec" / "sensor_map.json").read_text())["sensors"] == {"REF1": 0, "TT": 1, "TD": 2}
+    assert_equals_stream(rec, open_recording(tmp_path / "short.tsv"))
 
 
 def test_record_cli_with_nothing_to_record(tmp_path, capsys):

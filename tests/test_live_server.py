@@ -164,6 +164,14 @@ def test_loop_continues_numbers_and_times():
     assert not np.array_equal(frames[1].positions, frames[0].positions)
 
 
+def test_a_clock_starting_below_zero_is_shifted_to_zero():
+    rec = synthetic(n=5)
+    rec.times = rec.times - 0.53  # -0.03 ... 0.01 s
+    server = ReplayServer(rec)
+    stamps = [decode_data(PacketReader().feed(server.frame_packet(k))[0].payload).sixd.timestamp_us for k in range(5)]
+    assert stamps == [0, 10_000, 20_000, 30_000, 40_000]
+
+
 def test_without_loop_the_stream_ends():
     rec = synthetic(n=10)
     with ReplayServer(rec, speed=5.0) as server:

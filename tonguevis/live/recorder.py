@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from tonguevis._files import atomic_write
-from tonguevis.errors import RecordingError
+from tonguevis.errors import RecordingError, TonguevisError
 from tonguevis.live.source import LiveFrame, Source, SourceStatus
 
 log = logging.getLogger("tonguevis")
@@ -240,7 +240,10 @@ def record(source: Source, path, *, seconds: float | None = None, stop: threadin
         result.notes.append(note)
     if head_correction:
         # The map saved beside the file also carries the axes: let the reader find it there.
-        result.head_corrected, note = write_head_corrected(path, None if beside else (mapping or None))
+        try:
+            result.head_corrected, note = write_head_corrected(path, None if beside else (mapping or None))
+        except TonguevisError as exc:  # the raw recording is safe; say why there is no corrected one
+            note = f"no head-corrected file: {exc}"
         result.notes.append(note)
     return result
 
@@ -252,9 +255,11 @@ def _slot_names(source: Source, ids: list[int], sensor_map) -> dict[str, int]:
 
         mapping = dict(load_sensor_map(sensor_map))
         try:
-            return {name: int(channel) for name, channel in mapping.items()}
+            mapping = {name: int(channel) for name, channel in mapping.items()}
         except (TypeError, ValueError):
             raise RecordingError(f"sensor map {sensor_map}: NDI channels must be numbers ({mapping})") from None
+        # Only the slots recorded: a name for a channel the file lacks would stop every reader.
+        return {name: channel for name, channel in mapping.items() if channel in ids}
     names = source.sensor_names
     if not names or len(names) != len(ids) or all(name == f"S{i}" for name, i in zip(names, ids)):
         return {}

@@ -7,7 +7,7 @@ when the first client asks for frames and runs at the recording's own rate (time
 ``speed``) whether or not anyone listens, so a client that reconnects resumes at the
 live frame, as with the real device.  Frame numbers count samples from 1 and keep
 counting across loops; time stamps are the sample times (plus one recording length per
-loop) in microseconds.  Positions are the recording's, in mm, slot k being the
+loop) in microseconds, shifted to start at 0 if the recording's clock starts below 0.  Positions are the recording's, in mm, slot k being the
 recording's k-th sensor.
 
 Commands answered (case-insensitive, as LIVE.md lists them): ``Version``,
@@ -93,6 +93,8 @@ class ReplayServer:
         ids = recording.metadata.get("ndi_ids")
         self.ids = list(ids) if ids is not None and len(ids) == len(self.names) else list(range(len(self.names)))
         self.period = (self.times[-1] - self.times[0] + 1.0 / recording.rate) if len(self.times) else 0.0
+        # Time stamps are unsigned: a recording whose clock starts below 0 is shifted to start at 0.
+        self.time_origin = min(float(self.times[0]), 0.0) if len(self.times) else 0.0
         self.finished = threading.Event()
         self.connections = 0
         self.frames_sent = 0
@@ -143,8 +145,8 @@ class ReplayServer:
         if nan_slots:
             positions = positions.copy()
             positions[[s for s in nan_slots if s < len(positions)]] = np.nan
-        stamp = int(round((self.times[i] + lap * self.period) * 1e6))
-        return encode_6d_frame(k + 1, max(stamp, 0), positions, self.quaternions[i],
+        stamp = int(round((self.times[i] - self.time_origin + lap * self.period) * 1e6))
+        return encode_6d_frame(k + 1, stamp, positions, self.quaternions[i],
                                np.where(np.isfinite(positions[:, 0]), 0.0, np.nan), byte_order)
 
     def parameters_xml(self) -> str:
@@ -160,7 +162,8 @@ class ReplayServer:
     # --- serving ---------------------------------------------------------------------------------------
     def start(self) -> int:
         """Listen and serve in background threads; returns the port bound."""
-        listener = socket.create_server((self.host, self.port), reuse_port=False)
+        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
+        listener = socket.create_server((self.host, self.port), family=family)
         listener.settimeout(0.1)
         self._listener = listener
         self.port = listener.getsockname()[1]
