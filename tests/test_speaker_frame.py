@@ -77,8 +77,9 @@ def model():
 def test_a_speaker_frame_motion_is_the_model_frame_one_seen_through_the_fit(model, patches):
     recording = _recording(model, jaw_m=0.004)
     options = dict(modes=20, landmarks="speaker", backend="numpy", sensor_patches=patches)
+    # tongue_size=None: placed by the inverse of the rest alignment itself
     in_model = simulate(recording, model, frame="model", **options)
-    in_speaker = simulate(recording, model, frame="speaker", **options)
+    in_speaker = simulate(recording, model, frame="speaker", tongue_size=None, **options)
     fit = in_speaker.metadata["fit"]
     back = SimilarityTransform(fit["scale"], np.array(fit["rotation"]), np.array(fit["translation_m"])).inverse()
     assert isinstance(in_speaker.model, PlacedModel) or isinstance(in_speaker.model.base_model, PlacedModel)
@@ -123,7 +124,7 @@ def test_morphing_across_frames_carries_the_shape_onto_the_source_tongue(model):
     from tonguevis.analysis.morph import morph_between
 
     recording = _recording(model)
-    in_speaker = simulate(recording, model, modes=20, backend="numpy")
+    in_speaker = simulate(recording, model, modes=20, backend="numpy", tongue_size=None)
     in_model = simulate(recording, model, modes=20, backend="numpy", frame="model")
     morph = morph_between(in_speaker, 2.5, in_model, 2.5)
     assert morph.model is in_speaker.model
@@ -145,7 +146,9 @@ def test_the_demo_runs_in_the_speakers_millimetres():
     fit = motion.metadata["fit"]
     scale = fit["scale"]
     assert motion.metadata["frame"] == "speaker"
-    assert motion.model.rest_volume == pytest.approx(model.rest_volume / scale ** 3, rel=1e-9)
+    assert scale == 1.0 and fit["fitted_to"] == "upper surface"  # the generic size, fitted to the speaker's rest
+    assert motion.model.rest_volume == pytest.approx(model.rest_volume, rel=1e-9)
+    assert fit["residual_max_mm"] < 5
     # the generic palate moved with the model: the same clearance over the placed tongue's nodes
     placed_gap, _ = motion.palate.clearance(motion.model.mesh.points[model.dorsal_nodes])
     from tonguevis.palate import generic_palate
@@ -155,3 +158,21 @@ def test_the_demo_runs_in_the_speakers_millimetres():
     assert ok.sum() > 20
     np.testing.assert_allclose(placed_gap[ok] * scale, model_gap[ok], atol=1e-9)
     assert any(line.startswith("frame: the speaker's") for line in summary(motion))
+
+
+def test_the_surface_fit_places_the_model_at_the_size_given(model):
+    """The synthetic speaker is the bar at 1/1.15 of its size: told so, the surface fit puts every rest sensor
+    on its own node exactly; at the model's own size (the default) the tongue keeps its volume and the
+    sensors sit near its upper surface, the residual said."""
+    recording = _recording(model)
+    told = simulate(recording, model, modes=20, backend="numpy", tongue_size=1 / 1.15)
+    assert told.metadata["fit"]["fitted_to"] == "upper surface"
+    assert told.metadata["fit"]["residual_max_mm"] < 1e-3  # micrometres: the rest pose is a mean over a window
+    assert told.model.rest_volume == pytest.approx(model.rest_volume / 1.15 ** 3, rel=1e-9)
+    generic = simulate(recording, model, modes=20, backend="numpy")
+    fit = generic.metadata["fit"]
+    assert generic.model.rest_volume == pytest.approx(model.rest_volume, rel=1e-9)
+    assert 0.1 < fit["residual_max_mm"] < 10  # 15 % too large: the sensors cannot all sit on nodes
+    assert fit["tongue_size"] == 1.0
+    with pytest.raises(Exception, match="tongue size"):
+        simulate(recording, model, modes=20, backend="numpy", tongue_size=-1.0)

@@ -100,6 +100,7 @@ def validate(
     progress: ProgressCallback | None = None,
     sensor_patches: float | None | str = None,
     frame: str = "speaker",
+    tongue_size: float | None = 1.0,
 ) -> ValidationResult:
     """Leave-one-sensor-out validation of ``model`` (default: the shipped tongue) on ``recording``.
 
@@ -111,7 +112,8 @@ def validate(
     ``sensor_patches`` as :func:`tonguevis.sim.simulate`: in each run the patches of the driving
     sensors only close their gaps, and the held-out node moves with the modes and those patches.
     ``frame`` as :func:`tonguevis.sim.simulate`: "speaker" (default) scores in the speaker's millimetres
-    (the model placed in the speaker), "model" in the generic tongue's (the speaker scaled onto it).
+    (the model placed in the speaker, at ``tongue_size`` times its size, as :func:`~tonguevis.sim.simulate`),
+    "model" in the generic tongue's (the speaker scaled onto it).
     """
     from tonguevis.sim import TongueModel
     from tonguevis.io.sensor_map import how_to_map
@@ -137,7 +139,8 @@ def validate(
             f"{candidates or 'none'} (recording sensors: {', '.join(recording.sensor_names)}); "
             + how_to_map(recording), file)
     given = model
-    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest_interval)  # model in the frame
+    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest_interval,
+                                        tongue_size=tongue_size)  # the model in the frame
     if sensor_patches == "default":  # 3 mm on the generic tongue, as simulate() takes it
         from tonguevis.sim.patches import PATCH_RADIUS
 
@@ -150,7 +153,7 @@ def validate(
         sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
     motion = simulate(recording, given, modes=modes, warping=True, landmarks=landmarks,
                       rest_interval=prep.rest, tolerance=tolerance, sensor_stiffness=sensor_stiffness,
-                      sensor_patches=patch_option, frame=frame)
+                      sensor_patches=patch_option, frame=frame, tongue_size=tongue_size)
     centres = prep.aligned_rest
     s = len(names)
     dofs = (3 * nodes[:, None] + np.arange(3)).ravel()

@@ -141,7 +141,8 @@ def in_model_frame(surface, model: Any):
 
 
 def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", landmarks: str = "speaker",
-                     rest=None, smooth_window: int | None = None, keep_frequencies: bool = True):
+                     rest=None, smooth_window: int | None = None, keep_frequencies: bool = True,
+                     tongue_size: float | None = 1.0):
     """The model and the sensor targets in ``frame``: (model, :class:`~tonguevis.preprocess.PreparedTargets`, fit).
 
     Both frames start alike: :func:`~tonguevis.preprocess.prepare_targets` fits the similarity T
@@ -151,6 +152,14 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
     with it (the same numbers seen through T⁻¹, so the sensor nodes are the same node ids): the
     displacements are then the speaker's own (head- and jaw-corrected, metres), the transform
     the identity, and a speaker's palate needs no moving.
+
+    tongue_size : in the speaker frame, the speaker's tongue as a multiple of the model's (default 1:
+        the generic adult tongue, about 100 cm³): the model at that size, turned and moved so that the
+        speaker's rest sensors lie on its upper surface (:func:`surface_fit`), each sensor's node the
+        nearest there; not the same simulation as the model frame's, since the sensors sit on other
+        parts of the tongue.  None: the model placed by T⁻¹ exactly, 1/s times its size (the
+        model-frame motion exactly, seen in the speaker's units), which on the Opti-Speech speaker
+        is a tongue 4-6.5 times too large (:func:`surface_fit` says why).
 
     fit : what ``motion.metadata["fit"]`` says: the frame, T (scale, rotation, translation in
     metres of the model frame, its 4x4 matrix) and the residual of the rest sensors from their
@@ -165,7 +174,20 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
                               recording.metadata.get("file"))
     prep = prepare_targets(recording, model, landmarks, rest, smooth_window)
     fit = prep.transform
-    if frame == "speaker":
+    how = "rule nodes"
+    if frame == "speaker" and tongue_size is not None:
+        if not (np.isfinite(tongue_size) and tongue_size > 0):
+            raise SimulationError(f"the tongue size must be a positive multiple of the model's or None, got "
+                                  f"{tongue_size!r}", recording.metadata.get("file"))
+        fit, _ = surface_fit(prep, model, 1.0 / tongue_size)
+        how = "upper surface"
+        placed = model.placed(fit.inverse(), keep_frequencies=keep_frequencies)
+        from tonguevis.preprocess.alignment import SimilarityTransform as _Similarity
+
+        prep = prepare_targets(recording, placed, landmarks, prep.rest, smooth_window,
+                               transform=_Similarity(1.0, np.eye(3), np.zeros(3)))
+        model = placed
+    elif frame == "speaker":
         placement = fit.inverse()
         model = model.placed(placement, keep_frequencies=keep_frequencies)
         linear = placement.scale * placement.rotation
@@ -173,10 +195,13 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
             prep, displacement=prep.displacement @ linear.T, aligned_rest=placement.apply(prep.aligned_rest),
             jaw_offset=None if prep.jaw_offset is None else prep.jaw_offset @ linear.T,
             transform=SimilarityTransform(1.0, np.eye(3), np.zeros(3)), alignment_rms=placement.scale * prep.alignment_rms)
-    rule = model.mesh.points[[int(model.landmarks.sensors[n]) for n in prep.names]]
-    residual = 1e3 * np.linalg.norm(prep.aligned_rest - rule, axis=1)
+    # The residual: each rest sensor from the node it is fitted to (the rule nodes, or the surface nodes).
+    fitted = model.mesh.points[[int(model.landmarks.sensors[n]) for n in prep.names]] if how == "rule nodes" \
+        else model.mesh.points[prep.nodes]
+    residual = 1e3 * np.linalg.norm(prep.aligned_rest - fitted, axis=1)
     info = {
-        "frame": frame, "scale": fit.scale, "rotation": fit.rotation.tolist(), "translation_m": fit.translation.tolist(),
+        "frame": frame, "fitted_to": how, "tongue_size": None if frame == "model" else 1.0 / fit.scale,
+        "scale": fit.scale, "rotation": fit.rotation.tolist(), "translation_m": fit.translation.tolist(),
         "matrix": fit.matrix.tolist(), "midsagittal": bool(prep.midsagittal),
         "residual_rms_mm": float(np.sqrt(np.mean(residual ** 2))), "residual_max_mm": float(residual.max()),
         "residual_by_sensor_mm": {n: float(r) for n, r in zip(prep.names, residual)},
@@ -189,12 +214,15 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
 def describe_fit(fit: dict) -> str:
     """One line on the frame of a motion and its fit, for summaries (``motion.metadata["fit"]``)."""
     scale = fit["scale"]
-    residual = f"rest sensors {fit['residual_rms_mm']:.2f} mm RMS ({fit['residual_max_mm']:.2f} max) from the model's nodes"
+    residual = (f"{fit['residual_rms_mm']:.2f} mm RMS ({fit['residual_max_mm']:.2f} max) from "
+                + ("the model's nodes" if fit.get("fitted_to", "rule nodes") == "rule nodes" else "its upper surface"))
     if fit["frame"] == "speaker":
-        return (f"frame: the speaker's (head-corrected, mm as recorded): the model placed in the speaker, scaled by "
-                f"{1 / scale:.3f} (tongue {fit['model_volume_cm3']:.0f} cm³); {residual}")
+        size = (f"at {1 / scale:.2f} x its size ({fit['model_volume_cm3']:.0f} cm³)"
+                + (", the rest sensors fitted onto its upper surface" if fit.get("fitted_to") == "upper surface"
+                   else ", as the rest alignment scales it"))
+        return f"frame: the speaker's (head-corrected, mm as recorded): the model placed in the speaker {size}; rest sensors {residual}"
     return (f"frame: the model's (the speaker scaled by {scale:.3f} onto the generic tongue: mm are the model's, "
-            f"not the speaker's); {residual}")
+            f"not the speaker's); rest sensors {residual}")
 
 
 def modal_scale(model: Any) -> float:
@@ -205,3 +233,39 @@ def modal_scale(model: Any) -> float:
         return 1.0
     c = placed.placement.scale
     return float(c * np.sqrt(placed.density_factor * c ** 3))
+
+
+def surface_fit(prep, model: TongueModel, scale: float, iterations: int = 50):
+    """(T, rms m): the similarity of fixed ``scale`` (recording -> model) putting the rest sensors on the model's
+    upper surface: rotation and translation by ICP over its dorsal nodes (each sensor its own nearest node,
+    :func:`~tonguevis.preprocess.targets.assign_sensor_nodes`), from the rule-node fit ``prep.transform``.
+
+    Why a fixed scale: the rest sensors do not tell the speaker's size.  On the Opti-Speech speaker the
+    rule-node fit says 0.53-0.61 (a tongue 1.6-1.9 times the generic one, 430-650 cm³ where adults have
+    about 100), because that speaker's coils sit further apart than the paper's placement rule (laterals
+    17-21 mm apart where the rule's nodes are 9 mm); yet the same sensors lie on the generic tongue's upper
+    surface within 0.9-1.8 mm RMS at any scale from 0.6 to 1.0.  The size must come from elsewhere (a
+    palate, an image, a norm); this fits the rest to it.
+    """
+    from tonguevis.preprocess.alignment import SimilarityTransform, fit_similarity
+    from tonguevis.preprocess.targets import assign_sensor_nodes
+
+    t = prep.transform
+    source = t.inverse().apply(prep.aligned_rest)  # the rest sensors in the recording's frame (m)
+    points, dorsal = model.mesh.points, model.dorsal_nodes
+
+    def at_scale(rotation, target):
+        return SimilarityTransform(scale, rotation, target.mean(axis=0) - scale * rotation @ source.mean(axis=0))
+
+    current = at_scale(t.rotation, t.apply(source))  # the rule fit's pose, the centroids kept together
+    nodes = None
+    for _ in range(iterations):
+        new = assign_sensor_nodes(current.apply(source), points, dorsal)
+        if nodes is not None and np.array_equal(new, nodes):
+            break
+        nodes = new
+        # The best rotation does not depend on the scale: take the free fit's, then this scale's translation.
+        current = at_scale(fit_similarity(source, points[nodes], midsagittal=prep.midsagittal).rotation,
+                           points[nodes])
+    rms = float(np.sqrt(np.mean(np.sum((current.apply(source) - points[nodes]) ** 2, axis=1))))
+    return current, rms

@@ -46,6 +46,7 @@ def simulate(
     preview_seconds: float = 20.0,
     sensor_patches: float | None | str = None,
     frame: str = "speaker",
+    tongue_size: float | None = 1.0,
 ) -> Motion:
     """Drive ``model`` (default: our shipped tongue) with ``recording``.
 
@@ -87,7 +88,12 @@ def simulate(
         every view are in the speaker's head-corrected frame and millimetres; "model": the
         paper's way, the speaker scaled and turned onto the generic tongue (figures in the
         model's millimetres).  The two are the same motion seen through the alignment (lengths
-        differ by its scale); ``metadata["frame"]`` and ``metadata["fit"]`` say which and how well.
+        differ by its scale) when ``tongue_size`` is None; ``metadata["frame"]`` and
+        ``metadata["fit"]`` say which and how well.
+    tongue_size : in the speaker frame, the speaker's tongue as a multiple of the model's: 1 (default,
+        the generic adult tongue), the rest sensors fitted onto its upper surface; None: the size the
+        rest alignment implies (1/s, 4-6.5 times the volume on the Opti-Speech speaker, whose coils sit
+        further apart than the paper's rule; :func:`tonguevis.sim.placement.surface_fit`).
 
     preview : called once, from the simulating thread, with the :class:`Motion` of the first
         ``preview_seconds`` s (a little more: whole segments) as soon as they are final, before
@@ -112,7 +118,8 @@ def simulate(
     recording = recording.on_uniform_grid()
     from tonguevis.sim.placement import targets_in_frame
 
-    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest_interval, smooth_window)
+    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest_interval, smooth_window,
+                                        tongue_size=tongue_size)
     basis = model.basis(modes, progress=_stage(progress, 0, 3))
     w_full = model.rotation_matrix(basis)
     dofs = (3 * prep.nodes[:, None] + np.arange(3)).ravel()
@@ -448,19 +455,19 @@ def shipped_tongue(model: TongueModel) -> bool:
 
 def placed_palate(recording: Recording, palate, model: TongueModel | None = None, landmarks: str = "speaker",
                   rest_interval: RestChoice | tuple[float, float] | None = None, smooth_window: int | None = None,
-                  frame: str = "speaker"):
+                  frame: str = "speaker", tongue_size: float | None = 1.0):
     """The palate as :func:`simulate` places it for ``recording`` on ``model`` (unplaced, as given to
     :func:`simulate`): (surface in the motion's ``frame``, raised by m).
 
     For drawing a motion against its palate: pass the motion's landmarks, rest and frame
     (``motion.metadata["landmarks"]``, :func:`tonguevis.workflows.rest_of`,
     ``motion.metadata.get("frame", "model")``: motions saved before the speaker frame are in the
-    model's) so the alignment is the one the simulation used.
+    model's; ``motion.metadata["fit"]["tongue_size"]``) so the alignment is the one the simulation used.
     """
     from tonguevis.sim.placement import targets_in_frame
 
     framed, prep, _ = targets_in_frame(recording, model or TongueModel.default(), frame, landmarks, rest_interval,
-                                       smooth_window)
+                                       smooth_window, tongue_size=tongue_size)
     return place_palate(palate, prep, quiet=True, model=framed)  # the simulation said it once
 
 
