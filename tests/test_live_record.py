@@ -244,3 +244,18 @@ def test_records_a_real_recording(tmp_path):
     assert_equals_stream(back, real)
     assert np.isnan(back.sensors["S2"]).all() and np.isfinite(back.sensors["S0"]).all()  # missing ports stay missing
     assert back.metadata["dropped_frames"] == real.metadata["dropped_frames"]  # the export's own gap, kept
+
+
+def test_streams_and_records_a_recording_of_another_format(tmp_path):
+    """Any recording tonguevis reads streams: a Haskins MVIEW file (its orientations are angles: no quaternions)."""
+    path = SHARED / "mview" / "F01_B01_S01_R01_N.mat"
+    if not path.exists():
+        pytest.skip(f"{path} is absent (the shared third-party data is not here)")
+    real = open_recording(path, audio=False)
+    with ReplayServer(real, speed=10.0) as server:
+        source = WaveFrontSource("127.0.0.1", server.port, stall_timeout=0.3, max_retries=0).start()
+        result = record(source, tmp_path / "mview.tsv")
+    back = open_recording(result.path)
+    assert back.sensor_names == real.sensor_names and back.n_samples == real.n_samples
+    assert_equals_stream(back, real)  # positions exact; quaternions NaN, as the stream had none
+    assert all(np.isnan(q).all() for q in back.orientations.values())
