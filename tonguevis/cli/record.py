@@ -25,7 +25,8 @@ def parse_address(text: str, default_port: int = 3030) -> tuple[str, int]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--source", required=True, metavar="HOST:PORT",
+    # dest "address": the device's, not a recording (other commands' "source" is a file).
+    parser.add_argument("--source", dest="address", required=True, metavar="HOST:PORT",
                         help="the NDI WaveFront real-time server (e.g. 192.168.1.10:3030, or a "
                              "`tonguevis stream` on 127.0.0.1:3030)")
     parser.add_argument("--out", required=True, metavar="DIR", help="folder to write the recording in")
@@ -48,7 +49,7 @@ def run(args) -> int:
 
     if args.seconds is not None and not args.seconds > 0:
         raise TonguevisError(f"--seconds must be positive, not {args.seconds}")
-    host, port = parse_address(args.source)
+    host, port = parse_address(args.address)
     name = args.name or time.strftime("sweep_%Y%m%d_%H%M%S")
     if not name or any(c in name for c in "/\\") or name in (".", ".."):
         raise TonguevisError(f"--name {name!r} is not a file name")
