@@ -39,3 +39,7 @@ class SimulationError(TonguevisError):
 
 class Cancelled(Exception):
     """Raised inside long work when the user asked to cancel it."""
+
+
+class ExportError(TonguevisError):
+    """An export (video, VTK series, ParaView series) could not be written."""

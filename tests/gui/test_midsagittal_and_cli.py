@@ -127,7 +127,7 @@ def test_view_screenshot_of_unmapped_channels_is_a_one_line_error(tmp_path):
 def test_export_video_command(tmp_path):
     if not (DEMO.exists() and _default_model_available()):
         pytest.skip("needs the demo corpus and the shipped mesh")
-    from tonguevis.render.video import probe_streams
+    from tonguevis.render.mp4 import probe_streams
 
     out = tmp_path / "demo.mp4"
     result = _run("export-video", str(DEMO), "--out", str(out), "--start", "5.5", "--end", "5.9",

@@ -38,7 +38,7 @@ def test_paraview_export_holds_what_the_app_shows(tmp_path, surface_only):
 
 def test_nothing_to_export_before_the_simulation(tmp_path):
     from tonguevis.render.paraview import export_paraview
-    from tonguevis.render.video import ExportError
+    from tonguevis.errors import ExportError
 
     with pytest.raises(ExportError, match="not been simulated"):
         export_paraview(SimpleNamespace(motion=None, path=None), tmp_path / "x.xdmf")

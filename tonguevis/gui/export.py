@@ -5,7 +5,6 @@ returns the job it started (None when the user cancelled a dialog) for the windo
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from PySide6.QtCore import QPoint, Qt
@@ -41,11 +40,14 @@ def grab_window(window) -> QImage:
 
 
 def atomic_save_image(image: QImage, path) -> None:
-    path = Path(path)
-    tmp = path.with_name(f".{path.stem}.partial{path.suffix or '.png'}")
-    if not image.save(str(tmp), "PNG"):
-        raise OSError(f"could not write {path}")
-    os.replace(tmp, path)
+    """Save ``image`` as a PNG at ``path`` (a temporary file, then a rename)."""
+    from tonguevis._files import atomic_write
+
+    def write(tmp: Path) -> None:
+        if not image.save(str(tmp), "PNG"):
+            raise OSError(f"could not write {path}")
+
+    atomic_write(path, write)
 
 
 class RangeDialog(QDialog):

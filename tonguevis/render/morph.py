@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tonguevis._files import atomic_write
 from tonguevis.analysis.morph import Morph, play_schedule
 
 COLORMAP = "coolwarm"  # blue = low difference, red = high
@@ -82,13 +83,6 @@ def morph_bounds(morph: Morph, ts) -> tuple[np.ndarray, float]:
     return 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
 
 
-def _atomic(path: Path, write) -> None:
-    """``write(tmp)`` into a temporary file with the same suffix (ffmpeg and VTK pick formats by it), then rename."""
-    from tonguevis._files import atomic_write
-
-    atomic_write(path, lambda tmp: write(str(tmp)))
-
-
 def render_png(morph: Morph, path, steps=(0.0, 0.25, 0.5, 0.75, 1.0), view: str = "oblique",
                size=(1500, 460), title: str | None = None) -> Path:
     """A strip of snapshots at blend parameters ``steps`` (t = 0 source, 1 target) written as PNG."""
@@ -113,7 +107,7 @@ def render_png(morph: Morph, path, steps=(0.0, 0.25, 0.5, 0.75, 1.0), view: str 
         if title:
             plotter.subplot(0, 0)
             plotter.add_text(title, font_size=9, position=(10, 10))
-        _atomic(path, lambda tmp: plotter.screenshot(tmp))
+        atomic_write(path, lambda tmp: plotter.screenshot(str(tmp)))
     finally:
         plotter.close()
     return path
@@ -122,10 +116,10 @@ def render_png(morph: Morph, path, steps=(0.0, 0.25, 0.5, 0.75, 1.0), view: str 
 def render_mp4(morph: Morph, path, n_frames: int = 60, fps: int = 30, back: bool = True,
                size=(1280, 720), title: str | None = None, progress=None) -> Path:
     """Play the morph forward (and back) to an MP4: one oblique view and the top/front/lateral views."""
-    import imageio_ffmpeg
     import pyvista as pv
 
     from tonguevis._progress import report
+    from tonguevis.render.mp4 import write_mp4
 
     path = Path(path)
     ts = play_schedule(n_frames, back=back)
@@ -150,25 +144,17 @@ def render_mp4(morph: Morph, path, n_frames: int = 60, fps: int = 30, back: bool
         plotter.add_text(f"{morph.labels[0]} (t = 0)  →  {morph.labels[1]} (t = 1)"
                          + (f"\n{title}" if title else ""), font_size=8, position="upper_edge")
 
-        def write(tmp):
-            writer = imageio_ffmpeg.write_frames(tmp, size, fps=fps, macro_block_size=8, quality=7,
-                                                 output_params=["-f", "mp4"])
-            writer.send(None)
-            try:
-                for f, t in enumerate(ts):
-                    for mesh in shown:
-                        mesh.points[:] = rest + disp[f][point_ids]
-                    label.SetText(3, f"t = {t:.2f}")
-                    plotter.render()
-                    image = plotter.screenshot(return_img=True)
-                    if image.shape[1] != size[0] or image.shape[0] != size[1]:
-                        raise RuntimeError(f"rendered {image.shape[1]}x{image.shape[0]}, expected {size}")
-                    writer.send(np.ascontiguousarray(image[:, :, :3]))
-                    report(progress, f + 1, len(ts), "rendering the morph")
-            finally:
-                writer.close()
+        def pictures():
+            for f, t in enumerate(ts):
+                for mesh in shown:
+                    mesh.points[:] = rest + disp[f][point_ids]
+                label.SetText(3, f"t = {t:.2f}")
+                plotter.render()
+                yield plotter.screenshot(return_img=True)
+                report(progress, f + 1, len(ts), "rendering the morph")
 
-        _atomic(path, write)
+        # crf 15 with x264's default preset: the encoding imageio-ffmpeg's quality=7 made before.
+        write_mp4(path, pictures(), size, fps, crf=15, preset="medium")
     finally:
         plotter.close()
     return path

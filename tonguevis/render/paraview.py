@@ -24,7 +24,7 @@ def export_paraview(session, path, frame: str = "head", surface_only: bool = Fal
     and ``energy_density`` (J/m³, of the unwarped modal displacement, as the app shows it).
     """
     from tonguevis.render.frames import NodalEnergy
-    from tonguevis.render.video import ExportError
+    from tonguevis.errors import ExportError
     from tonguevis.sim.xdmf import export_nodes, write_xdmf
 
     motion = getattr(session, "motion", None)

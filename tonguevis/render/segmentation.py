@@ -115,12 +115,11 @@ def render_grid(results: Sequence[SegmentationResult], path: str | os.PathLike, 
 
 
 def _write(plotter, path: Path) -> Path:
-    tmp = path.with_name(f".{path.stem}.tmp.png")
+    """Save the plotter's picture as a PNG at ``path`` (a temporary file, then a rename) and close it."""
+    from tonguevis._files import atomic_write
+
     try:
-        plotter.screenshot(str(tmp))
-        os.replace(tmp, path)
+        atomic_write(path, lambda tmp: plotter.screenshot(str(tmp)))
     finally:
         plotter.close()
-        if tmp.exists():
-            tmp.unlink()
     return path

@@ -234,49 +234,13 @@ class Motion:
         """Write ``motion.pvd`` + one ``.vtu`` per frame (ParaView) and a README.txt; returns the .pvd path.
 
         frame : "head" (default: the tongue carried by the jaw's translation, the palate's
-        frame) or "jaw" (as simulated); see :mod:`tonguevis.sim.reference`.  Point data:
-        displacement (m, from rest in that frame) and its magnitude displacement_mm,
-        deformation (m, the tongue's own, jaw frame).  README.txt says which frame,
-        jaw_offset.csv gives the jaw's translation per frame.
+        frame) or "jaw" (as simulated).  Point data: displacement (m, from rest in that frame)
+        and its magnitude displacement_mm, deformation (m, the tongue's own, jaw frame); see
+        :func:`tonguevis.sim.vtk_series.write_vtk_series`.
         """
-        from pathlib import Path
-        from xml.sax.saxutils import quoteattr
+        from tonguevis.sim.vtk_series import write_vtk_series
 
-        import meshio
-
-        from tonguevis._files import atomic_write_text
-        from tonguevis._progress import report
-        from tonguevis.sim.reference import tongue_offset, write_export_notes
-
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        idx = np.arange(self.n_frames) if frames is None else np.arange(self.n_frames)[frames]
-        offset = tongue_offset(self, frame)
-        entries = []
-        mesh = self.model.mesh
-        for k, i in enumerate(idx):
-            deformation = self.displacement(int(i))
-            disp = deformation + offset[i]
-            name = f"frame_{int(i):05d}.vtu"
-            meshio.write(
-                folder / name,
-                meshio.Mesh(
-                    mesh.points + disp, [("tetra", mesh.tets)],
-                    point_data={"displacement": disp, "displacement_mm": 1e3 * np.linalg.norm(disp, axis=1),
-                                "deformation": deformation},
-                ),
-            )
-            entries.append(f'    <DataSet timestep="{self.times[i]:.6f}" file={quoteattr(name)}/>')
-            report(progress, k + 1, len(idx), "writing VTK")
-        pvd = folder / "motion.pvd"
-        text = (
-            '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
-            + "\n".join(entries)
-            + "\n  </Collection>\n</VTKFile>\n"
-        )
-        atomic_write_text(pvd, text)
-        write_export_notes(folder, self, frame)
-        return pvd
+        return write_vtk_series(self, folder, frames=frames, frame=frame, progress=progress)
 
 
 def _json_default(obj):

@@ -31,12 +31,12 @@ In ParaView: open NAME.xdmf (the XDMF3 reader), *Warp By Vector* with
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
+from tonguevis._files import atomic_write
 from tonguevis._progress import ProgressCallback, report
 
 #: Displacements are rounded to this many metres (a power of two, so the rounding is exact in
@@ -86,10 +86,9 @@ def write_xdmf(motion, path, surface_only: bool = False, stride: int = 1, frames
     offset = tongue_offset(motion, frame)
     note = f"{describe(frame, jaw_moves(motion))}; {_FIELD[frame]}"
     h5_name = h5_path.name
-    tmp_h5 = h5_path.with_name(f".{h5_path.name}.partial")
-    tmp_xdmf = path.with_name(f".{path.name}.partial")
     n = len(nodes)
-    try:
+
+    def write(tmp_h5: Path, tmp_xdmf: Path) -> None:
         # HDF5 1.10's file format (ParaView 5.5+, any h5py of the last years): a dataset of one
         # chunk is indexed without a B-tree, 2.7 KB less per frame (7.5 KB instead of 10.1).
         with h5py.File(tmp_h5, "w", libver=("v110", "v110")) as h5, \
@@ -129,15 +128,10 @@ def write_xdmf(motion, path, surface_only: bool = False, stride: int = 1, frames
                     step += 1
                 report(progress, step, len(idx), "writing the ParaView export")
             xml.write("    </Grid>\n  </Domain>\n</Xdmf>\n")
-        os.replace(tmp_h5, h5_path)
-        os.replace(tmp_xdmf, path)
-    except BaseException:
-        for tmp in (tmp_h5, tmp_xdmf):
-            try:
-                tmp.unlink()
-            except OSError:
-                pass
-        raise
+
+    # The HDF5 file is renamed into place first, then the XDMF that points to it: a reader never
+    # finds an .xdmf whose .h5 is missing or half written.
+    atomic_write(path, lambda tmp_xdmf: atomic_write(h5_path, lambda tmp_h5: write(tmp_h5, tmp_xdmf)))
     return path
 
 
