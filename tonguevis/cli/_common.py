@@ -146,6 +146,36 @@ def add_sensor_patches_argument(parser: argparse.ArgumentParser) -> None:
                              "recordings); the held-out sensors are predicted as without it")
 
 
+def add_frame_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--model-frame`` and ``--tongue-size``: in whose millimetres the tongue is simulated (tonguevis.sim.placement)."""
+    parser.add_argument("--model-frame", dest="frame", action="store_const", const="model", default="speaker",
+                        help="simulate in the generic tongue's frame and millimetres, the speaker scaled onto it "
+                             "(the paper's way); default: the model placed in the speaker, every figure in the "
+                             "speaker's millimetres")
+    parser.add_argument("--tongue-size", type=_tongue_size_arg, default=1.0, metavar="X|alignment",
+                        help="the speaker's tongue as a multiple of the model's (default 1, the generic adult "
+                             "tongue, turned and moved so the rest sensors lie on it); 'alignment': the size the "
+                             "rest sensors' fit onto the model's nodes implies (often far too large: the coils' "
+                             "layout, not the tongue)")
+
+
+def _tongue_size_arg(text: str):
+    if text == "alignment":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a multiple of the model's size or 'alignment', not {text!r}") from None
+    if not (0.3 <= value <= 3.0):
+        raise argparse.ArgumentTypeError(f"the tongue size must be between 0.3 and 3 times the model's, got {text}")
+    return value
+
+
+def frame_options(args) -> dict:
+    """``frame`` and ``tongue_size`` of :func:`tonguevis.sim.simulate` from ``--model-frame``/``--tongue-size``."""
+    return {"frame": getattr(args, "frame", "speaker"), "tongue_size": getattr(args, "tongue_size", 1.0)}
+
+
 def _patch_radius_arg(text: str):
     if text == "default":
         return "default"
@@ -232,7 +262,8 @@ def run_settings_of(args, modes: int | None = None):
         modes=getattr(args, "modes", defaults.modes) if modes is None else modes,
         warping=not getattr(args, "linear", False), landmarks=getattr(args, "landmarks", defaults.landmarks),
         sensor_stiffness=getattr(args, "sensor_stiffness", defaults.sensor_stiffness),
-        sensor_patches=sensor_patches_option(args), rest=rest_arg(args), palate=getattr(args, "palate", None))
+        sensor_patches=sensor_patches_option(args), rest=rest_arg(args), palate=getattr(args, "palate", None),
+        **frame_options(args))
 
 
 def load_model_args(args):

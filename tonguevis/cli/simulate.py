@@ -10,14 +10,15 @@ import numpy as np
 from tonguevis.sim.plausibility import plausibility_line
 
 from tonguevis.cli._common import (
-    add_model_arguments, add_recording_arguments, add_rest_argument, load_model_args, read_recording_args, rest_line,
-    simulate_args,
+    add_frame_arguments, add_model_arguments, add_recording_arguments, add_rest_argument, load_model_args,
+    read_recording_args, rest_line, simulate_args,
 )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_recording_arguments(parser)
     add_model_arguments(parser)
+    add_frame_arguments(parser)
     add_rest_argument(parser)
     parser.add_argument("--palate", metavar="PALATE",
                         help="keep the tongue below a palate and report penetration and contact: the speaker's "
@@ -64,9 +65,9 @@ def summary(motion) -> list[str]:
         f"{'modal warping' if motion.warping else 'linear'}; sensor nodes: {meta['landmarks']}",
         rest_line(motion),
         "driving sensors: " + ", ".join(f"{n}->node {int(k)}" for n, k in zip(motion.sensor_names, motion.sensor_nodes)),
-        f"alignment: scale {meta['alignment_scale']:.3f}, rest fit RMS {1e3 * meta['alignment_rms_m']:.2f} mm"
-        + (" (midsagittal)" if meta.get("midsagittal_alignment") else ""),
-        *([describe_fit(meta["fit"])] if "fit" in meta else []),
+        (describe_fit(meta["fit"]) if "fit" in meta else  # motions saved before the speaker frame
+         f"alignment: scale {meta['alignment_scale']:.3f}, rest fit RMS {1e3 * meta['alignment_rms_m']:.2f} mm")
+        + (" (midsagittal fit)" if meta.get("midsagittal_alignment") else ""),
         f"frames: {motion.n_frames} ({motion.times[-1] - motion.times[0]:.2f} s); "
         f"Newton iterations per frame: {meta['newton_iterations_mean']:.2f}; unconverged frames: {unconverged}",
         f"max sensor residual: {1e3 * res:.2e} mm ({_stiffness_text(meta)})",

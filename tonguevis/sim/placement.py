@@ -174,11 +174,12 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
                               recording.metadata.get("file"))
     prep = prepare_targets(recording, model, landmarks, rest, smooth_window)
     fit = prep.transform
-    how = "rule nodes"
+    how, rule_scale = "rule nodes", fit.scale
     if frame == "speaker" and tongue_size is not None:
         if not (np.isfinite(tongue_size) and tongue_size > 0):
             raise SimulationError(f"the tongue size must be a positive multiple of the model's or None, got "
                                   f"{tongue_size!r}", recording.metadata.get("file"))
+        rule_scale = fit.scale
         fit, _ = surface_fit(prep, model, 1.0 / tongue_size)
         how = "upper surface"
         placed = model.placed(fit.inverse(), keep_frequencies=keep_frequencies)
@@ -202,6 +203,7 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
     info = {
         "frame": frame, "fitted_to": how, "tongue_size": None if frame == "model" else 1.0 / fit.scale,
         "scale": fit.scale, "rotation": fit.rotation.tolist(), "translation_m": fit.translation.tolist(),
+        "rule_node_scale": rule_scale,  # what the rest sensors' fit onto the rule nodes says
         "matrix": fit.matrix.tolist(), "midsagittal": bool(prep.midsagittal),
         "residual_rms_mm": float(np.sqrt(np.mean(residual ** 2))), "residual_max_mm": float(residual.max()),
         "residual_by_sensor_mm": {n: float(r) for n, r in zip(prep.names, residual)},
@@ -215,7 +217,8 @@ def describe_fit(fit: dict) -> str:
     """One line on the frame of a motion and its fit, for summaries (``motion.metadata["fit"]``)."""
     scale = fit["scale"]
     residual = (f"{fit['residual_rms_mm']:.2f} mm RMS ({fit['residual_max_mm']:.2f} max) from "
-                + ("the model's nodes" if fit.get("fitted_to", "rule nodes") == "rule nodes" else "its upper surface"))
+                + ("the model's nodes" if fit.get("fitted_to", "rule nodes") == "rule nodes"
+                   else "their nodes on its upper surface"))
     if fit["frame"] == "speaker":
         size = (f"at {1 / scale:.2f} x its size ({fit['model_volume_cm3']:.0f} cm³)"
                 + (", the rest sensors fitted onto its upper surface" if fit.get("fitted_to") == "upper surface"

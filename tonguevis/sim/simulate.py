@@ -307,7 +307,7 @@ class _Run:
             "midsagittal_alignment": prep.midsagittal,
             "frame": self.fit["frame"],
             "fit": self.fit,
-            "alignment_scale": self.fit["scale"],  # the fit recording -> model, in either frame
+            "alignment_scale": self.fit["rule_node_scale"],  # the rest sensors onto the rule nodes, either frame
             "alignment_matrix": self.fit["matrix"],
             "alignment_rms_m": prep.alignment_rms,  # in the frame's metres
             "sensor_stiffness": stiffness,

@@ -38,6 +38,10 @@ class RunSettings:
     rest : (start_s, end_s) of the rest, None to find it.
     palate : None (no contact), "generic" or a palate file (``tonguevis palate``).
     backend : "warp" (compiled frame loop) or "numpy" (the reference).
+    frame : "speaker" (the model placed in the speaker: every figure in the speaker's mm) or "model"
+        (the speaker scaled onto the generic tongue, the paper's way); :mod:`tonguevis.sim.placement`.
+    tongue_size : in the speaker frame, the tongue as a multiple of the model's (1: the generic adult
+        tongue, fitted to the rest sensors), None: the size the rest alignment implies.
     """
 
     mesh: str | None = None
@@ -50,6 +54,8 @@ class RunSettings:
     rest: tuple[float, float] | None = None
     palate: str | None = None
     backend: str = "warp"
+    frame: str = "speaker"
+    tongue_size: float | None = 1.0
 
     def __post_init__(self) -> None:
         from tonguevis.sensor_stiffness import sensor_stiffness_value
@@ -64,6 +70,12 @@ class RunSettings:
         if int(self.modes) < 1:
             raise SimulationError(f"modes must be at least 1, got {self.modes}")
         object.__setattr__(self, "modes", int(self.modes))
+        from tonguevis.sim.placement import FRAMES
+
+        if self.frame not in FRAMES:
+            raise SimulationError(f"frame must be one of {', '.join(FRAMES)}, got {self.frame!r}")
+        if self.tongue_size is not None and not float(self.tongue_size) > 0:
+            raise SimulationError(f"the tongue size must be a positive multiple of the model's, got {self.tongue_size!r}")
         if self.landmarks not in LANDMARK_CHOICES:
             raise SimulationError(f"landmarks must be one of {', '.join(LANDMARK_CHOICES)}, got {self.landmarks!r}")
 
@@ -75,7 +87,8 @@ class RunSettings:
         """Keyword arguments of :func:`tonguevis.sim.simulate` (the model and the palate aside: see
         :func:`build_model` and :meth:`palate_surface`)."""
         return dict(modes=self.modes, warping=self.warping, landmarks=self.landmarks, rest_interval=self.rest,
-                    sensor_stiffness=self.sensor_stiffness, sensor_patches=self.sensor_patches, backend=self.backend)
+                    sensor_stiffness=self.sensor_stiffness, sensor_patches=self.sensor_patches, backend=self.backend,
+                    frame=self.frame, tongue_size=self.tongue_size)
 
     def palate_surface(self):
         """The :class:`~tonguevis.palate.PalateSurface` of ``palate`` (None: no contact)."""
