@@ -72,9 +72,13 @@ def speaker_palate(surface, label: str, simulated: bool = True, raised_mm: float
                        float(raised_mm), bool(surface.metadata.get("generic", False)))
 
 
-def generic_shown(simulated: bool = False) -> ShownPalate | None:
-    """The shipped generic palate (model frame): its own mesh drawn, its height field measured; None if absent."""
+def generic_shown(simulated: bool = False, model=None) -> ShownPalate | None:
+    """The shipped generic palate: its own mesh drawn, its height field measured; None if absent.
+
+    In the model frame, or placed with ``model`` when that is the model placed in a speaker
+    (:mod:`tonguevis.sim.placement`): the generic palate belongs to the generic tongue."""
     from tonguevis.palate import generic_palate
+    from tonguevis.sim.placement import in_model_frame, model_placement
 
     from tonguevis.mesh.default import context_surface_path
     from tonguevis.mesh.surfaces import read_surface
@@ -85,6 +89,9 @@ def generic_shown(simulated: bool = False) -> ShownPalate | None:
     except Exception as exc:  # context is optional: never block the app on it
         logger.warning("generic palate not shown: %s", exc)
         return None
+    placement = model_placement(model)
+    if placement is not None:
+        surface, points = in_model_frame(surface, model), placement.apply(points)
     return ShownPalate(surface, np.asarray(points, dtype=np.float32), np.asarray(faces), "generic palate",
                        simulated, 0.0, True)
 

@@ -574,14 +574,18 @@ def _contact_lut(clim: tuple[float, float]) -> "pv.LookupTable":
 
 
 # -- what the four views show for a simulated session (the app's views and the video alike) -----------
-def context_surfaces(palate=None) -> dict:
+def context_surfaces(palate=None, model=None) -> dict:
     """Jaw and palate surfaces shipped in meshes/ (empty if absent or unreadable); ``palate``
-    (a :class:`~tonguevis.render.drawing.ShownPalate`) replaces the shipped palate."""
+    (a :class:`~tonguevis.render.drawing.ShownPalate`) replaces the shipped palate.  They belong to
+    the shipped tongue's frame: placed with ``model`` when it is placed in a speaker
+    (:mod:`tonguevis.sim.placement`)."""
     import logging
 
     from tonguevis.paths import MESH_DIR
+    from tonguevis.sim.placement import model_placement
 
     log = logging.getLogger("tonguevis")
+    placement = model_placement(model)
     out = {}
     try:
         from tonguevis.mesh import read_surface
@@ -594,6 +598,8 @@ def context_surfaces(palate=None) -> dict:
             except Exception as exc:  # context is optional: never block the app on it
                 log.warning("context surface %s not shown: %s", path, exc)
                 continue
+            if placement is not None:
+                points = placement.apply(points)
             out[name] = pv.PolyData(np.asarray(points, dtype=np.float32), faces_to_vtk(faces))
             break
     if palate is not None and not palate.generic:
@@ -637,7 +643,7 @@ def scene_setup(session) -> dict:
     if palate is not None:
         clim["contact"] = CONTACT_RANGE_MM
     style = {} if palate is None or palate.generic else {"palate": SPEAKER_PALATE_STYLE}
-    return dict(n_sensors=len(frames.motion.sensor_names), context=context_surfaces(palate), clim=clim,
+    return dict(n_sensors=len(frames.motion.sensor_names), context=context_surfaces(palate, frames.motion.model), clim=clim,
                 titles=scene_titles(), context_style=style)
 
 

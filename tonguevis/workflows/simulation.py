@@ -154,24 +154,27 @@ def simulate_session(session: Session, settings: RunSettings | None = None, mode
 def shown_palate(recording, motion, model, palate):
     """The palate the views draw for ``motion`` (:class:`tonguevis.render.drawing.ShownPalate`), or None.
 
-    ``palate`` as given to the simulation: placed in the model frame by the same core
+    ``palate`` as given to the simulation: placed in the motion's frame by the same core
     function the simulation used (:func:`tonguevis.sim.simulate.placed_palate`, with the
-    motion's landmarks and rest); None: the generic palate, drawn and measured only.
+    motion's landmarks, rest, frame and tongue size); None: the generic palate (placed with
+    the motion's model), drawn and measured only.
     """
     from tonguevis.render.drawing import generic_shown, palate_label, speaker_palate
 
     if palate is None:
-        return generic_shown(simulated=False)
+        return generic_shown(simulated=False, model=motion.model)
     from tonguevis.palate import load_palate
     from tonguevis.sim.simulate import placed_palate
     from tonguevis.workflows import rest_of
 
     surface = load_palate(palate)
     if surface.metadata.get("generic"):
-        return generic_shown(simulated=True)
+        return generic_shown(simulated=True, model=motion.model)
     if getattr(motion, "palate", None) is not None:  # as the simulation placed it: no second preparation
         placed, raised = motion.palate, 1e-3 * motion.metadata.get("contact", {}).get("palate_raised_mm", 0.0)
     else:  # a motion loaded from a file
+        fit = motion.metadata.get("fit", {})  # none: saved before the speaker frame, in the model's
         placed, raised = placed_palate(recording, surface, model, landmarks=motion.metadata.get("landmarks", "speaker"),
-                                       rest_interval=rest_of(motion))
+                                       rest_interval=rest_of(motion), frame=fit.get("frame", "model"),
+                                       tongue_size=fit.get("tongue_size"))
     return speaker_palate(placed, palate_label(surface), simulated=True, raised_mm=1e3 * raised)
