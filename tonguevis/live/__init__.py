@@ -7,4 +7,6 @@ The stream (no Qt here, see :mod:`tonguevis.gui` for the live view):
   WaveFront client (reconnecting) and a recording played in-process.
 * :mod:`tonguevis.live.server` — a replay server speaking the protocol from any recording.
 * :mod:`tonguevis.live.recorder` — a stream written as an NDI Wave TSV as it arrives.
+* :mod:`tonguevis.live.simulator` — the tongue simulated frame by frame from the stream (the
+  replay's model and constraints; the rest from a still moment).
 """
