@@ -143,6 +143,35 @@ def test_a_hostile_peer_cannot_make_it_allocate_or_crash():
         listener.close()
 
 
+def test_a_device_that_sends_other_components_and_no_replies():
+    """Frames with an analog component before the 6D one are used (the analog skipped, said once); a device
+    that answers no command still streams."""
+    listener = socket.create_server(("127.0.0.1", 0))
+    port = listener.getsockname()[1]
+
+    def device():
+        conn, _ = listener.accept()
+        for k in range(1, 6):
+            analog = struct.pack(">IIIQI", 28, 2, k, 0, 1) + b"\0" * 4
+            sixd = struct.pack(">IIIQI", 56, 4, k, 1000 * k, 1) + struct.pack(">8f", 1, 0, 0, 0, k, 2, 3, 0.5)
+            payload = struct.pack(">I", 2) + analog + sixd
+            conn.sendall(struct.pack(">II", 8 + len(payload), 3) + payload)
+        time.sleep(1.0)
+        conn.close()
+
+    thread = threading.Thread(target=device, daemon=True)
+    thread.start()
+    events = []
+    source = WaveFrontSource("127.0.0.1", port, command_timeout=0.1, on_event=events.append).start()
+    frames = collect(source, 5)
+    source.close()
+    listener.close()
+    assert [f.frame for f in frames] == [1, 2, 3, 4, 5]
+    np.testing.assert_array_equal([f.positions[0, 0] for f in frames], [1, 2, 3, 4, 5])
+    assert frames[2].timestamp_s == 0.003
+    assert sum("types [2]" in e for e in events) == 1
+
+
 def test_nothing_listening_gives_up_after_the_bounded_tries():
     sock = socket.create_server(("127.0.0.1", 0))
     port = sock.getsockname()[1]

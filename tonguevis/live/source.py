@@ -316,6 +316,7 @@ class WaveFrontSource(ThreadedSource):
         self.connect_timeout = float(connect_timeout)
         self.parameters_xml: str | None = None
         self._reader = PacketReader(byte_order)
+        self._got = self._warned = False
 
     def __repr__(self) -> str:
         return f"WaveFrontSource({self.host!r}, {self.port})"
@@ -325,7 +326,7 @@ class WaveFrontSource(ThreadedSource):
         first = True
         while not self._stop.is_set():
             self._set_state("connecting" if first else "reconnecting")
-            got_frames = False
+            self._got = self._warned = False  # per connection
             sock = None
             try:
                 sock = socket.create_connection((self.host, self.port), timeout=self.connect_timeout)
@@ -334,19 +335,18 @@ class WaveFrontSource(ThreadedSource):
                 self._reader = PacketReader(BIG)  # the protocol's default until SetByteOrder
                 self._handshake(sock)
                 self._set_state("streaming")
-                got_frames = self._stream(sock)
+                self._stream(sock)
                 if self._stop.is_set():
                     self._goodbye(sock)
                     break
             except (OSError, LiveProtocolError, _Stalled, _Closed) as exc:
-                got_frames = got_frames or getattr(exc, "got_frames", False)
                 self._event(self._describe(exc), error=True)
             finally:
                 if sock is not None:
                     sock.close()
             if self._stop.is_set():
                 break
-            failures = 0 if got_frames else failures + 1
+            failures = 0 if self._got else failures + 1
             if failures > self.max_retries:
                 self._event(f"gave up after {self.max_retries} failed reconnection attempts", error=True)
                 self._set_state("failed")
@@ -393,21 +393,43 @@ class WaveFrontSource(ThreadedSource):
             return data, arrival
 
     def _reply(self, sock: socket.socket, command: str, send: bool = True):
-        """The next non-data packet after sending ``command`` (None if none came in time)."""
+        """The next non-data packet after sending ``command`` (None if none came in time).
+
+        Frames that come meanwhile (a device already streaming) are delivered, not lost.
+        """
         if send:
             self._send(sock, command)
         deadline = time.perf_counter() + self.command_timeout
         while not self._stop.is_set():
             try:
-                data, _ = self._recv(sock, deadline)
+                data, arrival = self._recv(sock, deadline)
             except _Stalled:
                 self._event(f"no reply to {command!r} within {self.command_timeout:g} s")
                 return None
-            for packet in self._reader.feed(data):
-                if packet.type in (PacketType.DATA, PacketType.NODATA):
-                    continue
-                return packet
+            packets = self._reader.feed(data)
+            for k, packet in enumerate(packets):
+                if packet.type == PacketType.DATA:
+                    self._data(packet, arrival)
+                elif packet.type != PacketType.NODATA:
+                    for later in packets[k + 1:]:  # frames right behind the reply
+                        if later.type == PacketType.DATA:
+                            self._data(later, arrival)
+                    return packet
         return None
+
+    def _data(self, packet, arrival: float) -> bool:
+        """Decode and deliver a data packet; whether it held a frame."""
+        decoded = decode_data(packet.payload, self._reader.byte_order)
+        if decoded.skipped and not self._warned:
+            # Said once per connection: WaveFront is said to send one 6D component only.
+            self._warned = True
+            self._event(f"frames hold components this source does not use (types "
+                        f"{sorted(set(decoded.skipped))}; 4 = a further 6D one): skipped")
+        if decoded.sixd is None:
+            return False
+        self._deliver(_frame_from_6d(decoded.sixd, arrival))
+        self._got = True
+        return True
 
     def _handshake(self, sock: socket.socket) -> None:
         if self.byte_order != BIG:
@@ -436,26 +458,17 @@ class WaveFrontSource(ThreadedSource):
             self._event(f"the device speaks {'little' if self._reader.detected == '<' else 'big'}-endian")
         self._send(sock, "StreamFrames AllFrames")
 
-    def _stream(self, sock: socket.socket) -> bool:
-        got = False
+    def _stream(self, sock: socket.socket) -> None:
+        """Read and deliver frames until close() (returns) or a stall, a drop or a bad packet (raises)."""
         while not self._stop.is_set():
-            try:
-                data, arrival = self._recv(sock, time.perf_counter() + self.stall_timeout)
-                if not data:  # close() asked us to stop
-                    break
-                packets = self._reader.feed(data)
-                for packet in packets:
-                    if packet.type == PacketType.DATA:
-                        decoded = decode_data(packet.payload, self._reader.byte_order)
-                        if decoded.sixd is not None:
-                            self._deliver(_frame_from_6d(decoded.sixd, arrival))
-                            got = True
-                    elif packet.type == PacketType.ERROR:
-                        self._event(f"device error: {packet.text}", error=True)
-            except (OSError, LiveProtocolError, _Stalled, _Closed) as exc:
-                exc.got_frames = got
-                raise
-        return got
+            data, arrival = self._recv(sock, time.perf_counter() + self.stall_timeout)
+            if not data:  # close() asked us to stop
+                break
+            for packet in self._reader.feed(data):
+                if packet.type == PacketType.DATA:
+                    self._data(packet, arrival)
+                elif packet.type == PacketType.ERROR:
+                    self._event(f"device error: {packet.text}", error=True)
 
     def _goodbye(self, sock: socket.socket) -> None:
         try:
