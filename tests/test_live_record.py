@@ -175,7 +175,7 @@ def run_cli(argv, timeout=20.0):
 def test_record_cli_end_to_end(demo, tmp_path, capsys):
     with ReplayServer(demo, speed=5.0) as server:
         status = run_cli(["record", "--source", f"127.0.0.1:{server.port}", "--out", str(tmp_path / "out"),
-                          "--seconds", "0.5", "--name", "first"])
+                          "--seconds", "0.5", "--name", "first", "--capture"])
     assert status == 0
     text = capsys.readouterr().out
     assert re.search(r"done: \d+ frames \(0\.\d s\) in .*first\.tsv", text), text
@@ -183,6 +183,12 @@ def test_record_cli_end_to_end(demo, tmp_path, capsys):
     rec = open_recording(tmp_path / "out" / "first.tsv")
     assert rec.sensor_names == demo.sensor_names and rec.n_samples > 50
     assert_equals_stream(rec, demo)
+    # The raw bytes kept beside it hold the same frames.
+    from tonguevis.live.rtc3d import read_capture
+
+    _, frames = read_capture((tmp_path / "out" / "first.rtc3d").read_bytes())
+    assert [f.frame for f in frames[:rec.n_samples]] == rec.metadata["meas_id"].astype(int).tolist()
+    assert "raw bytes received:" in text
     # Another command opens it.
     assert main(["info", str(tmp_path / "out" / "first_headcorrected.tsv")]) == 0
     assert "sensors (8)" in capsys.readouterr().out

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from tonguevis.errors import TonguevisError
 from tonguevis.live.rtc3d import (
     BIG, LITTLE, MAX_PACKET_SIZE, MAX_SENSORS, LiveProtocolError, PacketReader, PacketType, decode_data,
-    encode_6d_frame, encode_command,
+    encode_6d_frame, encode_command, read_capture,
 )
 
 # LIVE.md's worked example, big-endian.
@@ -210,3 +210,16 @@ def test_round_trip_any_frame_any_split(sensors, o, frame, stamp, cuts):
     decoded = decode_data(out[1].payload, o).sixd
     assert decoded.frame == frame and decoded.timestamp_us == stamp
     np.testing.assert_array_equal(decoded.positions, positions.astype(np.float32))
+
+
+def test_read_capture_follows_a_byte_order_switch_and_leaves_a_cut_packet_out():
+    big, little = BIG, LITTLE
+    data = (packet(big, 1, b"Version 1.0") + packet(little, 1, b"Byte order set to LittleEndian")
+            + data_packet(little, [sixd(little, 5, 50, [item(little, xyz=(1, 2, 3))])])
+            + data_packet(little, [sixd(little, 6, 60, [item(little, xyz=(4, 5, 6))])])[:30])
+    packets, frames = read_capture(data)
+    assert [p.text for p in packets[:2]] == ["Version 1.0", "Byte order set to LittleEndian"]
+    assert len(packets) == 3 and [f.frame for f in frames] == [5]
+    np.testing.assert_array_equal(frames[0].positions, [[1, 2, 3]])
+    with pytest.raises(LiveProtocolError, match="exceeds the maximum"):
+        read_capture(struct.pack(">II", MAX_PACKET_SIZE + 1, 3) + struct.pack("<II", MAX_PACKET_SIZE + 1, 3))

@@ -87,6 +87,25 @@ def test_reconnects_after_a_disconnect_in_the_middle_of_a_packet(demo):
                                   expected_positions(demo, [f.frame for f in frames]))
 
 
+def test_capture_keeps_the_raw_bytes_of_each_connection(demo, tmp_path):
+    from tonguevis.live.rtc3d import PacketType, read_capture
+
+    with ReplayServer(demo, speed=10.0, faults=Faults(cut_after=10)) as server:
+        source = WaveFrontSource("127.0.0.1", server.port, backoff=0.05, byte_order=LITTLE,
+                                 capture=tmp_path / "raw.rtc3d").start()
+        frames = collect(source, 25)
+        source.close()
+    assert source.captured == [tmp_path / "raw.rtc3d", tmp_path / "raw_2.rtc3d"]
+    first, second = (read_capture(p.read_bytes()) for p in source.captured)
+    # The first connection: the replies (the first in the new order), 10 frames, and half a packet left out.
+    assert [p.type for p in first[0][:3]] == [PacketType.COMMAND, PacketType.COMMAND, PacketType.XML]
+    assert [f.frame for f in first[1]] == [f.frame for f in frames[:10]]
+    assert (tmp_path / "raw.rtc3d").stat().st_size > sum(p.size for p in first[0])
+    captured = first[1] + second[1]
+    assert [f.frame for f in captured[:25]] == [f.frame for f in frames]
+    np.testing.assert_array_equal(np.stack([f.positions for f in captured[:25]]), np.stack([f.positions for f in frames]))
+
+
 def test_reconnects_after_a_stall(demo):
     with ReplayServer(demo, speed=10.0, faults=Faults(stall_after=10, stall_seconds=5.0)) as server:
         source = WaveFrontSource("127.0.0.1", server.port, stall_timeout=0.3, backoff=0.05).start()

@@ -36,6 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sensors", metavar="MAP",
                         help="names of the slots: a preset or a JSON file of name -> NDI Id (default: the names "
                              "the device sends, if any); three REF* names give the head-corrected file")
+    parser.add_argument("--capture", action="store_true",
+                        help="also keep every byte the device sent, raw, in NAME.rtc3d (golden files of a real "
+                             "device for tests; tonguevis.live.rtc3d.read_capture reads them)")
     parser.add_argument("--stall", type=float, default=2.0, metavar="S",
                         help="seconds without data before the connection is reopened (default 2)")
     parser.add_argument("--retries", type=int, default=5, metavar="N",
@@ -55,7 +58,9 @@ def run(args) -> int:
         raise TonguevisError(f"--name {name!r} is not a file name")
     path = free_path(args.out, name)
     say = lambda text: print(text, flush=True)  # noqa: E731
-    source = WaveFrontSource(host, port, stall_timeout=args.stall, max_retries=args.retries, on_event=say)
+    capture = path.with_suffix(".rtc3d") if args.capture else None
+    source = WaveFrontSource(host, port, stall_timeout=args.stall, max_retries=args.retries, on_event=say,
+                             capture=capture)
     say(f"recording {host}:{port} into {path}" + (f" for {args.seconds:g} s" if args.seconds else "")
         + "; Ctrl-C stops and keeps the file")
     source.start()
@@ -72,4 +77,6 @@ def run(args) -> int:
         + (f"; {st.reconnects} reconnection(s)" if st.reconnects else ""))
     for note in result.notes:
         say(note)
+    if source.captured:
+        say(f"raw bytes received: {', '.join(str(p) for p in source.captured)}")
     return 0

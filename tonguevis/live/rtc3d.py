@@ -289,3 +289,39 @@ class PacketReader:
             packets.append(Packet(int(ptype), bytes(self._buffer[HEADER_SIZE:size])))
             del self._buffer[:size]
         return packets
+
+
+def read_capture(data: bytes, byte_order: str = BIG) -> tuple[list[Packet], list[Frame6D]]:
+    """(every packet, the 6D frames) of the raw bytes a client received (a capture file's content).
+
+    A header impossible in the current byte order but plausible in the other switches the
+    order from that packet on (the reply to SetByteOrder may come in either); a cut last
+    packet is left out; a size beyond :data:`MAX_PACKET_SIZE` raises :class:`LiveProtocolError`.
+    """
+    reader = PacketReader(byte_order, detect=False)
+    packets, frames = [], []
+    view = memoryview(data)
+    pos = 0
+    while len(view) - pos >= HEADER_SIZE:
+        header = bytes(view[pos:pos + HEADER_SIZE])
+        other = LITTLE if reader.byte_order == BIG else BIG
+        if not _plausible_header(header, reader.byte_order) and _plausible_header(header, other):
+            reader.byte_order = other
+        got = reader.feed(header)  # the size is checked before the payload is looked at
+        (size,) = struct.unpack_from(f"{reader.byte_order}I", header)
+        if pos + size > len(view):
+            break
+        got = got or reader.feed(bytes(view[pos + HEADER_SIZE:pos + size]))
+        pos += size
+        packet = got[0]
+        packets.append(packet)
+        if packet.type == PacketType.DATA:
+            sixd = decode_data(packet.payload, reader.byte_order).sixd
+            if sixd is not None:
+                frames.append(sixd)
+    return packets, frames
+
+
+def _plausible_header(header: bytes, order: str) -> bool:
+    size, ptype = struct.unpack(f"{order}II", header)
+    return HEADER_SIZE <= size <= MAX_PACKET_SIZE and ptype <= max(PacketType)

@@ -38,6 +38,7 @@ from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -295,6 +296,9 @@ class WaveFrontSource(ThreadedSource):
     backoff : first wait before reconnecting (s), doubled each failure up to ``max_backoff``.
     byte_order : ``">"`` (the protocol's default) or ``"<"``: asks with SetByteOrder when not big-endian.
     command_timeout : seconds to wait for a reply during the handshake.
+    capture : a file path: every byte received is also written there, raw and flushed (the golden
+        files a first session on real hardware gives; read them back with
+        :func:`tonguevis.live.rtc3d.read_capture`).  Connection n > 1 goes to ``STEM_n.SUFFIX``.
 
     The handshake: ``Version 1.0``, ``SendParameters All`` (slot names when the reply
     lists them, see :func:`parse_parameters`), ``StreamFrames AllFrames``.  On
@@ -304,7 +308,7 @@ class WaveFrontSource(ThreadedSource):
 
     def __init__(self, host: str, port: int = DEFAULT_PORT, *, stall_timeout: float = 2.0, max_retries: int = 5,
                  backoff: float = 0.2, max_backoff: float = 5.0, byte_order: str = BIG, command_timeout: float = 2.0,
-                 connect_timeout: float = 3.0, queue_size: int | None = QUEUE_FRAMES,
+                 connect_timeout: float = 3.0, queue_size: int | None = QUEUE_FRAMES, capture=None,
                  on_event: Callable[[str], None] | None = None):
         super().__init__(queue_size=queue_size, on_event=on_event)
         self.host, self.port = host, int(port)
@@ -315,6 +319,9 @@ class WaveFrontSource(ThreadedSource):
         self.command_timeout = float(command_timeout)
         self.connect_timeout = float(connect_timeout)
         self.parameters_xml: str | None = None
+        self.capture = None if capture is None else Path(capture)
+        self.captured: list[Path] = []
+        self._capture_file = None
         self._reader = PacketReader(byte_order)
         self._got = self._warned = False
 
@@ -333,6 +340,7 @@ class WaveFrontSource(ThreadedSource):
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                 self._event(f"connected to {self.host}:{self.port}")
                 self._reader = PacketReader(BIG)  # the protocol's default until SetByteOrder
+                self._open_capture()
                 self._handshake(sock)
                 self._set_state("streaming")
                 self._stream(sock)
@@ -344,6 +352,9 @@ class WaveFrontSource(ThreadedSource):
             finally:
                 if sock is not None:
                     sock.close()
+                if self._capture_file is not None:
+                    self._capture_file.close()
+                    self._capture_file = None
             if self._stop.is_set():
                 break
             failures = 0 if self._got else failures + 1
@@ -359,6 +370,15 @@ class WaveFrontSource(ThreadedSource):
             if self._stop.wait(wait):
                 break
         self._set_state("finished")
+
+    def _open_capture(self) -> None:
+        if self.capture is None:
+            return
+        n = len(self.captured) + 1
+        path = self.capture if n == 1 else self.capture.with_name(f"{self.capture.stem}_{n}{self.capture.suffix}")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self._capture_file = open(path, "wb")
+        self.captured.append(path)
 
     def _describe(self, exc: Exception) -> str:
         where = f"{self.host}:{self.port}"
@@ -386,6 +406,9 @@ class WaveFrontSource(ThreadedSource):
                     raise _Stalled() from None
                 continue
             arrival = time.perf_counter()
+            if self._capture_file is not None and data:
+                self._capture_file.write(data)
+                self._capture_file.flush()
             if not data:
                 pending = self._reader.pending
                 what = f" in the middle of a packet ({self._reader.pending_description()})" if pending else ""
