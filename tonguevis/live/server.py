@@ -219,7 +219,7 @@ class ReplayServer:
             thread = threading.Thread(target=self._serve, args=(sock, number), name=f"ReplayClient{number}",
                                       daemon=True)
             thread.start()
-            self._threads.append(thread)
+            self._threads = [t for t in self._threads if t.is_alive()] + [thread]  # a long --loop sees many clients
 
     def _serve(self, sock: socket.socket, number: int) -> None:
         try:
@@ -288,7 +288,8 @@ class _Client:
         if verb == "version":
             self.reply(f"Version {arg or '1.0'}")
         elif verb == "sendparameters":
-            self.send(encode_packet(PacketType.XML, server.parameters_xml().encode("ascii"), self.order))
+            xml = server.parameters_xml().encode("ascii", "xmlcharrefreplace")  # a name such as "Zungenrücken"
+            self.send(encode_packet(PacketType.XML, xml, self.order))
         elif verb == "setbyteorder":
             if arg.lower() in ("littleendian", "bigendian"):
                 self.order = LITTLE if arg.lower() == "littleendian" else BIG
