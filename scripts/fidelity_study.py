@@ -167,6 +167,9 @@ def full_row(name, label, model, recording, kwargs, note):
     from tonguevis.sim import simulate
 
     t0 = time.perf_counter()
+    # The model frame, as the probes' prepare_targets rows (the library's default is the speaker's since
+    # tonguevis.sim.placement): the study's figures stay comparable with each other and its history.
+    kwargs = {"frame": "model", **kwargs}
     result = validate(recording, model, quasi_static=False, **kwargs)
     row_s = time.perf_counter() - t0
     t0 = time.perf_counter()

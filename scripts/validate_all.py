@@ -78,8 +78,10 @@ def run_one(path: Path, sensor_map, model, modes: int, landmarks: str, json_dir:
 
     rec = open_recording(path, sensor_map)
     t0 = time.perf_counter()
+    # The report is in the model frame (its text says so, and its history is): frame="model" since the
+    # library's default became the speaker's (tonguevis.sim.placement).
     result = validate(rec, model, modes=modes, landmarks=landmarks, sensor_stiffness=sensor_stiffness,
-                      quasi_static=quasi_static)
+                      quasi_static=quasi_static, frame="model")
     doc = result.as_dict()
     doc["recording"]["file"] = path.name  # no local paths in the report
     doc["elapsed_s"] = time.perf_counter() - t0
