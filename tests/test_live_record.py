@@ -145,6 +145,8 @@ def test_frames_with_another_slot_count_are_fitted_and_counted(tmp_path):
 def test_a_repeated_or_older_frame_is_not_written(tmp_path):
     """Readers need increasing times: a frame repeated after a reconnection is counted, not written."""
     recorder = TsvRecorder(tmp_path / "t.tsv")
+    empty = LiveFrame(0, 0.0, 0.0, np.zeros((0, 3)), np.zeros((0, 4)), np.zeros(0))
+    assert recorder.write(empty) is False and recorder.empty == 1  # no sensors yet: no row, no header
     written = [recorder.write(LiveFrame(k, t, 0.0, np.full((1, 3), float(k)), np.full((1, 4), 0.5), np.zeros(1)))
                for k, t in enumerate([0.0, 0.01, 0.01, 0.005, 0.02], start=1)]
     recorder.close()

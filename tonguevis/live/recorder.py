@@ -67,6 +67,8 @@ class TsvRecorder:
         #: frame after a reconnection, or a device whose clock went back): readers need increasing times.
         self.out_of_order = 0
         self._last_time = -np.inf
+        #: Frames without any sensor slot, not written.
+        self.empty = 0
         self._file = None
         self._n_slots: int | None = None
         self._last_sync = 0.0
@@ -92,6 +94,9 @@ class TsvRecorder:
     def write(self, frame: LiveFrame) -> bool:
         """Write one frame's row and flush it to the operating system; False (not written) when its
         time stamp does not come after the last row's (see :attr:`out_of_order`)."""
+        if frame.n_sensors == 0:  # nothing measured (no sensor plugged in yet): no row, no header fixed by it
+            self.empty += 1
+            return False
         stamp = f"{frame.timestamp_s:.6f}"
         if not float(stamp) > self._last_time:
             self.out_of_order += 1
