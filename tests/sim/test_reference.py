@@ -44,8 +44,8 @@ def test_frame_names_are_checked_and_described():
         check_reference("skull")
     assert describe("head").startswith("head frame") and "palate fixed" in describe("head")
     assert describe("jaw").startswith("jaw frame") and "removed" in describe("jaw")
-    note = export_note("head", True, suffix="_m")
-    assert note.startswith("Frame of reference: head frame") and "deformation_m" in note and "jaw_offset.csv" in note
+    note = export_note("head", True)
+    assert note.startswith("Frame of reference: head frame") and "\ndeformation = " in note and "jaw_offset.csv" in note
 
 
 def test_the_views_palate_is_the_one_simulate_used(model, monkeypatch):  # noqa: F811

@@ -53,8 +53,8 @@ def describe(frame: str, moves: bool = True) -> str:
     return "jaw frame: the jaw's motion removed (the palate moves)"
 
 
-def export_note(frame: str, moves: bool, suffix: str = "") -> str:
-    """What an export folder's README says about the frame its points are in (``suffix``: of the field names)."""
+def export_note(frame: str, moves: bool) -> str:
+    """What a VTK series folder's README says about the frame its points are in and their point data."""
     check_reference(frame)
     lines = [f"Frame of reference: {describe(frame, moves)}.", ""]
     if not moves:
@@ -63,25 +63,25 @@ def export_note(frame: str, moves: bool, suffix: str = "") -> str:
     elif frame == "head":
         lines += ["The points are the tongue in the head frame: the simulated shape (jaw frame) plus the jaw's",
                   "translation from rest (jaw_offset.csv, per frame). Point data:",
-                  f"displacement{suffix} = head-frame position minus rest position (metres);",
-                  f"deformation{suffix} = the tongue's own deformation (jaw frame), what the elastic energy measures.",
+                  "displacement = head-frame position minus rest position (metres);",
+                  "deformation = the tongue's own deformation (jaw frame), what the elastic energy measures.",
                   "Export with --frame jaw (or in the app's jaw frame) for the points without the jaw's motion."]
     else:
         lines += ["The points are the tongue in the jaw frame (the jaw's translation removed), where it is",
-                  f"simulated: displacement{suffix} = deformation{suffix} = the tongue's own deformation (metres).",
+                  "simulated: displacement = deformation = the tongue's own deformation (metres).",
                   "Add the jaw's translation (jaw_offset.csv, per frame) to place it in the head frame."]
     lines += ["", "Units: metres, seconds; axes x anterior, y left, z up (the model frame)."]
     return "\n".join(lines) + "\n"
 
 
-def write_export_notes(folder, motion, frame: str, suffix: str = "") -> None:
+def write_export_notes(folder, motion, frame: str) -> None:
     """README.txt (which frame, which fields) and jaw_offset.csv (time_s, x_m, y_m, z_m per frame) in ``folder``."""
     from pathlib import Path
 
     from tonguevis._files import atomic_write_text
 
     folder = Path(folder)
-    atomic_write_text(folder / "README.txt", export_note(frame, jaw_moves(motion), suffix))
+    atomic_write_text(folder / "README.txt", export_note(frame, jaw_moves(motion)))
     times = np.asarray(motion.times, dtype=np.float64)
     jaw = np.zeros((len(times), 3)) if motion.jaw_offset is None else np.asarray(motion.jaw_offset, dtype=np.float64)
     rows = "".join(f"{t:.6f},{x:.9g},{y:.9g},{z:.9g}\n" for t, (x, y, z) in zip(times, jaw))
