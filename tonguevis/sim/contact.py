@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tonguevis._backend import check_backend
+
 MARGIN = 1e-4  # m: clearance the solve keeps, so that warping's small rotations do not cross the palate
 CONFLICT_RADIUS = 10e-3  # m: nodes this close to a sensor above the palate are left to that sensor
 MAX_PASSES = 8
@@ -33,7 +35,7 @@ BAND = 2e-3  # m: candidates this close to the margin join each pass's linearisa
 
 
 def solve_contact(eigenvalues, phi_nodes, phi_s, targets, compliance, points, sensor_nodes, candidates, palate,
-                  jaw_offset, margin: float = MARGIN):
+                  jaw_offset, margin: float = MARGIN, backend: str = "warp"):
     """Contact-aware static solution per frame.
 
     eigenvalues : (m,); phi_nodes : (k, 3, m) rows of Φ at the candidate nodes;
@@ -46,6 +48,10 @@ def solve_contact(eigenvalues, phi_nodes, phi_s, targets, compliance, points, se
     the sensors not acting too: where the others put them),
     "external": (F, m) contact forces in modal space, "active": (F,) contact
     constraints per frame, "conflicts": [(frame, sensor index)]}.
+    backend : "warp" (default) queries the clearances of every frame in one compiled pass
+    (:mod:`tonguevis.sim.contact_kernel`) and solves only the frames where a candidate the
+    solve may constrain is inside the margin; "numpy" is the reference (the same solution to
+    rounding: tests/sim/test_contact_fast.py).
     """
     lam = np.asarray(eigenvalues, dtype=np.float64)
     n_frames, n_s, _ = targets.shape
@@ -62,18 +68,23 @@ def solve_contact(eigenvalues, phi_nodes, phi_s, targets, compliance, points, se
     mult = np.linalg.solve(mats, np.where(acting, c_all, 0.0)[:, :, None])[:, :, 0]
     q_all = (mult @ P) / lam  # (F, m)
     cand_pts = points[candidates]
-    u = np.einsum("kcm,fm->fkc", phi_nodes, q_all)
-    gap, _ = palate.clearance((cand_pts[None] + u + jaw_offset[:, None]).reshape(-1, 3))
-    gap = gap.reshape(n_frames, -1)
     out_targets = (q_all @ P.T).reshape(targets.shape)
     external = np.zeros((n_frames, m))
     active_count = np.zeros(n_frames, dtype=np.int64)
     conflicts: list[tuple[int, int]] = []
+    near_sensor = np.linalg.norm(cand_pts[:, None] - points[sensor_nodes][None], axis=2) < CONFLICT_RADIUS  # (k, S)
+    if check_backend(backend) == "warp":
+        _solve_frames_fast(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset, c_all, comp3, acting, q_all,
+                           targets, points[sensor_nodes], near_sensor, margin, out_targets, external, active_count,
+                           conflicts)
+        return {"targets": out_targets, "external": external, "active": active_count, "conflicts": conflicts}
+    u = np.einsum("kcm,fm->fkc", phi_nodes, q_all)
+    gap, _ = palate.clearance((cand_pts[None] + u + jaw_offset[:, None]).reshape(-1, 3))
+    gap = gap.reshape(n_frames, -1)
     # Sensors above the palate: their neighbourhoods are left to them.
     sensor_gap, _ = palate.clearance((points[sensor_nodes][None] + np.nan_to_num(targets)
                                       + jaw_offset[:, None]).reshape(-1, 3))
     sensor_gap = sensor_gap.reshape(n_frames, n_s)
-    near_sensor = np.linalg.norm(cand_pts[:, None] - points[sensor_nodes][None], axis=2) < CONFLICT_RADIUS  # (k, S)
     for f in np.flatnonzero(np.nanmin(np.where(np.isfinite(gap), gap, np.inf), axis=1) < margin):
         above = np.flatnonzero((sensor_gap[f] < 0) & np.all(np.isfinite(targets[f]), axis=1))
         conflicts.extend((int(f), int(s)) for s in above)
@@ -99,12 +110,8 @@ def _active_set(lam, P, gram, phi_nodes, cand_pts, palate, offset, c, comp, acti
     hold by construction.  Passes repeat until no candidate is closer than
     the margin (the palate is curved), at most MAX_PASSES.
     """
-    from scipy.optimize import nnls
-
-    act = np.flatnonzero(acting)
-    p_act = P[act]
-    g_c = gram[np.ix_(act, act)] + np.diag(np.where(np.isfinite(comp[act]), comp[act], 0.0))
-    solve_g = np.linalg.pinv(g_c)
+    p_act = P[np.flatnonzero(acting)]
+    solve_g = _sensor_inverse(gram, comp, acting)
     q, lam_a, rows = q0, None, None
     for _ in range(MAX_PASSES):
         u = np.einsum("kcm,m->kc", phi_nodes, q)
@@ -112,23 +119,7 @@ def _active_set(lam, P, gram, phi_nodes, cand_pts, palate, offset, c, comp, acti
         ok = allowed & np.isfinite(gap)
         if not np.any(ok & (gap < margin - 1e-7)):
             break
-        near = np.flatnonzero(ok & (gap < margin + BAND))
-        a_rows = -np.einsum("kc,kcm->km", normal[near], phi_nodes[near])
-        rhs = gap[near] - margin + a_rows @ q
-        # q(λ) = q₀ + Bλ with the sensors re-balanced: B = Λ⁻¹(Pᵀ G⁻¹ P Λ⁻¹ Aᵀ - Aᵀ).
-        at_l = (a_rows / lam).T  # Λ⁻¹Aᵀ (m, a)
-        b_mat = (p_act.T @ (solve_g @ (p_act @ at_l))) / lam[:, None] - at_l
-        m_mat = -a_rows @ b_mat
-        r = rhs - a_rows @ q0
-        chol = _cholesky(0.5 * (m_mat + m_mat.T))
-        lam_a = nnls(chol.T, -np.linalg.lstsq(chol, r, rcond=None)[0], maxiter=50 * len(r))[0]
-        on = lam_a > 0
-        if on.any():  # polish: the active constraints exactly tight (NNLS stops at its own tolerance)
-            polished = np.linalg.lstsq(m_mat[np.ix_(on, on)], -r[on], rcond=None)[0]
-            if np.all(polished >= 0):
-                lam_a[on] = polished
-        rows = a_rows
-        q = q0 + b_mat @ lam_a
+        lam_a, rows, q = _contact_pass(lam, p_act, solve_g, phi_nodes, q, q0, gap, normal, ok, margin)
     if lam_a is None or not np.any(lam_a > 0):
         return q0, None, None
     # A contact push moves the surface about as far as it was inside the palate: a solve that moves it
@@ -140,6 +131,126 @@ def _active_set(lam, P, gram, phi_nodes, cand_pts, palate, offset, c, comp, acti
         return q0, None, None
     used = lam_a > 0
     return q, lam_a[used], rows[used]
+
+
+def _contact_pass(lam, p_act, solve_g, phi_nodes, q, q0, gap, normal, ok, margin):
+    """One pass of :func:`_active_set`: the QP linearised at ``q`` (the clearances ``gap`` (k,) and
+    ``normal`` (k, 3) there; ok : (k,) the candidates that may get a constraint) solved exactly.
+    Returns (contact forces λ (a,), their rows A (a, m), the new q)."""
+    from scipy.optimize import nnls
+
+    near = np.flatnonzero(ok & (gap < margin + BAND))
+    a_rows = -np.einsum("kc,kcm->km", normal[near], phi_nodes[near])
+    rhs = gap[near] - margin + a_rows @ q
+    # q(λ) = q₀ + Bλ with the sensors re-balanced: B = Λ⁻¹(Pᵀ G⁻¹ P Λ⁻¹ Aᵀ - Aᵀ).
+    at_l = (a_rows / lam).T  # Λ⁻¹Aᵀ (m, a)
+    b_mat = (p_act.T @ (solve_g @ (p_act @ at_l))) / lam[:, None] - at_l
+    m_mat = -a_rows @ b_mat
+    r = rhs - a_rows @ q0
+    chol = _cholesky(0.5 * (m_mat + m_mat.T))
+    lam_a = nnls(chol.T, -np.linalg.lstsq(chol, r, rcond=None)[0], maxiter=50 * len(r))[0]
+    on = lam_a > 0
+    if on.any():  # polish: the active constraints exactly tight (NNLS stops at its own tolerance)
+        polished = np.linalg.lstsq(m_mat[np.ix_(on, on)], -r[on], rcond=None)[0]
+        if np.all(polished >= 0):
+            lam_a[on] = polished
+    return lam_a, a_rows, q0 + b_mat @ lam_a
+
+
+def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, margin, gap0, normal0):
+    """:func:`_active_set` of several frames at once, with what the caller already has.
+
+    solves : per frame, (P of the acting sensors, their G⁻¹) (shared by the frames with the same
+    acting sensors and springs); q0 : (n, m); allowed : (n, k); offsets : (n, 3); gap0 (n, k)
+    and normal0 (n, k, 3): the clearances at q0 (from the compiled pass over every frame);
+    query : a :class:`~tonguevis.sim.contact_kernel.Clearance` of the candidates.  The frames
+    take their passes in step, so each later pass queries the clearances of all the frames
+    still going in one compiled call; each frame's passes, QP (:func:`_contact_pass`) and guard
+    are :func:`_active_set`'s: the same result to rounding (tests/sim/test_contact_fast.py).
+    Returns a list of (q, λ, A) or (q0, None, None), one per frame.
+    """
+    n = len(q0)
+    state = [(q0[i], None, None) for i in range(n)]
+    going = np.arange(n)
+    for n_pass in range(MAX_PASSES):
+        if len(going) == 0:
+            break
+        if n_pass:
+            qs = np.array([state[i][0] for i in going])
+            gap, normal = query((qs @ phi_flat.T).reshape(len(going), -1, 3), offsets[going], normals=True)
+        else:
+            gap, normal = gap0[going], normal0[going]
+        still = []
+        for j, i in enumerate(going):
+            ok = allowed[i] & np.isfinite(gap[j])
+            if not np.any(ok & (gap[j] < margin - 1e-7)):
+                continue
+            p_act, solve_g = solves[i]
+            lam_a, rows, q = _contact_pass(lam, p_act, solve_g, phi_nodes, state[i][0], q0[i], gap[j], normal[j], ok,
+                                           margin)
+            state[i] = (q, lam_a, rows)
+            still.append(i)
+        going = np.asarray(still, dtype=np.int64)
+    out = []
+    for i, (q, lam_a, rows) in enumerate(state):
+        if lam_a is None or not np.any(lam_a > 0):
+            out.append((q0[i], None, None))
+            continue
+        depth = max(0.0, -float(np.nanmin(gap0[i][allowed[i]])))  # as _active_set's guard
+        moved = float(np.abs((phi_flat @ (q - q0[i])).reshape(-1, 3)[allowed[i]]).max())
+        if not np.isfinite(moved) or moved > 2 * depth + 2e-3:
+            out.append((q0[i], None, None))
+            continue
+        used = lam_a > 0
+        out.append((q, lam_a[used], rows[used]))
+    return out
+
+
+def _sensor_inverse(gram, comp, acting):
+    """G⁻¹ of the acting sensors (pseudo-inverse, as :func:`_active_set`): (a, a), a = acting.sum()."""
+    act = np.flatnonzero(acting)
+    g_c = gram[np.ix_(act, act)] + np.diag(np.where(np.isfinite(comp[act]), comp[act], 0.0))
+    return np.linalg.pinv(g_c)
+
+
+def _solve_frames_fast(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset, c_all, comp3, acting, q_all, targets,
+                       sensor_pts, near_sensor, margin, out_targets, external, active_count, conflicts):
+    """:func:`solve_contact`'s frames on the compiled clearances; fills the last four arguments in place.
+
+    Every frame's clearances at once (one compiled pass); the active-set solve only where a
+    candidate the solve may constrain is inside the margin (the reference's first pass stops
+    at once everywhere else: nothing to do); the same conflicts, in the same order."""
+    from tonguevis.sim.contact_kernel import Clearance, clearances
+
+    n_frames, k, m = len(q_all), len(cand_pts), len(lam)
+    phi_flat = np.ascontiguousarray(phi_nodes.reshape(3 * k, m))
+    query = Clearance(palate, cand_pts)
+    u = (q_all @ phi_flat.T).reshape(n_frames, k, 3)
+    gap, _ = query(u, jaw_offset)
+    sensor_gap, _ = clearances(palate, sensor_pts, np.nan_to_num(targets), jaw_offset)
+    above_all = (sensor_gap < 0) & np.all(np.isfinite(targets), axis=2)  # (F, S)
+    low = np.flatnonzero(np.nanmin(np.where(np.isfinite(gap), gap, np.inf), axis=1) < margin)
+    allowed = ~((above_all[low].astype(np.int64) @ near_sensor.T.astype(np.int64)) > 0)  # (len(low), k)
+    for f in low:
+        conflicts.extend((int(f), int(s)) for s in np.flatnonzero(above_all[f]))
+    inside = np.any(allowed & np.isfinite(gap[low]) & (gap[low] < margin - 1e-7), axis=1)
+    frames, allowed = low[inside], allowed[inside]
+    _, normals = query(u[frames], jaw_offset[frames], normals=True)
+    inverses: dict = {}
+    solves = []
+    for f in frames:
+        key = (acting[f].tobytes(), comp3[f][acting[f]].tobytes())
+        if key not in inverses:
+            inverses[key] = (P[np.flatnonzero(acting[f])], _sensor_inverse(gram, comp3[f], acting[f]))
+        solves.append(inverses[key])
+    solved = _active_sets(lam, solves, phi_nodes, phi_flat, query, jaw_offset[frames], q_all[frames], allowed, margin,
+                          gap[frames], normals)
+    for f, (q, lam_f, rows) in zip(frames, solved):
+        if rows is None:
+            continue
+        external[f] = -(rows.T @ lam_f)
+        active_count[f] = len(lam_f)
+        out_targets[f] = (P @ q).reshape(-1, 3)
 
 
 def _cholesky(matrix: np.ndarray) -> np.ndarray:
@@ -159,7 +270,8 @@ def _cholesky(matrix: np.ndarray) -> np.ndarray:
 
 
 def correct_frames(eigenvalues, phi_nodes, phi_s, q, points, candidates, palate, jaw_offset, allowed=None,
-                   margin: float = MARGIN, compliance: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                   margin: float = MARGIN, compliance: float = 0.0,
+                   backend: str = "warp") -> tuple[np.ndarray, np.ndarray]:
     """Dynamic shapes (F, m) moved out of the palate where they went in: (corrected q, frames corrected).
 
     The integrator does not see the palate (only the contact forces of the
@@ -170,12 +282,18 @@ def correct_frames(eigenvalues, phi_nodes, phi_s, q, points, candidates, palate,
     with the sensors at their dynamic positions, held by springs of ``compliance``
     (m/N; 0 = exactly, the paper's constraint).  allowed : (F, k) bool,
     candidates that may get a constraint (False near a conflicting sensor).
+    backend : "warp" (default): every frame's clearances in one compiled pass and the frames
+    that went in solved together (:func:`_active_sets`); "numpy": the
+    reference (the same q to rounding).
     """
     lam = np.asarray(eigenvalues, dtype=np.float64)
     n_s = phi_s.shape[0]
     P = phi_s.reshape(3 * n_s, len(lam))
     gram = (P / lam) @ P.T
     cand_pts = points[candidates]
+    if check_backend(backend) == "warp":
+        return _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offset, allowed, margin,
+                                    compliance)
     u = np.einsum("kcm,fm->fkc", phi_nodes, q)
     gap, _ = palate.clearance((cand_pts[None] + u + jaw_offset[:, None]).reshape(-1, 3))
     gap = gap.reshape(len(q), -1)
@@ -188,6 +306,31 @@ def correct_frames(eigenvalues, phi_nodes, phi_s, q, points, candidates, palate,
         ok = np.ones(len(candidates), bool) if allowed is None else allowed[f]
         out[f] = _active_set(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset[f], P @ q[f], np.full(3 * n_s, compliance),
                              ones, q[f], ok, margin)[0]
+    return out, frames
+
+
+def _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offset, allowed, margin, compliance):
+    """:func:`correct_frames` on the compiled clearances (see there)."""
+    from tonguevis.sim.contact_kernel import Clearance
+
+    n_frames, k, m = len(q), len(cand_pts), len(lam)
+    phi_flat = np.ascontiguousarray(phi_nodes.reshape(3 * k, m))
+    query = Clearance(palate, cand_pts)
+    u = (q @ phi_flat.T).reshape(n_frames, k, 3)
+    gap, _ = query(u, jaw_offset)
+    if allowed is not None:
+        gap = np.where(allowed, gap, np.nan)
+    out = np.array(q, copy=True)
+    frames = np.flatnonzero(np.nanmin(np.where(np.isfinite(gap), gap, np.inf), axis=1) < margin - 1e-7)
+    if len(frames) == 0:
+        return out, frames
+    ones = np.ones(len(P), dtype=bool)
+    solve_g = _sensor_inverse(gram, np.full(len(P), compliance), ones)
+    _, normals = query(u[frames], jaw_offset[frames], normals=True)
+    ok = np.ones((len(frames), k), bool) if allowed is None else allowed[frames]
+    solved = _active_sets(lam, [(P, solve_g)] * len(frames), phi_nodes, phi_flat, query, jaw_offset[frames], q[frames],
+                          ok, margin, gap[frames], normals)
+    out[frames] = [q_f for q_f, _, _ in solved]
     return out, frames
 
 

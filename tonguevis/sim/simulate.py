@@ -134,6 +134,7 @@ def simulate(
     contact = None
     if palate is not None:
         contact = _contact_context(palate, prep, model, basis, recording)
+        contact["backend"] = backend  # its clearances and solves: compiled, or the NumPy reference
     targets, compliance, schedule = drive_schedule(prep.displacement, recording.rate, basis.eigenvalues, phi_s,
                                                    sensor_stiffness, contact=contact)
     release_freed_memory()  # the preparation's temporaries: 150 MB kept for 30 minutes otherwise
@@ -398,7 +399,7 @@ def drive_schedule(displacement: np.ndarray, rate: float, eigenvalues: np.ndarra
 
         solved = solve_contact(eigenvalues, contact["phi_nodes"], phi_s, anchored, springs, contact["points"],
                                contact["sensor_nodes"], contact["candidates"], contact["palate"],
-                               contact["jaw_offset"])
+                               contact["jaw_offset"], backend=contact.get("backend", "warp"))
         projected = solved.pop("targets")
         info.update(solved)
     acting = weight > 0
@@ -499,7 +500,8 @@ def _keep_below_palate(q, contact, schedule, basis, phi_s, compliance: float):
     for f, s in schedule["conflicts"]:
         allowed[f] &= ~near[:, s]
     return correct_frames(basis.eigenvalues, contact["phi_nodes"], phi_s, q, pts, cand, contact["palate"],
-                          contact["jaw_offset"], allowed, compliance=compliance)
+                          contact["jaw_offset"], allowed, compliance=compliance,
+                          backend=contact.get("backend", "warp"))
 
 
 def _contact_probe(contact, schedule, model):

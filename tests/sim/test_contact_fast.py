@@ -1,0 +1,136 @@
+"""The contact's fast path (compiled clearances, the frames in contact solved together) against the reference.
+
+The reference is today's solve (``backend="numpy"``: NumPy clearances, one frame at a time); the
+fast path must give the same shapes to 1e-10 relative, the same frames, forces and conflicts,
+on the demo /ta/ with the generic palate and on cases with many frames in contact.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tonguevis.palate import generic_palate
+
+REL = 1e-10
+
+
+def rel_diff(a: np.ndarray, b: np.ndarray) -> float:
+    scale = np.abs(a).max()
+    return float(np.abs(a - b).max() / scale) if scale > 0 else float(np.abs(b).max())
+
+
+def test_the_compiled_clearance_is_the_palates_own():
+    """Points inside, below and outside the footprint of a turned, scaled palate: the same gaps
+    (NaN outside) and normals as PalateSurface.clearance."""
+    from tonguevis.sim.contact_kernel import Clearance
+
+    rng = np.random.default_rng(3)
+    turn = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    turn *= np.linalg.det(turn)  # a rotation
+    for palate in (generic_palate(), generic_palate().transformed(turn, 0.8, np.array([0.01, -0.02, 0.003]))):
+        verts, _ = palate.triangles()
+        base = rng.uniform(verts.min(axis=0) - 0.005, verts.max(axis=0) + 0.005, size=(200, 3))
+        disp = rng.normal(size=(30, 200, 3)) * 3e-3
+        offset = rng.normal(size=(30, 3)) * 1e-3
+        gap, normal = Clearance(palate, base)(disp, offset, normals=True)
+        ref_gap, ref_normal = palate.clearance((base[None] + disp + offset[:, None]).reshape(-1, 3))
+        ref_gap, ref_normal = ref_gap.reshape(30, 200), ref_normal.reshape(30, 200, 3)
+        inside = np.isfinite(ref_gap)
+        assert 0.2 < inside.mean() < 0.9  # both kinds of point are there
+        np.testing.assert_array_equal(np.isfinite(gap), inside)
+        np.testing.assert_allclose(gap[inside], ref_gap[inside], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(normal[inside], ref_normal[inside], rtol=0, atol=1e-12)
+        gap_only, none = Clearance(palate, base)(disp, offset)
+        assert none is None and np.array_equal(np.isfinite(gap_only), inside)
+
+
+@pytest.fixture(scope="module")
+def demo():
+    """The demo /ta/ placed as simulate() places it: model, targets, modes, the contact context."""
+    from tonguevis.io import read_recording
+    from tonguevis.paths import DATA_DIR
+    from tonguevis.sim import TongueModel
+    from tonguevis.sim.placement import targets_in_frame
+    from tonguevis.sim.simulate import _contact_context
+
+    rec = read_recording(DATA_DIR / "spk1_ta.tsv", sensor_map=DATA_DIR / "sensor_map.json").on_uniform_grid()
+    model, prep, _ = targets_in_frame(rec, TongueModel.default(), "speaker", "speaker", None, None, tongue_size=1.0)
+    basis = model.basis(40)
+    dofs = (3 * prep.nodes[:, None] + np.arange(3)).ravel()
+    s = len(prep.nodes)
+    phi_s = basis.phi[dofs].reshape(s, 3, -1)
+    w_s = model.rotation_matrix(basis)[dofs].reshape(s, 3, -1)
+    return rec, model, prep, basis, phi_s, w_s, _contact_context("generic", prep, model, basis, rec)
+
+
+def both_backends(demo, palate, sensor_stiffness):
+    """The drive (contact solve), the dynamics and the correction after them, on each backend."""
+    from tonguevis.sim.constrained import point_stiffness
+    from tonguevis.sim.newmark import NewmarkSettings
+    from tonguevis.sim.newmark_kernel import integrate_compiled
+    from tonguevis.sim.simulate import _keep_below_palate, drive_schedule
+
+    rec, model, prep, basis, phi_s, w_s, context = demo
+    settings = NewmarkSettings(dt=1 / rec.rate, alpha=model.material.alpha, beta=model.material.beta)
+    k_ref = point_stiffness(basis.eigenvalues, phi_s)
+    base = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * k_ref)
+    out = {}
+    for backend in ("numpy", "warp"):
+        contact = {**context, "palate": palate, "backend": backend}
+        targets, compliance, schedule = drive_schedule(prep.displacement, rec.rate, basis.eigenvalues, phi_s,
+                                                       sensor_stiffness, contact=contact)
+        if backend == "numpy":  # the same dynamics for both: only the contact differs
+            q = integrate_compiled(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance,
+                                   external=schedule["external"], rates=False).q
+        corrected, frames = _keep_below_palate(q, contact, schedule, basis, phi_s, base)
+        out[backend] = targets, schedule, corrected, frames
+    return out["numpy"], out["warp"]
+
+
+def assert_same(ref, fast):
+    targets, schedule, corrected, frames = ref
+    f_targets, f_schedule, f_corrected, f_frames = fast
+    assert np.array_equal(np.isnan(targets), np.isnan(f_targets))
+    assert rel_diff(np.nan_to_num(targets), np.nan_to_num(f_targets)) < REL
+    assert rel_diff(schedule["external"], f_schedule["external"]) < REL
+    assert np.array_equal(schedule["active"], f_schedule["active"])
+    assert schedule["conflicts"] == f_schedule["conflicts"]
+    np.testing.assert_array_equal(frames, f_frames)
+    assert rel_diff(corrected, f_corrected) < REL
+
+
+def test_the_demo_with_the_generic_palate_is_solved_as_the_reference_does(demo):
+    """Hard sensors (the paper's setting): the tongue presses on the generic palate in a few frames."""
+    ref, fast = both_backends(demo, demo[-1]["palate"], None)
+    assert np.sum(ref[1]["active"] > 0) > 0  # frames with contact forces: the solve has work to do
+    assert_same(ref, fast)
+
+
+def test_many_frames_in_contact_are_solved_as_the_reference_does(demo):
+    """The generic palate 6 mm lower: the tongue presses on it in 163 frames, the tip sensor goes
+    above it (138 conflicts), and the dynamics carry the tongue into it (178 frames corrected)."""
+    low = demo[-1]["palate"].transformed(np.eye(3), 1.0, np.array([0.0, 0.0, -0.006]))
+    ref, fast = both_backends(demo, low, 20.0)
+    assert np.sum(ref[1]["active"] > 0) > 100 and len(ref[1]["conflicts"]) > 100 and len(ref[3]) > 100
+    assert_same(ref, fast)
+
+
+def test_simulate_reports_the_same_contact_on_both_backends(demo):
+    """The whole run against the generic palate 4 mm lower (still the model's frame: used as is):
+    the contact's figures of simulate() are the reference's to rounding."""
+    from tonguevis.sim import simulate
+
+    low = generic_palate().transformed(np.eye(3), 1.0, np.array([0.0, 0.0, -0.004]))
+    low.metadata.update(generic_palate().metadata)
+    rec = demo[0]
+    runs = [simulate(rec, modes=40, palate=low, backend=b) for b in ("numpy", "warp")]
+    ref, fast = (r.metadata["contact"] for r in runs)
+    assert ref["frames_with_contact_forces"] > 20 and ref["frames_in_contact"] > 20
+    for key in ("frames_in_contact", "frames_with_contact_forces", "frames_corrected_after_the_dynamics",
+                "sensors_above_palate", "conflicts"):
+        assert ref[key] == fast[key]
+    for key in ("penetration_max_mm", "contact_area_max_mm2"):
+        assert fast[key] == pytest.approx(ref[key], rel=1e-6, abs=1e-9)
+    np.testing.assert_allclose(runs[1].penetration, runs[0].penetration, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(runs[1].contact_area, runs[0].contact_area, rtol=1e-6, atol=1e-12)

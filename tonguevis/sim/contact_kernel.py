@@ -1,0 +1,134 @@
+"""warp-lang kernel for the contact's clearance queries: many points against one palate height field.
+
+The contact (:mod:`tonguevis.sim.contact`) asks, for every frame, how far
+each candidate surface node lies below the palate: F × k queries (1,762 ×
+310 on the demo), each a change of frame, a gather of four grid heights and
+a bilinear interpolation.  In NumPy that is a dozen whole-array passes
+(0.1-0.2 s a simulation, several times over); here it is one pass, one
+thread per (frame, node), the positions formed inside the kernel from the
+rest positions, the nodes' displacements and the frame's jaw offset, so the
+(F, k, 3) query array is never built.
+
+The arithmetic is :meth:`tonguevis.palate.PalateSurface.clearance`'s, step by
+step (the NumPy reference; a test proves them equal to 1e-12 m).
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+_lock = threading.Lock()
+_kernel = None
+_wp = None
+
+
+def _build():
+    global _kernel, _wp
+    with _lock:
+        if _kernel is not None:
+            return
+        from tonguevis._backend import load_warp
+
+        wp = load_warp()
+        f64 = wp.float64
+
+        @wp.kernel
+        def clearance(base: wp.array(dtype=wp.vec3d), disp: wp.array2d(dtype=wp.vec3d),
+                      offset: wp.array(dtype=wp.vec3d), z: wp.array2d(dtype=f64), rot: wp.mat33d, scale: f64,
+                      shift: wp.vec3d, x0: f64, x1: f64, y0: f64, y1: f64, want_normal: int,
+                      gap: wp.array2d(dtype=f64), normal: wp.array2d(dtype=wp.vec3d)):
+            f, k = wp.tid()
+            p = (base[k] + disp[f, k]) + offset[f] - shift
+            # the palate's own frame: (p - t) R / s, as PalateSurface._to_own
+            ox = (p[0] * rot[0, 0] + p[1] * rot[1, 0] + p[2] * rot[2, 0]) / scale
+            oy = (p[0] * rot[0, 1] + p[1] * rot[1, 1] + p[2] * rot[2, 1]) / scale
+            oz = (p[0] * rot[0, 2] + p[1] * rot[1, 2] + p[2] * rot[2, 2]) / scale
+            nx = z.shape[1]
+            ny = z.shape[0]
+            fx = (ox - x0) / (x1 - x0)
+            fy = (oy - y0) / (y1 - y0)
+            inside = fx >= f64(0.0) and fx <= f64(nx - 1) and fy >= f64(0.0) and fy <= f64(ny - 1)
+            # the cell, clipped to the grid as NumPy's (outside the footprint the height is NaN anyway)
+            i = 0
+            j = 0
+            if fx == fx:  # not NaN
+                i = int(wp.clamp(wp.floor(fx), f64(0.0), f64(nx - 2)))
+            if fy == fy:
+                j = int(wp.clamp(wp.floor(fy), f64(0.0), f64(ny - 2)))
+            tx = wp.clamp(fx - f64(i), f64(0.0), f64(1.0))
+            ty = wp.clamp(fy - f64(j), f64(0.0), f64(1.0))
+            z00 = z[j, i]
+            z10 = z[j, i + 1]
+            z01 = z[j + 1, i]
+            z11 = z[j + 1, i + 1]
+            h = (f64(1.0) - ty) * ((f64(1.0) - tx) * z00 + tx * z10) + ty * ((f64(1.0) - tx) * z01 + tx * z11)
+            dx = ((f64(1.0) - ty) * (z10 - z00) + ty * (z11 - z01)) / (x1 - x0)
+            dy = ((f64(1.0) - tx) * (z01 - z00) + tx * (z11 - z10)) / (y1 - y0)
+            if not inside:
+                h = f64(wp.nan)
+            norm = wp.sqrt(dx * dx + dy * dy + f64(1.0))
+            gap[f, k] = (h - oz) / norm * scale
+            if want_normal != 0:
+                n = wp.vec3d(dx / norm, dy / norm, f64(-1.0) / norm)
+                normal[f, k] = wp.vec3d(n[0] * rot[0, 0] + n[1] * rot[0, 1] + n[2] * rot[0, 2],
+                                        n[0] * rot[1, 0] + n[1] * rot[1, 1] + n[2] * rot[1, 2],
+                                        n[0] * rot[2, 0] + n[1] * rot[2, 1] + n[2] * rot[2, 2])
+
+        _kernel = clearance
+        _wp = wp
+
+
+class Clearance:
+    """Clearance queries of a fixed set of points (rest positions ``base`` (k, 3), m) below ``palate``
+    (a PalateSurface), displaced per call: the palate's grid and the rest positions are handed to
+    warp once, so a query of one frame's 310 nodes (the active-set solve's, several per frame) costs
+    little more than the launch."""
+
+    def __init__(self, palate, base: np.ndarray):
+        _build()
+        wp = _wp
+        self.k = len(base)
+        self._base_np = np.ascontiguousarray(base, dtype=np.float64).reshape(-1, 3)
+        self._z_np = np.ascontiguousarray(palate.z, dtype=np.float64)
+        x, y = np.asarray(palate.x, dtype=np.float64), np.asarray(palate.y, dtype=np.float64)
+        self._base = wp.array(self._base_np, dtype=wp.vec3d, device="cpu", copy=False)
+        self._z = wp.array(self._z_np, dtype=wp.float64, device="cpu", copy=False)
+        self._params = [wp.mat33d(*np.asarray(palate.rotation, dtype=np.float64).ravel()), float(palate.scale),
+                        wp.vec3d(*np.asarray(palate.translation, dtype=np.float64)),
+                        float(x[0]), float(x[1]), float(y[0]), float(y[1])]
+        self._no_normal = wp.empty((1, 1), dtype=wp.vec3d, device="cpu")
+
+    def __call__(self, disp: np.ndarray, offset: np.ndarray,
+                 normals: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+        """(gap (F, k) m, normals (F, k, 3) or None) of base[k] + disp[f, k] + offset[f];
+        disp : (F, k, 3) m, offset : (F, 3) m; see :func:`clearances`."""
+        wp = _wp
+        offset = np.ascontiguousarray(offset, dtype=np.float64).reshape(-1, 3)
+        n_frames = len(offset)
+        disp = np.ascontiguousarray(disp, dtype=np.float64).reshape(n_frames, self.k, 3)
+        gap = np.empty((n_frames, self.k))
+        if n_frames == 0 or self.k == 0:
+            return gap, (np.empty((n_frames, self.k, 3)) if normals else None)
+        normal = np.empty((n_frames, self.k, 3)) if normals else None
+        outs = [wp.array(gap, dtype=wp.float64, device="cpu", copy=False),
+                wp.array(normal, dtype=wp.vec3d, device="cpu", copy=False) if normals else self._no_normal]
+        wp.launch(_kernel, dim=(n_frames, self.k), device="cpu",
+                  inputs=[self._base, wp.array(disp, dtype=wp.vec3d, device="cpu", copy=False),
+                          wp.array(offset, dtype=wp.vec3d, device="cpu", copy=False), self._z, *self._params,
+                          int(normals)], outputs=outs)
+        wp.synchronize_device("cpu")
+        return gap, normal
+
+
+def clearances(palate, base: np.ndarray, disp: np.ndarray, offset: np.ndarray,
+               normals: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """Clearance below ``palate`` (a PalateSurface) of the points base[k] + disp[f, k] + offset[f].
+
+    base : (k, 3) rest positions, m; disp : (F, k, 3) displacements, m; offset : (F, 3), m
+    (the jaw's offset carrying the tongue into the palate's frame).  Returns (gap (F, k) m,
+    NaN outside the palate's footprint, negative inside it; normals (F, k, 3) or None), as
+    :meth:`~tonguevis.palate.PalateSurface.clearance` of the (F·k, 3) points.
+    """
+    return Clearance(palate, base)(disp, offset, normals)
