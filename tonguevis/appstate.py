@@ -55,6 +55,8 @@ from typing import Any, Callable
 
 from psygnal import EmitLoopError, Signal, SignalGroup
 
+from tonguevis.render.production_marks import interval_at  # noqa: F401 (the views' import of it)
+
 
 MIN_SPEED = 0.25
 MAX_SPEED = 1.0
@@ -442,11 +444,3 @@ class AppState:
         """A line for the status bar (sent even when it repeats: the bar may show something else now)."""
         self._status = str(text)
         self._emit("status", self._status, source)
-
-
-def interval_at(intervals: list[tuple[float, float]], t: float) -> tuple[float, float] | None:
-    """The ``(start, end)`` interval containing time ``t`` (the first one), or None."""
-    for start, end in intervals:
-        if start <= t <= end:
-            return (float(start), float(end))
-    return None

@@ -26,7 +26,6 @@ why not (fewer than three REF* head references).
 from __future__ import annotations
 
 import json
-import logging
 import os
 import threading
 import time
@@ -40,7 +39,7 @@ from tonguevis._files import atomic_write
 from tonguevis.errors import RecordingError, TonguevisError
 from tonguevis.live.source import LiveFrame, Source, SourceStatus
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 STATUS_OK = 55
 STATUS_MISSING = 119
@@ -77,7 +76,7 @@ class TsvRecorder:
         if self.ids is None or len(self.ids) != n_slots or len(set(self.ids)) != n_slots \
                 or any(not isinstance(i, (int, np.integer)) or i < 0 for i in self.ids):
             if self.ids is not None:
-                log.warning("%s: the device's sensor ids %s do not fit %d slots; slot numbers used",
+                logger.warning("%s: the device's sensor ids %s do not fit %d slots; slot numbers used",
                             self.path, self.ids, n_slots)
             self.ids = list(range(n_slots))
         header = ["AudioTime[s]", "MeasId", "WavId"]

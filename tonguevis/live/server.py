@@ -24,7 +24,6 @@ disconnect in the middle of a packet, a packet with an impossible size.
 
 from __future__ import annotations
 
-import logging
 import re
 import socket
 import struct
@@ -41,7 +40,7 @@ from tonguevis.live.rtc3d import (
 )
 from tonguevis.live.source import recording_frames
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 
 @dataclass
@@ -225,7 +224,7 @@ class ReplayServer:
         try:
             _Client(self, sock, number).run()
         except (OSError, LiveProtocolError) as exc:
-            log.info("replay server: client %d: %s", number, exc)
+            logger.info("replay server: client %d: %s", number, exc)
         finally:
             with self._lock:
                 self._clients.discard(sock)

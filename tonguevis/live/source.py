@@ -46,7 +46,7 @@ from tonguevis.live.rtc3d import (
     BIG, DEFAULT_PORT, LiveProtocolError, PacketReader, PacketType, decode_data, encode_command,
 )
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 #: Frames the recorder's queue holds before new ones are dropped (60 s at 100 Hz).
 QUEUE_FRAMES = 6000
@@ -178,12 +178,12 @@ class ThreadedSource(Source):
                 self._errors.append(message)
         # With a callback the consumer shows the message; the log then keeps it quiet (no double lines).
         level = logging.WARNING if error and self._on_event is None else logging.INFO
-        log.log(level, "live source: %s", message)
+        logger.log(level, "live source: %s", message)
         if self._on_event is not None:
             try:
                 self._on_event(message)
             except Exception:  # a consumer's callback must not kill the reader
-                log.exception("live source: on_event callback failed")
+                logger.exception("live source: on_event callback failed")
 
     def _set_state(self, state: str) -> None:
         with self._lock:
@@ -214,7 +214,7 @@ class ThreadedSource(Source):
         except Exception as exc:  # never let the thread die silently: the consumer sees "failed"
             self._event(f"stopped by an unexpected error: {exc!r}", error=True)
             self._set_state("failed")
-            log.exception("live source crashed")
+            logger.exception("live source crashed")
 
     # --- the interface ---------------------------------------------------------------------------------
     def start(self) -> "ThreadedSource":

@@ -45,7 +45,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import logging
 import math
 import os
 import re
@@ -63,7 +62,7 @@ from tonguevis.live.targets import (
     MAX_CYCLE_S, Target, accuracy_colour, cycle_period, per_cycle, summarise, target_from_dict,
 )
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 RAW_FILE = "raw.tsv"
 CORRECTED_FILE = "head_corrected.tsv"
@@ -372,7 +371,7 @@ class Sweep:
         number = self.number
         if profile is not None and update_profile and any(r.number == number for r in profile.sweeps):
             number = profile.next_sweep_number()
-            log.info("sweep %d (%s) is saved as %d: the profile already has a sweep %d", self.number, self.name,
+            logger.info("sweep %d (%s) is saved as %d: the profile already has a sweep %d", self.number, self.name,
                      number, self.number)
         if folder is None:
             if profile is None:
@@ -397,7 +396,7 @@ class Sweep:
             corrected = self.recording(corrected=True)
         except RecordingError as exc:
             # Offline head correction can fail (collinear references): keep the sweep, say so.
-            log.warning("sweep %d (%s): no head correction (%s); head_corrected.tsv holds the raw positions",
+            logger.warning("sweep %d (%s): no head correction (%s); head_corrected.tsv holds the raw positions",
                         self.number, self.name, exc)
             corrected, correction = raw, f"none ({exc})"
         else:

@@ -85,3 +85,11 @@ def mark_landmarks(ax, landmarks, times: np.ndarray | None = None, trace: np.nda
                                  frameon=not above, framealpha=0.8, ncol=5, handlelength=1.0, borderaxespad=0.2,
                                  columnspacing=0.8, **place))
     return artists
+
+
+def interval_at(intervals: list[tuple[float, float]], t: float) -> tuple[float, float] | None:
+    """The ``(start, end)`` interval containing time ``t`` (the first one), or None."""
+    for start, end in intervals:
+        if start <= t <= end:
+            return (float(start), float(end))
+    return None

@@ -579,12 +579,10 @@ def context_surfaces(palate=None, model=None) -> dict:
     (a :class:`~tonguevis.render.drawing.ShownPalate`) replaces the shipped palate.  They belong to
     the shipped tongue's frame: placed with ``model`` when it is placed in a speaker
     (:mod:`tonguevis.sim.placement`)."""
-    import logging
-
+    from tonguevis._logging import logger as log
     from tonguevis.paths import MESH_DIR
     from tonguevis.sim.placement import model_placement
 
-    log = logging.getLogger("tonguevis")
     placement = model_placement(model)
     out = {}
     try:
@@ -649,7 +647,7 @@ def scene_setup(session) -> dict:
 
 def frame_text(frames, i: int, productions, caption: str | None = None) -> str:
     """The main view's caption at frame ``i``: time, frame number, production, largest sensor residual (mm)."""
-    from tonguevis.appstate import interval_at
+    from tonguevis.render.production_marks import interval_at
 
     t = frames.times[i]
     text = f"t = {t:.3f} s   frame {i + 1}/{frames.n_frames}"
