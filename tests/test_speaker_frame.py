@@ -101,9 +101,10 @@ def test_a_speaker_frame_motion_is_the_model_frame_one_seen_through_the_fit(mode
     assert rise == pytest.approx(0.015 / 1.15, rel=1e-6)
 
 
-def test_the_fit_is_in_the_metadata_and_the_motion_reloads_in_its_frame(model, tmp_path):
+@pytest.mark.parametrize("size", [None, 1.0])
+def test_the_fit_is_in_the_metadata_and_the_motion_reloads_in_its_frame(model, tmp_path, size):
     recording = _recording(model)
-    motion = simulate(recording, model, modes=20, backend="numpy")
+    motion = simulate(recording, model, modes=20, backend="numpy", tongue_size=size)
     fit = motion.metadata["fit"]
     assert motion.metadata["frame"] == "speaker"
     for key in ("scale", "rotation", "translation_m", "residual_rms_mm", "residual_max_mm"):
@@ -113,7 +114,7 @@ def test_the_fit_is_in_the_metadata_and_the_motion_reloads_in_its_frame(model, t
     motion.save(path)
     loaded = Motion.load(path)
     assert isinstance(loaded.model, PlacedModel)
-    np.testing.assert_allclose(loaded.model.mesh.points, motion.model.mesh.points, atol=1e-15)
+    np.testing.assert_array_equal(loaded.model.mesh.points, motion.model.mesh.points)  # bit for bit: same results
     np.testing.assert_allclose(loaded.deformed_points(300), motion.deformed_points(300), atol=1e-12)
     assert loaded.metadata["fit"]["scale"] == pytest.approx(fit["scale"])
 
@@ -145,10 +146,10 @@ def test_the_demo_runs_in_the_speakers_millimetres():
     motion = simulate(recording, model, modes=40, palate="generic")
     fit = motion.metadata["fit"]
     scale = fit["scale"]
-    assert motion.metadata["frame"] == "speaker"
-    assert scale == 1.0 and fit["fitted_to"] == "upper surface"  # the generic size, fitted to the speaker's rest
-    assert motion.model.rest_volume == pytest.approx(model.rest_volume, rel=1e-9)
-    assert fit["residual_max_mm"] < 5
+    assert motion.metadata["frame"] == "speaker" and fit["fitted_to"] == "rule nodes"
+    assert 0.5 < scale < 2 and scale != 1.0  # placed as the rest alignment scales it (the default)
+    assert motion.model.rest_volume == pytest.approx(model.rest_volume / scale ** 3, rel=1e-9)
+    assert fit["residual_max_mm"] < 10
     # the generic palate moved with the model: the same clearance over the placed tongue's nodes
     placed_gap, _ = motion.palate.clearance(motion.model.mesh.points[model.dorsal_nodes])
     from tonguevis.palate import generic_palate
@@ -158,21 +159,66 @@ def test_the_demo_runs_in_the_speakers_millimetres():
     assert ok.sum() > 20
     np.testing.assert_allclose(placed_gap[ok] * scale, model_gap[ok], atol=1e-9)
     assert any(line.startswith("frame: the speaker's") for line in summary(motion))
+    sized = simulate(recording, model, modes=40, tongue_size=1.0)
+    assert sized.metadata["fit"]["fitted_to"] == "upper surface"
+    assert sized.model.rest_volume == pytest.approx(model.rest_volume, rel=1e-9)
 
 
 def test_the_surface_fit_places_the_model_at_the_size_given(model):
     """The synthetic speaker is the bar at 1/1.15 of its size: told so, the surface fit puts every rest sensor
-    on its own node exactly; at the model's own size (the default) the tongue keeps its volume and the
+    on its own node exactly; at the model's own size the tongue keeps its volume and the
     sensors sit near its upper surface, the residual said."""
     recording = _recording(model)
     told = simulate(recording, model, modes=20, backend="numpy", tongue_size=1 / 1.15)
     assert told.metadata["fit"]["fitted_to"] == "upper surface"
     assert told.metadata["fit"]["residual_max_mm"] < 1e-3  # micrometres: the rest pose is a mean over a window
     assert told.model.rest_volume == pytest.approx(model.rest_volume / 1.15 ** 3, rel=1e-9)
-    generic = simulate(recording, model, modes=20, backend="numpy")
+    generic = simulate(recording, model, modes=20, backend="numpy", tongue_size=1.0)
     fit = generic.metadata["fit"]
     assert generic.model.rest_volume == pytest.approx(model.rest_volume, rel=1e-9)
     assert 0.1 < fit["residual_max_mm"] < 10  # 15 % too large: the sensors cannot all sit on nodes
     assert fit["tongue_size"] == 1.0
     with pytest.raises(Exception, match="tongue size"):
         simulate(recording, model, modes=20, backend="numpy", tongue_size=-1.0)
+
+
+def test_a_motion_carried_onto_another_placement_is_the_same_deformation(model):
+    """Carried onto the unplaced model, a speaker-frame motion (placed by the alignment) is the model-frame one;
+    a comparison of two speakers' motions carries B onto A's tongue, so a per-node difference exists."""
+    from tonguevis.analysis.compare import Comparison
+    from tonguevis.sim.placement import carried
+
+    recording = _recording(model)
+    in_speaker = simulate(recording, model, modes=20, backend="numpy", tongue_size=None)
+    in_model = simulate(recording, model, modes=20, backend="numpy", frame="model")
+    back = carried(in_speaker, model)
+    assert back.model is model
+    extent = np.ptp(model.mesh.points, axis=0).max()
+    for frame in (0, 250, 280):
+        np.testing.assert_allclose(back.deformed_points(frame), in_model.deformed_points(frame), atol=1e-7 * extent)
+    np.testing.assert_allclose(back.targets, in_model.targets, atol=1e-9)
+    np.testing.assert_allclose(back.energy, in_model.energy, rtol=1e-4, atol=1e-4 * in_model.energy.max())
+    other = simulate(_recording(model, raise_m=0.01), model, modes=20, backend="numpy")  # another fit
+    assert not np.allclose(other.model.mesh.points, in_speaker.model.mesh.points)
+    comparison = Comparison(in_speaker, other, "absolute")
+    assert comparison.same_mesh
+    assert np.isfinite(comparison.difference(250, 250)).all()
+
+
+def test_an_implausible_placed_size_is_warned_about(model, caplog):
+    """The synthetic speaker is 1/1.15 of the bar: placed by the alignment, fine; a speaker whose rest sensors
+    lie twice as far apart makes an 8x tongue, which is said, with the option that keeps the model's size."""
+    import logging
+
+    from tests.sim.test_simulate import Recording
+
+    recording = _recording(model)
+    with caplog.at_level(logging.WARNING, logger="tonguevis"):
+        simulate(recording, model, modes=20, backend="numpy")
+    assert "times the generic one's volume" not in caplog.text
+    wide = Recording(rate=recording.rate, times=recording.times,
+                     sensors={k: 2.3 * v for k, v in recording.sensors.items()}, metadata=dict(recording.metadata))
+    with caplog.at_level(logging.WARNING, logger="tonguevis"):
+        motion = simulate(wide, model, modes=20, backend="numpy")
+    assert "8.0 times the generic one's volume" in caplog.text and "--tongue-size 1" in caplog.text
+    assert motion.metadata["fit"]["model_volume_cm3"] == pytest.approx(8 * 1e6 * model.rest_volume, rel=1e-6)

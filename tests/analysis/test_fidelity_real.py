@@ -24,8 +24,8 @@ def runs():
 
     rec = read_recording(shared_file("ema", "optispeech", "009_OSN12_Tah_withFb_natural_HR.tsv"))
     model = TongueModel.default()
-    default = validate(rec, model, quasi_static=False)
-    paper = validate(rec, model, quasi_static=False, sensor_stiffness=None)
+    default = validate(rec, model, quasi_static=False, frame="model")  # the figures of docs/validation.md: model mm
+    paper = validate(rec, model, quasi_static=False, sensor_stiffness=None, frame="model")
     return default, paper
 
 

@@ -8,9 +8,10 @@ k-th production of one recording is laid over the k-th of the other, so
 syllables line up whatever their durations.  On absolute time instead,
 frames are matched by their times.
 
-Both motions are already in the model frame (each recording aligned onto the
-model), so when they share a model the per-node distance between the two
-shapes at matched frames is the difference a clinician looks at.
+Both motions are on one tongue model: in the model frame (each recording aligned
+onto it) or each placed in its own speaker, B's deformation then carried onto A's
+placement (:func:`tonguevis.sim.placement.carried`), so the per-node distance
+between the two shapes at matched frames is the difference a clinician looks at.
 """
 
 from __future__ import annotations
@@ -159,6 +160,14 @@ class Comparison:
             raise TonguevisError(f"compare mode must be 'production' or 'absolute', got {self.mode!r}")
         self._knots = (production_time_map(self.productions_a, self.productions_b)
                        if self.mode == "production" else None)
+        # In the speaker frame each recording places the tongue in its own speaker: B's deformation is
+        # compared on A's placement (tonguevis.sim.placement.carried), node by node.
+        from tonguevis.sim.patches import global_part
+        from tonguevis.sim.placement import carried, same_source
+
+        model_a = global_part(self.motion_a)[0]
+        if not self.same_mesh and same_source(model_a, self.motion_b.model):
+            self.motion_b = carried(self.motion_b, model_a)
 
     @property
     def same_mesh(self) -> bool:

@@ -100,7 +100,7 @@ def validate(
     progress: ProgressCallback | None = None,
     sensor_patches: float | None | str = None,
     frame: str = "speaker",
-    tongue_size: float | None = 1.0,
+    tongue_size: float | None = None,
 ) -> ValidationResult:
     """Leave-one-sensor-out validation of ``model`` (default: the shipped tongue) on ``recording``.
 

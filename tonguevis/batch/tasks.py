@@ -167,8 +167,12 @@ def _motion(task: Task, manifest: dict, rec, model, save: bool):
 
     path = task.folder / store.MOTION
     if not save and store.step_current(manifest, "simulate", task.keys["simulate"], task.folder):
+        from tonguevis.sim.placement import placed_model_of
+
         motion = Motion.load(path)
-        motion.model = model  # the same model (the key says so), with its caches
+        placed = placed_model_of(motion.model)
+        # the same model (the key says so), with its caches; placed in the speaker as the saved one was
+        motion.model = model if placed is None else model.placed(placed.placement, placed.keep_frequencies)
         return motion
     motion = simulate_recording(rec, model, task.settings.run_settings())
     if save:

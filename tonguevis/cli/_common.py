@@ -152,11 +152,12 @@ def add_frame_arguments(parser: argparse.ArgumentParser) -> None:
                         help="simulate in the generic tongue's frame and millimetres, the speaker scaled onto it "
                              "(the paper's way); default: the model placed in the speaker, every figure in the "
                              "speaker's millimetres")
-    parser.add_argument("--tongue-size", type=_tongue_size_arg, default=1.0, metavar="X|alignment",
-                        help="the speaker's tongue as a multiple of the model's (default 1, the generic adult "
-                             "tongue, turned and moved so the rest sensors lie on it); 'alignment': the size the "
-                             "rest sensors' fit onto the model's nodes implies (often far too large: the coils' "
-                             "layout, not the tongue)")
+    parser.add_argument("--tongue-size", type=_tongue_size_arg, default=None, metavar="X|alignment",
+                        help="the speaker's tongue as a multiple of the model's (1: the generic adult tongue, "
+                             "turned and moved so the rest sensors lie on its surface); default 'alignment': the "
+                             "size the rest sensors' fit onto the model's nodes implies (the same motion as "
+                             "--model-frame in the speaker's units; far too large when the coils sit further apart "
+                             "than the model's placement rule, which is warned about)")
 
 
 def _tongue_size_arg(text: str):
@@ -173,7 +174,7 @@ def _tongue_size_arg(text: str):
 
 def frame_options(args) -> dict:
     """``frame`` and ``tongue_size`` of :func:`tonguevis.sim.simulate` from ``--model-frame``/``--tongue-size``."""
-    return {"frame": getattr(args, "frame", "speaker"), "tongue_size": getattr(args, "tongue_size", 1.0)}
+    return {"frame": getattr(args, "frame", "speaker"), "tongue_size": getattr(args, "tongue_size", None)}
 
 
 def _patch_radius_arg(text: str):

@@ -79,8 +79,11 @@ class CompareMixin:
         run = self.state.run_settings.replace(modes=settings["modes"], warping=settings["warping"],
                                               rest=session.given_rest)
 
+        primary = self.state.session_of("primary")
+        onto = getattr(getattr(primary, "motion", None), "model", None)  # B drawn on A's placed tongue
+
         def work(progress):
-            return simulate_motion(recording, run, model, progress=progress)
+            return simulate_motion(recording, run, model, progress=progress, onto=onto)
 
         def done(result) -> None:
             if self.state.session_of("compare") is not session:

@@ -154,7 +154,9 @@ class Motion:
 
         placed = placed_model_of(model)
         if placed is not None:  # placed in a speaker: the source mesh and the move, so load derives the modes
-            meta["placement"] = {"matrix": placed.placement.matrix.tolist(), "keep_frequencies": placed.keep_frequencies,
+            move = placed.placement  # its parts as they are: the loaded mesh then equals this one bit for bit
+            meta["placement"] = {"matrix": move.matrix.tolist(), "scale": move.scale, "rotation": move.rotation.tolist(),
+                                 "translation": move.translation.tolist(), "keep_frequencies": placed.keep_frequencies,
                                  "source_material": placed.source.material.as_dict()}
         def write(tmp):
             with open(tmp, "wb") as fh:
@@ -204,9 +206,12 @@ class Motion:
         if placement is not None:  # a model placed in the speaker: the shipped modes (cache), moved
             from tonguevis.preprocess.alignment import SimilarityTransform
 
-            matrix = np.asarray(placement["matrix"], dtype=np.float64)
-            scale = float(np.cbrt(np.linalg.det(matrix[:3, :3])))
-            move = SimilarityTransform(scale, matrix[:3, :3] / scale, matrix[:3, 3])
+            if "scale" in placement:
+                move = SimilarityTransform(placement["scale"], placement["rotation"], placement["translation"])
+            else:  # the 4x4 matrix alone
+                matrix = np.asarray(placement["matrix"], dtype=np.float64)
+                scale = float(np.cbrt(np.linalg.det(matrix[:3, :3])))
+                move = SimilarityTransform(scale, matrix[:3, :3] / scale, matrix[:3, 3])
             source = TongueModel(TetMesh(arrays["source_points"], arrays["tets"], metadata={"file": str(path)}),
                                  landmarks, Material(**placement["source_material"]))
             model = source.placed(move, keep_frequencies=placement["keep_frequencies"])

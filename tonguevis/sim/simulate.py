@@ -46,7 +46,7 @@ def simulate(
     preview_seconds: float = 20.0,
     sensor_patches: float | None | str = None,
     frame: str = "speaker",
-    tongue_size: float | None = 1.0,
+    tongue_size: float | None = None,
 ) -> Motion:
     """Drive ``model`` (default: our shipped tongue) with ``recording``.
 
@@ -90,10 +90,11 @@ def simulate(
         model's millimetres).  The two are the same motion seen through the alignment (lengths
         differ by its scale) when ``tongue_size`` is None; ``metadata["frame"]`` and
         ``metadata["fit"]`` say which and how well.
-    tongue_size : in the speaker frame, the speaker's tongue as a multiple of the model's: 1 (default,
-        the generic adult tongue), the rest sensors fitted onto its upper surface; None: the size the
-        rest alignment implies (1/s, 4-6.5 times the volume on the Opti-Speech speaker, whose coils sit
-        further apart than the paper's rule; :func:`tonguevis.sim.placement.surface_fit`).
+    tongue_size : in the speaker frame, None (default): the size the rest alignment implies (1/s: the
+        model-frame motion exactly, in the speaker's units; 4.4-6.6 times the generic volume on the
+        Opti-Speech speaker, whose coils sit further apart than the paper's rule, which is said);
+        a number: the speaker's tongue as that multiple of the model's (1: the generic adult tongue),
+        the rest sensors fitted onto its upper surface (:func:`tonguevis.sim.placement.surface_fit`).
 
     preview : called once, from the simulating thread, with the :class:`Motion` of the first
         ``preview_seconds`` s (a little more: whole segments) as soon as they are final, before
@@ -456,7 +457,7 @@ def shipped_tongue(model: TongueModel) -> bool:
 
 def placed_palate(recording: Recording, palate, model: TongueModel | None = None, landmarks: str = "speaker",
                   rest_interval: RestChoice | tuple[float, float] | None = None, smooth_window: int | None = None,
-                  frame: str = "speaker", tongue_size: float | None = 1.0):
+                  frame: str = "speaker", tongue_size: float | None = None):
     """The palate as :func:`simulate` places it for ``recording`` on ``model`` (unplaced, as given to
     :func:`simulate`): (surface in the motion's ``frame``, raised by m).
 

@@ -40,8 +40,9 @@ class RunSettings:
     backend : "warp" (compiled frame loop) or "numpy" (the reference).
     frame : "speaker" (the model placed in the speaker: every figure in the speaker's mm) or "model"
         (the speaker scaled onto the generic tongue, the paper's way); :mod:`tonguevis.sim.placement`.
-    tongue_size : in the speaker frame, the tongue as a multiple of the model's (1: the generic adult
-        tongue, fitted to the rest sensors), None: the size the rest alignment implies.
+    tongue_size : in the speaker frame, None: the size the rest alignment implies (the model-frame
+        motion seen in the speaker's units); a multiple of the model's (1: the generic adult tongue,
+        the rest sensors fitted onto it).
     """
 
     mesh: str | None = None
@@ -55,7 +56,7 @@ class RunSettings:
     palate: str | None = None
     backend: str = "warp"
     frame: str = "speaker"
-    tongue_size: float | None = 1.0
+    tongue_size: float | None = None
 
     def __post_init__(self) -> None:
         from tonguevis.sensor_stiffness import sensor_stiffness_value

@@ -109,7 +109,7 @@ class Simulated:
 
 @verbose
 def simulate_motion(recording, settings: RunSettings | None = None, model=None, *,
-                    progress: ProgressCallback | None = None, preview=None, **changes: Any) -> Simulated:
+                    progress: ProgressCallback | None = None, preview=None, onto=None, **changes: Any) -> Simulated:
     """Simulate ``recording`` with ``settings`` on ``model`` (None: built from the settings); returns a
     :class:`Simulated`.  ``changes`` override fields of ``settings`` (``rest=``, ``modes=``...).
 
@@ -118,6 +118,8 @@ def simulate_motion(recording, settings: RunSettings | None = None, model=None, 
     palate, drawn only).  The rest is the settings' when the user gave one, else found as every
     front end finds it (:func:`simulate_recording`).
     ``progress(done, total, message)`` may raise :class:`tonguevis.errors.Cancelled`.
+    ``onto``: a model placed in another speaker (e.g. recording A's, to compare): the motion is carried onto
+    it and drawn there (:func:`tonguevis.sim.placement.carried`; its palate is then A's generic one).
     ``preview(simulated)``: called once, on this thread, with a :class:`Simulated` of the recording's first
     seconds as soon as they are final (:func:`tonguevis.sim.simulate`'s preview; a long recording is shown
     while the rest simulates; not called for a short one, nor with a palate).
@@ -137,6 +139,13 @@ def simulate_motion(recording, settings: RunSettings | None = None, model=None, 
 
         options["preview"] = first_seconds
     motion = simulate_recording(recording, model, settings, progress=staged(progress, 0, 2, "simulating"), **options)
+    if onto is not None and getattr(onto, "mesh", None) is not None:
+        import numpy as np
+
+        from tonguevis.sim.placement import carried, same_source
+
+        if same_source(onto, motion.model) and not np.allclose(onto.mesh.points, motion.model.mesh.points):
+            motion, palate = carried(motion, onto), None
     shown = shown_palate(recording, motion, model, palate)
     frames = MotionFrames(motion, progress=staged(progress, 1, 2, "reconstructing frames"))
     return Simulated(model, motion, frames, palate, shown)
