@@ -57,7 +57,7 @@ class LiveStep:
     """What one frame gave.
 
     surface : (k, 3) float32 m, the surface nodes' positions (``LiveSimulator.surface_nodes`` order;
-        a view on a buffer the next step overwrites: copy to keep).
+        a view on a buffer the next step overwrites: copy to keep); None when not reconstructed.
     sensor_points : (S, 3) float64 m, the driving sensors' measured positions in the model's frame
         (each sensor's node at rest plus its displacement), NaN where missing.
     corrected : (A, 3) float64 m, every slot head-corrected (the stream's frame, NaN where missing),
@@ -66,7 +66,7 @@ class LiveStep:
     timings : stage -> seconds ("correct", "drive", "integrate", "reconstruct").
     """
 
-    surface: np.ndarray
+    surface: np.ndarray | None
     sensor_points: np.ndarray
     corrected: np.ndarray
     q: np.ndarray
@@ -287,6 +287,7 @@ class LiveSimulator:
         self._surface = np.empty((k, 3), dtype=self.dtype)
         self.sensor_rest_nodes = model.mesh.points[prep.nodes]
         self.driving_names = list(prep.names)
+        self.last_corrected = self._head_correct_many(positions[-1:])[0]  # until the first step
         self.ready = True
         self.frames_done = 0
 
@@ -306,8 +307,11 @@ class LiveSimulator:
             out[ok] = np.einsum("nij,nsj->nsi", r, positions[ok]) + shift[:, None]
         return out
 
-    def step(self, positions_mm: np.ndarray) -> LiveStep:
-        """Simulate the next frame from its raw positions (S_all, 3) mm (NaN = missing); see :class:`LiveStep`."""
+    def step(self, positions_mm: np.ndarray, reconstruct: bool = True) -> LiveStep:
+        """Simulate the next frame from its raw positions (S_all, 3) mm (NaN = missing); see :class:`LiveStep`.
+
+        reconstruct : False skips the surface (``surface`` None): a frame simulated (the dynamics need
+        every frame at its step) but not drawn, because a newer one came with it."""
         if not self.ready:
             raise LiveSimulationError("no rest yet: take the rest (a still moment) before simulating")
         from tonguevis.sim.constrained import compliant_targets
@@ -337,9 +341,10 @@ class LiveSimulator:
         result = self.integrator.advance(targets[None, None], compliance[None, None])[0]
         q = result.q[0]
         t3 = clock()
-        surface = self.reconstruct(q)
+        surface = self.reconstruct(q) if reconstruct else None
         t4 = clock()
         self.frames_done += 1
+        self.last_corrected = corrected
         return LiveStep(surface, self.sensor_rest_nodes + displacement, corrected, q, jaw_offset,
                         {"correct": t1 - t0, "drive": t2 - t1, "integrate": t3 - t2, "reconstruct": t4 - t3})
 
@@ -364,6 +369,10 @@ class LiveSimulator:
         else:
             np.add(lin, self.rest_surface, out=self._surface)
         return self._surface
+
+    def sensor_points_in_view(self, step: LiveStep) -> np.ndarray:
+        """(S, 3) m, the driving sensors where the view draws them: with the tongue, carried by the jaw."""
+        return step.sensor_points + step.jaw_offset
 
     def tip_position(self, step: LiveStep) -> np.ndarray | None:
         """(3,) m, the tongue tip sensor's (TT, else the first driving sensor's) corrected position in the

@@ -1,0 +1,196 @@
+"""The live window against the replay server: frames drawn, the rest, targets coloured by accuracy, sweeps
+saved and readable, a dropped connection reconnected, a malformed stream survived."""
+
+from __future__ import annotations
+
+import socket
+import struct
+import threading
+
+import numpy as np
+import pytest
+
+from tonguevis.paths import DEMO_RECORDING
+
+pytestmark = pytest.mark.timeout(180)
+
+
+@pytest.fixture(scope="module")
+def demo():
+    from tonguevis.workflows import open_recording
+
+    return open_recording(DEMO_RECORDING, audio=False, labels=False)
+
+
+@pytest.fixture
+def live(qtbot, tmp_path):
+    """A function making a LiveWindow on a source (closed at the end of the test)."""
+    from tonguevis.gui.live_window import LiveWindow
+
+    windows = []
+
+    def make(source, **options):
+        window = LiveWindow(source, profiles_root=tmp_path / "profiles", **options)
+        window.quiet = True
+        qtbot.addWidget(window)
+        window.show()
+        windows.append(window)
+        return window
+
+    yield make
+    for window in windows:
+        window.close_source()
+
+
+def wavefront(port: int, **options):
+    from tonguevis.live.source import WaveFrontSource
+
+    return WaveFrontSource("127.0.0.1", port, **options)
+
+
+def test_draws_takes_rest_colours_targets_and_saves_a_sweep(qtbot, live, demo, tmp_path):
+    from tonguevis.live.server import ReplayServer
+    from tonguevis.live.targets import ReplayTarget, StaticTarget, accuracy_colour
+    from tonguevis.workflows import open_recording
+
+    with ReplayServer(demo, loop=True) as server:
+        window = live(wavefront(server.port))
+        # The rest is taken by itself from the stillest half second of the first 3 s.
+        qtbot.waitUntil(lambda: window.simulator is not None, timeout=60000)
+        assert "stillest" in window.rest_label.text() and "TT, TD, TL, TR" in window.rest_label.text()
+        qtbot.waitUntil(lambda: window.surface_mesh is not None and window.frames_drawn > 20, timeout=20000)
+        first = np.array(window.surface_mesh.points)
+        drawn = window.frames_drawn
+        qtbot.waitUntil(lambda: window.frames_drawn > drawn + 30, timeout=20000)
+        assert np.abs(np.array(window.surface_mesh.points) - first).max() > 1e-4  # the tongue moves
+        assert len(window.surface_mesh.points) == len(window.simulator.surface_nodes)
+        assert len(window.midsagittal.segments) > 20  # the section is drawn
+        # Every frame is simulated; those not drawn are counted, none piles up.
+        assert window.frames_drawn + window.dropped_frames + window.skipped_frames == window.frames_received
+        assert window.source._queue.qsize() < 20
+        # The sensors drawn sit where the stream puts them: TT's node carried by its displacement is within
+        # the rest fit's residual of TT's head-corrected position.
+        sim = window.simulator
+        tt = sim.driving_names.index("TT")
+        assert sim.fit["residual_max_mm"] < 10
+        # "Take rest now": the last half second.
+        assert window.take_rest_now()
+        assert "taken" in window.rest_label.text()
+        qtbot.waitUntil(lambda: window.surface_mesh is not None, timeout=10000)
+
+        # A static target at the tip's rest position: the /ta/ train takes the tip away from it and back,
+        # so the accuracy and the sphere's colour go through low and high values.
+        rest_tip = window.simulator.prep.aligned_rest[tt]
+        window.add_target(StaticTarget(rest_tip, 0.004, sensor="TT", name="rest tip"))
+        assert window.target_list.count() == 1
+        seen = []
+
+        def coloured() -> bool:
+            if window.target_actors and 0 in window.accuracy:
+                seen.append((window.accuracy[0], tuple(window.target_actors[0].prop.color)))
+            values = [a for a, _ in seen if np.isfinite(a)]
+            return bool(values) and min(values) < 20 and max(values) > 80
+
+        qtbot.waitUntil(coloured, timeout=30000)
+        for accuracy, colour in seen[-20:]:
+            np.testing.assert_allclose(colour[:3], accuracy_colour(accuracy), atol=0.6 / 255)  # 8-bit colours
+        assert "rest tip" in window.target_list.item(0).text()
+        # Static at the tip now, oscillating, following: added and removed from the panel's buttons.
+        window.add_static_target()
+        window.add_oscillating_target()
+        window.add_following_target()
+        assert [t.kind for t in window.targets] == ["static", "static", "oscillating", "following"]
+        window.target_list.setCurrentRow(2)
+        window.remove_target()
+        assert [t.kind for t in window.targets] == ["static", "static", "following"]
+        # A production replayed as a target with its ghost tongue (the template's sensors, drawn joined).
+        window.add_target(ReplayTarget.from_recording(demo, "TT", 0.004, start_s=5.0, end_s=6.0))
+        qtbot.waitUntil(lambda: window.ghost_mesh is not None, timeout=10000)
+        assert len(window.ghost_mesh.points) >= 4 and len(window.midsagittal.ghost) >= 4
+
+        # A sweep: every frame from Start to Stop, saved in the profile's folder, readable by every command.
+        window.sweep_name.setText("ta train")
+        assert window.start_sweep()
+        received = window.frames_received
+        qtbot.waitUntil(lambda: window.frames_received > received + 150, timeout=20000)
+        saved = window.stop_sweep()
+        assert saved is not None, window.sweep_label.text()
+        assert saved.folder.parent == tmp_path / "profiles" / "default" / "sweeps"
+        raw = open_recording(saved.folder / "raw.tsv")
+        corrected = open_recording(saved.folder / "head_corrected.tsv")
+        assert raw.n_samples >= 150 and corrected.n_samples == raw.n_samples
+        assert raw.sensor_names == corrected.sensor_names and "TT" in raw.sensor_names
+        accuracy = (saved.folder / "accuracy.csv").read_text().splitlines()
+        assert len(accuracy) == raw.n_samples + 1  # a header, one row per frame
+        assert "saved in" in window.sweep_label.text()
+
+
+def test_a_dropped_connection_is_shown_and_reconnected(qtbot, live, demo):
+    from tonguevis.live.server import Faults, ReplayServer
+
+    with ReplayServer(demo, loop=True, faults=Faults(cut_after=150)) as server:
+        window = live(wavefront(server.port, backoff=0.1), auto_rest=False)
+        qtbot.waitUntil(lambda: window.source.status().reconnects >= 1, timeout=30000)
+        drawn = window.frames_drawn
+        qtbot.waitUntil(lambda: window.frames_drawn > drawn + 50, timeout=20000)  # drawing again
+        window._update_status()
+        text = window.connection_label.text()
+        assert text.startswith("streaming") and "reconnection" in text
+        assert any("closed by the device" in e for e in window.source.status().errors)
+
+
+def _garbage_server():
+    """A TCP server that answers anything with a packet whose size field is absurd (4 GB), then closes."""
+    listener = socket.create_server(("127.0.0.1", 0))
+    listener.settimeout(10)
+
+    def serve():
+        for _ in range(3):
+            try:
+                conn, _ = listener.accept()
+            except OSError:
+                return
+            with conn:
+                conn.sendall(struct.pack(">II", 0xFFFFFFF0, 3) + b"\x00" * 64)
+                try:
+                    conn.recv(1024)
+                except OSError:
+                    pass
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    return listener
+
+
+def test_a_malformed_stream_is_an_error_shown_not_a_crash(qtbot, live):
+    listener = _garbage_server()
+    try:
+        window = live(wavefront(listener.getsockname()[1], backoff=0.05, max_retries=1))
+        qtbot.waitUntil(lambda: window.source.status().state == "failed", timeout=30000)
+        window._update_status()
+        assert window.connection_label.text().startswith("failed")
+        assert any("malformed" in e for e in window.source.status().errors)
+        assert window.frames_drawn == 0 and window.isVisible()
+        # Nothing to take a rest or a target from: said, not raised.
+        assert not window.take_rest_now()
+        window.add_static_target()
+        assert window.targets == [] and "no frame" in window.statusBar().currentMessage()
+    finally:
+        listener.close()
+
+
+def test_cannot_connect_is_shown(qtbot, live):
+    from tonguevis.gui.live_window import parse_source
+
+    free = socket.create_server(("127.0.0.1", 0))
+    port = free.getsockname()[1]
+    free.close()  # nothing listens there now
+    window = live(None)
+    window.source_edit.setText(f"127.0.0.1:{port}")
+    window.connect_from_panel()
+    qtbot.waitUntil(lambda: window.source.status().state == "failed", timeout=30000)
+    window._update_status()
+    assert "failed" in window.connection_label.text()
+    window.source_edit.setText("127.0.0.1:http")
+    window.connect_from_panel()
+    assert "port must be a number" in window.statusBar().currentMessage()
+    assert parse_source("[::1]:3031") == ("::1", 3031) and parse_source("host") == ("host", 3030)
