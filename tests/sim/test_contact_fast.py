@@ -134,3 +134,32 @@ def test_simulate_reports_the_same_contact_on_both_backends(demo):
         assert fast[key] == pytest.approx(ref[key], rel=1e-6, abs=1e-9)
     np.testing.assert_allclose(runs[1].penetration, runs[0].penetration, rtol=0, atol=1e-9)
     np.testing.assert_allclose(runs[1].contact_area, runs[0].contact_area, rtol=1e-6, atol=1e-12)
+
+
+@pytest.mark.parametrize("workers", [1, 3])
+def test_compiled_contact_figures_equal_the_reference(demo, workers):
+    """frame_figures on the compiled backend with a palate measures contact on the candidate nodes
+    alone: the same penetration and contact area as the NumPy path over the whole surface (with
+    conflicts excluded), the volume and far field as without a palate (float32 products, 1e-8)."""
+    from tonguevis.sim.figures import ContactProbe, frame_figures
+    from tonguevis.sim.newmark import NewmarkSettings
+    from tonguevis.sim.newmark_kernel import integrate_compiled
+    from tonguevis.sim.simulate import drive_schedule
+
+    rec, model, prep, basis, phi_s, w_s, context = demo
+    low = context["palate"].transformed(np.eye(3), 1.0, np.array([0.0, 0.0, -0.004]))
+    targets, compliance, _ = drive_schedule(prep.displacement, rec.rate, basis.eigenvalues, phi_s, 20.0)
+    settings = NewmarkSettings(dt=1 / rec.rate, alpha=model.material.alpha, beta=model.material.beta)
+    q = integrate_compiled(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance, rates=False).q
+    candidates = np.asarray(model.dorsal_nodes)  # no palate in the dynamics: the tongue goes into the low one
+    rng = np.random.default_rng(5)
+    conflicts = np.column_stack([rng.integers(0, len(q), 40), rng.integers(0, len(prep.nodes), 40)])
+    near = rng.random((len(candidates), len(prep.nodes))) < 0.2
+    probe = ContactProbe(model.mesh.points, candidates, low, prep.jaw_offset, model.surface_faces, conflicts, near)
+    ref = frame_figures(model, q, True, "numpy", contact=probe, chunk=300, workers=workers)
+    fast = frame_figures(model, q, True, "warp", contact=probe, chunk=300, workers=workers)
+    assert ref.penetration.max() > 1e-3 and (ref.contact_area > 0).sum() > 20  # contact to compare
+    np.testing.assert_allclose(fast.penetration, ref.penetration, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fast.contact_area, ref.contact_area, rtol=1e-10, atol=1e-16)
+    np.testing.assert_allclose(fast.volume_change, ref.volume_change, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(fast.largest_displacement, ref.largest_displacement, rtol=0, atol=1e-8)

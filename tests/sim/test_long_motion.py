@@ -56,8 +56,8 @@ def test_chunked_figures_equal_the_whole_array(demo, workers):
     near = rng.random((len(candidates), len(motion.sensor_nodes))) < 0.2
     probe = ContactProbe(model.mesh.points, candidates, generic_palate(), prep.jaw_offset, model.surface_faces,
                          conflicts, near)
-    chunked = frame_figures(model, motion.q, motion.warping, contact=probe, chunk=7,
-                            workers=workers)  # 7 does not divide F
+    chunked = frame_figures(model, motion.q, motion.warping, "numpy", contact=probe, chunk=7,
+                            workers=workers)  # 7 does not divide F; the compiled path: test_contact_fast.py
 
     assert np.allclose(chunked.volume_change, model.volume_change(full), rtol=0, atol=1e-13)
     exclude = np.zeros((motion.n_frames, len(candidates)), dtype=bool)

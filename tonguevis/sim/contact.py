@@ -355,7 +355,7 @@ TOUCH = 3e-4
 
 def contact_frames(displacements: np.ndarray, points: np.ndarray, candidates: np.ndarray, palate,
                    jaw_offset: np.ndarray, faces: np.ndarray, exclude: np.ndarray | None = None,
-                   touch: float = TOUCH) -> tuple[np.ndarray, np.ndarray]:
+                   touch: float = TOUCH, backend: str = "numpy") -> tuple[np.ndarray, np.ndarray]:
     """Per frame of ``displacements`` (F, n, 3) m: (deepest penetration (F,) m, contact area (F,) m²).
 
     Penetration as :func:`penetration` over the ``candidates`` (exclude : (F, k)
@@ -365,11 +365,17 @@ def contact_frames(displacements: np.ndarray, points: np.ndarray, candidates: np
     tongue into the palate's frame.  One clearance evaluation serves both, and
     any run of frames gives the same values as the whole motion, so a long
     motion is measured chunk by chunk (:func:`tonguevis.sim.figures.frame_figures`).
+    backend : "numpy" (default) or "warp" (the clearances in one compiled pass, the same to 1e-12 m).
     """
     n_frames, n_nodes = displacements.shape[0], len(points)
-    pts = points[candidates][None] + displacements[:, candidates] + jaw_offset[:, None]
-    gap, _ = palate.clearance(pts.reshape(-1, 3))
-    gap = gap.reshape(n_frames, -1)
+    if check_backend(backend) == "warp":
+        from tonguevis.sim.contact_kernel import clearances
+
+        gap, _ = clearances(palate, points[candidates], displacements[:, candidates], jaw_offset)
+    else:
+        pts = points[candidates][None] + displacements[:, candidates] + jaw_offset[:, None]
+        gap, _ = palate.clearance(pts.reshape(-1, 3))
+        gap = gap.reshape(n_frames, -1)
     counted = gap if exclude is None else np.where(exclude, np.nan, gap)
     deepest = np.nanmin(np.where(np.isfinite(counted), counted, np.inf), axis=1) if n_frames else np.zeros(0)
     pen = np.maximum(0.0, -np.where(np.isfinite(deepest), deepest, 0.0))

@@ -11,11 +11,14 @@ one frame's displacement at a time, so :func:`frame_figures` reconstructs
 and drops them: the working set is a few tens of MB whatever the length.  A
 test proves the figures equal to those of the whole array.
 
-Without a palate on the compiled backend (what ``simulate`` runs) a chunk is
-its float32 products Φq and Wq and one compiled pass per frame that warps,
-measures and drops it (:func:`tonguevis.sim.kernels.surface_figures`): 30
-minutes cost 7 s of one core instead of 14 (volume change within 1e-8 and the
-largest displacement within 1e-8 m of the float64 reference).
+On the compiled backend (what ``simulate`` runs) a chunk is its float32
+products Φq and Wq and one compiled pass per frame that warps, measures and
+drops it (:func:`tonguevis.sim.kernels.surface_figures`): 30 minutes cost 7 s
+of one core instead of 14 (volume change within 1e-8 and the largest
+displacement within 1e-8 m of the float64 reference).  With a palate, contact
+is measured on the candidate nodes alone (the only ones that can touch it:
+their float64 displacements, the clearances in one compiled pass), the same
+penetration and contact area as from the whole surface.
 """
 
 from __future__ import annotations
@@ -80,8 +83,8 @@ def frame_figures(model, q: np.ndarray, warping: bool = True, backend: str = "wa
                   contact: ContactProbe | None = None, chunk: int = CHUNK_FRAMES,
                   progress: ProgressCallback | None = None, workers: int | None = None) -> FrameFigures:
     """Volume change, largest surface displacement and (with ``contact``) penetration and contact
-    area of every frame of ``q`` (F, m), reconstructing ``chunk`` frames at a time (float64; the
-    products in float32 without ``contact`` on the "warp" backend, see the module docstring).
+    area of every frame of ``q`` (F, m), reconstructing ``chunk`` frames at a time (float64; on the
+    "warp" backend the volume's and largest displacement's products in float32, see the module docstring).
 
     Only the surface nodes are reconstructed (41 % of the shipped tongue's): the volume is the
     flux through the surface, contact happens there, and the far field a clinician sees is there.
@@ -114,17 +117,31 @@ def frame_figures(model, q: np.ndarray, warping: bool = True, backend: str = "wa
         points, candidates, faces = contact.points[surface], local[contact.candidates], local[contact.faces]
         if (candidates < 0).any() or (faces < 0).any():
             raise ValueError("frame_figures: contact candidates and faces must lie on the surface")
+        if backend == "warp":
+            # Only candidates can touch the palate: their displacements (float64) are all contact needs,
+            # the triangles of three candidates all the area can come from (renumbered among them).
+            among = np.full(len(contact.points), -1, dtype=np.int64)
+            among[contact.candidates] = np.arange(len(contact.candidates))
+            cand_faces = among[contact.faces]
+            cand_faces = cand_faces[np.all(cand_faces >= 0, axis=1)]
+            cand_points = contact.points[contact.candidates]
 
     def measure(start: int):
         from tonguevis.sim.contact import contact_frames
 
         stop = min(start + chunk, n_frames)
-        if contact is None and backend == "warp":  # warped, measured and dropped in one compiled pass
+        if backend == "warp":  # warped, measured and dropped in one compiled pass
             from tonguevis.sim.kernels import surface_figures
 
             lin, w = model.modal_fields(q[start:stop], surface, warping, dtype=np.float32)
             volume, largest = surface_figures(lin, w, surface_points, surface_faces, warping)
-            return start, stop, [volume / model.rest_volume - 1.0, largest]
+            out = [volume / model.rest_volume - 1.0, largest]
+            if contact is not None:
+                d = model.displacements(q[start:stop], warping=warping, backend=backend, nodes=contact.candidates)
+                out += contact_frames(d, cand_points, np.arange(len(cand_points)), contact.palate,
+                                      contact.jaw_offset[start:stop], cand_faces, contact.exclude(start, stop),
+                                      backend=backend)
+            return start, stop, out
         d = model.displacements(q[start:stop], warping=warping, backend=backend, nodes=surface)
         out = [model.volume_change(d, backend=backend, nodes=surface),
                np.sqrt(np.einsum("fnc,fnc->fn", d, d).max(axis=1))]
