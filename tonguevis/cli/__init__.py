@@ -18,6 +18,7 @@ import sys
 COMMANDS: list[tuple[str, str, str]] = [
     ("view", "view", "open the desktop app on a recording (default: the demo)"),
     ("info", "info", "describe a recording: format, rate, sensors, audio, labels"),
+    ("formats", "formats", "the recording formats tonguevis reads and everything it writes"),
     ("syllables", "syllables", "find the CV productions of a recording"),
     ("convert", "convert", "convert a recording to another format (BVH, CSV, NDI Wave TSV)"),
     ("simulate", "simulate", "drive the tongue model with a recording"),
@@ -30,6 +31,7 @@ COMMANDS: list[tuple[str, str, str]] = [
     ("batch", "batch", "a whole corpus: simulate, energy, segment, validate; resumable, in parallel"),
     ("stream", "stream", "serve a recording over the NDI WaveFront real-time protocol (a replay server)"),
     ("record", "record", "record a live stream (NDI WaveFront) as an NDI Wave TSV, written as it arrives"),
+    ("live", "live", "the live view: the tongue simulated from an articulograph's stream, targets, sweeps"),
 ]
 
 

@@ -178,4 +178,28 @@ def ask_paraview(window):
                       f"saved {path} and its .h5 ({frame} frame)", path)
 
 
-__all__ = ["TonguevisError", "ask_paraview", "ask_video", "ask_vtk", "atomic_save_image", "grab_window"]
+def ask_productions(window, key: str):
+    """File ▸ Export ▸ Productions (CSV) or (TextGrid): the primary recording's productions as they are
+    now (corrected ones included) into a file the user names.  Returns the path written, or None."""
+    from tonguevis.workflows.exports import export_format, write_export
+
+    fmt = export_format(key)
+    session = window.session
+    if session is None or getattr(session, "production_table", None) is None:
+        window.show_error("Nothing to export", "open a recording with productions first")
+        return None
+    default = f"{Path(session.name).stem}_productions{fmt.suffix}"
+    path, _ = QFileDialog.getSaveFileName(window, f"Save the {fmt.title}", default, f"{fmt.title} (*{fmt.suffix})")
+    if not path:
+        return None
+    try:
+        written = write_export(key, session, path)
+    except (TonguevisError, OSError) as exc:
+        window.show_error(f"{fmt.title} not saved", str(exc), path)
+        return None
+    window.state.set_status(f"saved {written}", window)
+    return written
+
+
+__all__ = ["TonguevisError", "ask_paraview", "ask_productions", "ask_video", "ask_vtk", "atomic_save_image",
+           "grab_window"]

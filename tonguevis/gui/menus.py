@@ -27,16 +27,14 @@ class MenusMixin:
         self._action(file_menu, "Open &demo", self.open_demo)
         self._action(file_menu, "&Compare with another recording…", self.ask_compare)
         self._action(file_menu, "S&top comparing", self.stop_comparing)
+        self._action(file_menu, "Connect to &live source…", self.open_live_window)
         file_menu.addSeparator()
         self._action(file_menu, "Load &palate…", self.ask_load_palate)
         self._action(file_menu, "&Fit palate from traces…", self.ask_fit_palate)
         self._action(file_menu, "Use the &generic palate (contact on)", self.use_generic_palate)
         self._action(file_menu, "&No palate (contact off)", self.use_no_palate)
         file_menu.addSeparator()
-        self._action(file_menu, "Export &screenshot (PNG)…", self.ask_export_screenshot)
-        self._action(file_menu, "Export &video (MP4)…", self.ask_export_video)
-        self._action(file_menu, "Export motion for &ParaView (XDMF)…", self.ask_export_paraview)
-        self._action(file_menu, "Export motion as VTK &series (one file per frame)…", self.ask_export_vtk)
+        self._build_export_menu(file_menu.addMenu("&Export"))
         file_menu.addSeparator()
         self._action(file_menu, "&Quit", self.close, QKeySequence.StandardKey.Quit)
         view = bar.addMenu("&View")
@@ -85,10 +83,43 @@ class MenusMixin:
         if self.session is not None:
             self._simulate(self.session)
 
+    def _build_export_menu(self, menu) -> None:
+        """File ▸ Export: one item per row of the export table (tonguevis.workflows.exports), the same
+        table ``tonguevis formats`` prints; each item's tip says what the file holds and the command
+        that writes it."""
+        from tonguevis.workflows.exports import EXPORTS
+
+        handlers = {"png": self.ask_export_screenshot, "mp4": self.ask_export_video,
+                    "xdmf": self.ask_export_paraview, "vtk": self.ask_export_vtk,
+                    "csv": lambda: self.ask_export_productions("csv"),
+                    "textgrid": lambda: self.ask_export_productions("textgrid")}
+        self.export_actions = {}
+        for fmt in EXPORTS:
+            action = self._action(menu, f"{fmt.title}…", handlers[fmt.key])
+            action.setToolTip(f"{fmt.holds}\n(command line: {fmt.command})")
+            action.setStatusTip(fmt.holds)
+            self.export_actions[fmt.key] = action
+        menu.setToolTipsVisible(True)
+
+    def ask_export_productions(self, key: str) -> None:
+        from tonguevis.gui.export import ask_productions
+
+        ask_productions(self, key)
+
     def ask_export_paraview(self) -> None:
         from tonguevis.gui.export import ask_paraview
 
         self.export_job = ask_paraview(self) or self.export_job
+
+    def open_live_window(self):
+        """File ▸ Connect to live source…: the live view (:mod:`tonguevis.gui.live_window`) in a window of its
+        own, to connect from its panel (a device, or ``tonguevis stream FILE``)."""
+        from tonguevis.gui.live_window import LiveWindow
+
+        window = LiveWindow()
+        self._live_windows = [w for w in getattr(self, "_live_windows", []) if w.isVisible()] + [window]
+        window.show()
+        return window
 
     def _action(self, menu, text: str, slot, shortcut=None) -> QAction:
         action = QAction(text, self)
