@@ -220,5 +220,5 @@ def test_an_implausible_placed_size_is_warned_about(model, caplog):
                      sensors={k: 2.3 * v for k, v in recording.sensors.items()}, metadata=dict(recording.metadata))
     with caplog.at_level(logging.WARNING, logger="tonguevis"):
         motion = simulate(wide, model, modes=20, backend="numpy")
-    assert "8.0 times the generic one's volume" in caplog.text and "--tongue-size 1" in caplog.text
+    assert "8.0 times the generic one's volume" in caplog.text and "--tongue-size 1" in caplog.text and "tongue_size=1" in caplog.text
     assert motion.metadata["fit"]["model_volume_cm3"] == pytest.approx(8 * 1e6 * model.rest_volume, rel=1e-6)

@@ -198,8 +198,8 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
             logging.getLogger("tonguevis").warning(
                 "%s: placed in the speaker as the rest alignment scales it (%.2f), the tongue is %.1f times the "
                 "generic one's volume: the rest sensors sit %s than the model's placement rule, which need not "
-                "be the tongue's size; --tongue-size 1 (tongue_size=1.0) keeps the generic size, the sensors "
-                "fitted onto its surface", recording.metadata.get("file", "recording"), placement.scale, volume,
+                "be the tongue's size; tongue_size=1 ('tonguevis simulate/validate --tongue-size 1') keeps the "
+                "generic size, the sensors fitted onto its surface", recording.metadata.get("file", "recording"), placement.scale, volume,
                 "further apart" if volume > 1 else "closer together")
         model = model.placed(placement, keep_frequencies=keep_frequencies)
         linear = placement.scale * placement.rotation
