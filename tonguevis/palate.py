@@ -250,7 +250,8 @@ def _height_field(points, tris, step, metadata) -> PalateSurface:
     """Lowest z of the triangles over each grid point (x, y).
 
     The grid is regular, so each triangle visits only the grid points of its bounding box
-    (index ranges, not a search of the whole grid)."""
+    (index ranges, not a search of the whole grid); all triangles' boxes at once (the shipped
+    palate's 0.2 s loop over its triangles took longer than a whole simulation)."""
     lo, hi = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
     x = np.arange(lo[0], hi[0] + step / 2, step)
     y = np.arange(lo[1], hi[1] + step / 2, step)
@@ -260,21 +261,23 @@ def _height_field(points, tris, step, metadata) -> PalateSurface:
     box_hi = np.maximum(np.maximum(a[:, :2], b[:, :2]), c[:, :2])
     first = np.maximum(np.ceil((box_lo - lo) / step - 1e-9).astype(np.int64), 0)
     last = np.minimum(np.floor((box_hi - lo) / step + 1e-9).astype(np.int64), [len(x) - 1, len(y) - 1])
-    for t in range(len(tris)):
-        if first[t, 0] > last[t, 0] or first[t, 1] > last[t, 1]:
-            continue
-        v0, v1 = b[t, :2] - a[t, :2], c[t, :2] - a[t, :2]
-        den = v0[0] * v1[1] - v0[1] * v1[0]
-        if abs(den) < 1e-18:
-            continue
-        gx, gy = np.meshgrid(x[first[t, 0]:last[t, 0] + 1], y[first[t, 1]:last[t, 1] + 1])
-        wx, wy = gx - a[t, 0], gy - a[t, 1]
-        u = (wx * v1[1] - wy * v1[0]) / den
-        v = (v0[0] * wy - v0[1] * wx) / den
-        inside = (u >= -1e-9) & (v >= -1e-9) & (u + v <= 1 + 1e-9)
-        zz = np.where(inside, a[t, 2] + u * (b[t, 2] - a[t, 2]) + v * (c[t, 2] - a[t, 2]), np.inf)
-        block = z[first[t, 1]:last[t, 1] + 1, first[t, 0]:last[t, 0] + 1]
-        np.minimum(block, zz, out=block)
+    v0, v1 = b[:, :2] - a[:, :2], c[:, :2] - a[:, :2]
+    den = v0[:, 0] * v1[:, 1] - v0[:, 1] * v1[:, 0]
+    # Every (triangle, grid point of its box) pair at once, in runs per triangle.
+    span = np.maximum(last - first + 1, 0)
+    count = np.where(np.abs(den) < 1e-18, 0, span[:, 0] * span[:, 1])
+    tri = np.repeat(np.arange(len(tris)), count)
+    local = np.arange(len(tri)) - np.repeat(np.cumsum(count) - count, count)
+    ix = first[tri, 0] + local % span[tri, 0]
+    iy = first[tri, 1] + local // span[tri, 0]
+    wx, wy = x[ix] - a[tri, 0], y[iy] - a[tri, 1]
+    dt, w0, w1 = den[tri], v0[tri], v1[tri]
+    u = (wx * w1[:, 1] - wy * w1[:, 0]) / dt
+    v = (w0[:, 0] * wy - w0[:, 1] * wx) / dt
+    inside = (u >= -1e-9) & (v >= -1e-9) & (u + v <= 1 + 1e-9)
+    at = tri[inside]
+    zz = a[at, 2] + u[inside] * (b[at, 2] - a[at, 2]) + v[inside] * (c[at, 2] - a[at, 2])
+    np.minimum.at(z.reshape(-1), iy[inside] * len(x) + ix[inside], zz)
     z = np.where(np.isfinite(z), z, np.nan)
     return PalateSurface(x, y, z, metadata=metadata)
 

@@ -194,3 +194,26 @@ def test_cannot_connect_is_shown(qtbot, live):
     window.connect_from_panel()
     assert "port must be a number" in window.statusBar().currentMessage()
     assert parse_source("[::1]:3031") == ("::1", 3031) and parse_source("host") == ("host", 3030)
+    # A sensor map (name -> NDI Id) names the slots by the ids the device lists, else by their numbers.
+    window.given_names = {"TT": 0, "TD": 2}
+    assert window.slot_names(3) == ["TT", "slot1", "TD"]
+
+
+def test_file_menu_opens_the_live_window(qtbot, window):
+    from tonguevis.gui.live_window import LiveWindow
+
+    actions = {a.text(): a for a in window.menuBar().actions()[0].menu().actions()}
+    actions["Connect to &live source…"].trigger()
+    live_windows = [w for w in window._live_windows if isinstance(w, LiveWindow)]
+    assert len(live_windows) == 1 and live_windows[0].isVisible()
+    assert live_windows[0].source is None and live_windows[0].source_edit.text() == "127.0.0.1:3030"
+    live_windows[0].close()
+
+
+def test_live_command_parses_and_refuses_bad_input(tmp_path):
+    from tonguevis.cli import build_parser, main
+
+    args = build_parser().parse_args(["live", "--source", "127.0.0.1:3031", "--sensors", "paper", "--modes", "40"])
+    assert (args.address, args.sensors, args.modes, args.profile) == ("127.0.0.1:3031", "paper", 40, None)
+    assert main(["live", "--source", "127.0.0.1:http"]) == 2  # a clear one-line error, no window
+    assert main(["live", "--profile", str(tmp_path / "nobody.json")]) == 2

@@ -142,8 +142,8 @@ class LiveWindow(QMainWindow):
     """The live view of ``source`` (a started or unstarted :class:`~tonguevis.live.source.Source`, or None
     to connect from the panel).
 
-    sensor_names : the stream's slot names in slot order (a sensor map's names), used when the
-        source does not tell them.  settings : a :class:`~tonguevis.workflows.settings.RunSettings`
+    sensor_names : the stream's slot names: a list in slot order, or a sensor map (name -> NDI Id);
+        without it the names the device sends (see :meth:`slot_names`).  settings : a :class:`~tonguevis.workflows.settings.RunSettings`
         (default the replay's, with ``modes``); model : the unplaced tongue model.
     profile : a :class:`~tonguevis.live.profiles.Profile` (its targets, offsets; sweeps saved in its
         folder under ``profiles_root``); None: the profile "default" there (made when first saved).
@@ -161,7 +161,8 @@ class LiveWindow(QMainWindow):
         if modes is not None:
             settings = settings.replace(modes=modes)
         self.settings, self.model = settings, model
-        self.given_names = list(sensor_names) if sensor_names else None
+        self.given_names = (dict(sensor_names) if isinstance(sensor_names, dict) else list(sensor_names)) \
+            if sensor_names else None
         self.profiles_root = profiles_root
         self.profile = profile if profile is not None else self._default_profile()
         self.targets = list(self.profile.targets)
@@ -382,12 +383,20 @@ class LiveWindow(QMainWindow):
         self.source = None
 
     def slot_names(self, n_slots: int) -> list[str]:
-        """The stream's slot names: the device's, else those given (sensor map), else the profile's map."""
+        """The stream's slot names: a sensor map given (name -> NDI Id, matched to the ids the device listed,
+        else to the slot numbers) or a list given, else the names the device sent, else the profile's map
+        (name -> slot), else slot0, slot1, ..."""
+        given = self.given_names
+        if isinstance(given, dict) and given:
+            ids = getattr(self.source, "sensor_ids", None)
+            ids = list(ids) if ids and len(ids) == n_slots else list(range(n_slots))
+            by_id = {int(i): str(name) for name, i in given.items()}
+            return [by_id.get(int(i), f"slot{k}") for k, i in enumerate(ids)]
+        if given and len(given) >= n_slots:
+            return [str(n) for n in given[:n_slots]]
         names = getattr(self.source, "sensor_names", None)
         if names and len(names) == n_slots:
             return list(names)
-        if self.given_names and len(self.given_names) >= n_slots:
-            return list(self.given_names[:n_slots])
         if self.profile.sensor_map:
             by_slot = {slot: name for name, slot in self.profile.sensor_map.items()}
             return [by_slot.get(k, f"slot{k}") for k in range(n_slots)]

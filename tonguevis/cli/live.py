@@ -1,0 +1,46 @@
+"""``tonguevis live [--source HOST:PORT]``: the live view of an articulograph's stream (or a replay server's)."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--source", dest="address", metavar="HOST:PORT",
+                        help="the NDI WaveFront real-time server to connect to at once (e.g. 192.168.1.10:3030, or "
+                             "`tonguevis stream FILE` on 127.0.0.1:3030); default: connect from the window")
+    parser.add_argument("--sensors", metavar="MAP",
+                        help="names of the slots: a preset or a JSON file of name -> NDI Id (default: the names the "
+                             "device sends, else the profile's)")
+    parser.add_argument("--profile", metavar="ID",
+                        help="the patient's profile (an id in the profiles folder, or a profile.json): its targets, "
+                             "offsets and sensor map; sweeps are saved in its folder (default: the profile 'default')")
+    parser.add_argument("--palate", metavar="FILE", help="a palate file (`tonguevis palate`) drawn in the views")
+    parser.add_argument("--modes", type=int, default=100, help="vibration modes of the live model (default 100, "
+                                                              "the replay's)")
+
+
+def run(args) -> int:
+    from tonguevis.cli.record import parse_address
+    from tonguevis.gui.app import application, install_error_hook
+    from tonguevis.gui.live_window import LiveWindow
+    from tonguevis.live.source import WaveFrontSource
+    from tonguevis.workflows.settings import RunSettings
+
+    settings = RunSettings(modes=args.modes)  # checks the number of modes before any window opens
+    sensor_map = None
+    if args.sensors:
+        from tonguevis.io.sensor_map import load_sensor_map
+
+        sensor_map = dict(load_sensor_map(args.sensors))
+    profile = None
+    if args.profile:
+        from tonguevis.live.profiles import load_profile
+
+        profile = load_profile(args.profile)
+    source = WaveFrontSource(*parse_address(args.address)) if args.address else None
+    app = application()
+    window = LiveWindow(source, sensor_names=sensor_map, settings=settings, profile=profile, palate=args.palate)
+    install_error_hook(window)
+    window.show()
+    return app.exec()
