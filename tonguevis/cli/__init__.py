@@ -18,6 +18,7 @@ import sys
 COMMANDS: list[tuple[str, str, str]] = [
     ("view", "view", "open the desktop app on a recording (default: the demo)"),
     ("info", "info", "describe a recording: format, rate, sensors, audio, labels"),
+    ("formats", "formats", "the recording formats tonguevis reads and everything it writes"),
     ("syllables", "syllables", "find the CV productions of a recording"),
     ("convert", "convert", "convert a recording to another format (BVH, CSV, NDI Wave TSV)"),
     ("simulate", "simulate", "drive the tongue model with a recording"),

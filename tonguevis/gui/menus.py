@@ -34,10 +34,7 @@ class MenusMixin:
         self._action(file_menu, "Use the &generic palate (contact on)", self.use_generic_palate)
         self._action(file_menu, "&No palate (contact off)", self.use_no_palate)
         file_menu.addSeparator()
-        self._action(file_menu, "Export &screenshot (PNG)…", self.ask_export_screenshot)
-        self._action(file_menu, "Export &video (MP4)…", self.ask_export_video)
-        self._action(file_menu, "Export motion for &ParaView (XDMF)…", self.ask_export_paraview)
-        self._action(file_menu, "Export motion as VTK &series (one file per frame)…", self.ask_export_vtk)
+        self._build_export_menu(file_menu.addMenu("&Export"))
         file_menu.addSeparator()
         self._action(file_menu, "&Quit", self.close, QKeySequence.StandardKey.Quit)
         view = bar.addMenu("&View")
@@ -85,6 +82,29 @@ class MenusMixin:
             self.patches_action.setChecked(on)
         if self.session is not None:
             self._simulate(self.session)
+
+    def _build_export_menu(self, menu) -> None:
+        """File ▸ Export: one item per row of the export table (tonguevis.workflows.exports), the same
+        table ``tonguevis formats`` prints; each item's tip says what the file holds and the command
+        that writes it."""
+        from tonguevis.workflows.exports import EXPORTS
+
+        handlers = {"png": self.ask_export_screenshot, "mp4": self.ask_export_video,
+                    "xdmf": self.ask_export_paraview, "vtk": self.ask_export_vtk,
+                    "csv": lambda: self.ask_export_productions("csv"),
+                    "textgrid": lambda: self.ask_export_productions("textgrid")}
+        self.export_actions = {}
+        for fmt in EXPORTS:
+            action = self._action(menu, f"{fmt.title}…", handlers[fmt.key])
+            action.setToolTip(f"{fmt.holds}\n(command line: {fmt.command})")
+            action.setStatusTip(fmt.holds)
+            self.export_actions[fmt.key] = action
+        menu.setToolTipsVisible(True)
+
+    def ask_export_productions(self, key: str) -> None:
+        from tonguevis.gui.export import ask_productions
+
+        ask_productions(self, key)
 
     def ask_export_paraview(self) -> None:
         from tonguevis.gui.export import ask_paraview
