@@ -153,3 +153,30 @@ def head_references(rec: Recording) -> list[str]:
     """The head references :func:`head_corrected` uses: every REF* sensor when there are >= 3, else none."""
     references = reference_names(rec.sensor_names)
     return references if len(references) >= 3 else []
+
+
+def reference_pose(corrected: Recording) -> dict[str, np.ndarray]:
+    """The head references' positions (m, (3,) each) in a head-corrected recording's frame: where
+    :func:`head_corrected` holds them (their median over the recording); {} without >= 3 references."""
+    pose = {}
+    for name in head_references(corrected):
+        track = corrected.sensors[name]
+        good = np.all(np.isfinite(track), axis=1)
+        if good.any():
+            pose[name] = np.median(track[good], axis=0)
+    return pose if len(pose) >= 3 else {}
+
+
+def register_references(source: dict[str, np.ndarray], target: dict[str, np.ndarray]):
+    """The rigid motion carrying one sitting's head frame onto another's, from the head references
+    both have: (rotation (3, 3), translation (3,) m, rms residual m, names used), or None with fewer
+    than 3 shared references.  Points p of the ``source`` frame go to ``rotation @ p + translation``."""
+    names = [n for n in source if n in target]
+    if len(names) < 3:
+        return None
+    a = np.array([source[n] for n in names], dtype=np.float64)
+    b = np.array([target[n] for n in names], dtype=np.float64)
+    rotation, _, a_c, b_c, _ = fit_rotations(a, b)
+    translation = b_c - rotation @ a_c
+    residual = float(np.sqrt(np.mean(np.sum((a @ rotation.T + translation - b) ** 2, axis=1))))
+    return rotation, translation, residual, names

@@ -105,7 +105,12 @@ def contact_line(metadata: dict) -> str:
     if joined:
         text += (f"; traced palate joined to the generic one behind it (moved {joined['generic_shift_mm']:+.1f} mm to "
                  "meet it)")
+    registered = (c.get("palate") or {}).get("head_registration")
+    if registered:
+        text += (f"; palate registered into the speech's head frame by {', '.join(registered['references'])} "
+                 f"(moved {registered['moved_mm']:.1f} mm, residual {registered['residual_mm']:.2f} mm)")
     if c.get("palate_raised_mm", 0.0) > 0.05:
-        text += (f"; palate raised {c['palate_raised_mm']:.1f} mm to sit above where the sensors went "
-                 "(traced in another sitting?)")
+        why = ("after the head references' registration" if registered else
+               "no head references relate the traces to the speech: traced in another sitting?")
+        text += f"; palate raised {c['palate_raised_mm']:.1f} mm to sit above where the sensors went ({why})"
     return text

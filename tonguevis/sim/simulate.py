@@ -409,7 +409,8 @@ def drive_schedule(displacement: np.ndarray, rate: float, eigenvalues: np.ndarra
     return targets, compliance, info
 
 
-def place_palate(palate, prep: PreparedTargets, quiet: bool = False, model: TongueModel | None = None):
+def place_palate(palate, prep: PreparedTargets, quiet: bool = False, model: TongueModel | None = None,
+                 speech_references: dict | None = None):
     """The palate in the model frame, where the contact solve and the app's views use it: (surface, raised by m).
 
     palate : a :class:`~tonguevis.palate.PalateSurface`, a palate file or "generic"
@@ -419,6 +420,11 @@ def place_palate(palate, prep: PreparedTargets, quiet: bool = False, model: Tong
     (:func:`_register_palate`) and, on the shipped tongue (``model`` None or it), joined to the
     generic palate behind and beside it (:func:`tonguevis.palate.joined_palate`); one whose
     metadata say ``frame == "model"`` (the generic one) is used as is.
+
+    speech_references : the speech's head references where its head correction holds them
+    (:func:`tonguevis.preprocess.correction.reference_pose`); a palate fitted from traces with the
+    same references (``metadata["head_references"]``) is first carried into the speech's head
+    frame by them (:func:`_by_head_references`), so only what they cannot tell is left to the raise.
     """
     from tonguevis.palate import load_palate
 
@@ -429,6 +435,7 @@ def place_palate(palate, prep: PreparedTargets, quiet: bool = False, model: Tong
         return palate if model is None else in_model_frame(palate, model), 0.0
     from tonguevis.palate import generic_palate, joined_palate
 
+    palate = _by_head_references(palate, speech_references, quiet)
     t = prep.transform
     placed, shift = _register_palate(palate.transformed(t.rotation, t.scale, t.translation), prep, quiet=quiet)
     if model is not None and not shipped_tongue(model):  # the generic palate is our tongue's roof, not this mesh's
@@ -436,6 +443,40 @@ def place_palate(palate, prep: PreparedTargets, quiet: bool = False, model: Tong
     # A traced palate covers the front of the roof: the generic one, moved to meet it, completes it.
     generic = generic_palate() if model is None else in_model_frame(generic_palate(), model)
     return joined_palate(placed, generic), shift
+
+
+def _by_head_references(palate, speech_references: dict | None, quiet: bool = False):
+    """``palate`` carried from its traces' head frame into the speech's by the head references both
+    recorded (a rigid fit; said once with the references and the residual); as it is otherwise."""
+    from tonguevis.preprocess.correction import register_references
+
+    traced = palate.metadata.get("head_references")
+    if not traced or not speech_references:
+        return palate
+    fit = register_references({n: np.asarray(v, dtype=float) for n, v in traced.items()}, speech_references)
+    if fit is None:
+        if not quiet:
+            logger.warning("the palate's head references (%s) and the speech's (%s) share fewer than 3: not "
+                           "registered by them", ", ".join(traced), ", ".join(speech_references))
+        return palate
+    rotation, translation, residual, names = fit
+    moved = palate.transformed(rotation, 1.0, translation)
+    moved.metadata["head_registration"] = {"references": names, "residual_mm": 1e3 * residual,
+                                          "moved_mm": 1e3 * float(np.linalg.norm(translation))}
+    if not quiet:
+        logger.info("palate registered into the speech's head frame by the head references %s (moved %.1f mm, "
+                    "residual %.2f mm)", ", ".join(names), 1e3 * float(np.linalg.norm(translation)), 1e3 * residual)
+    return moved
+
+
+def _speech_references(recording: Recording, prep: PreparedTargets, palate) -> dict:
+    """The speech's head references in its head-corrected frame, when the palate has references to meet."""
+    from tonguevis.palate import load_palate
+    from tonguevis.preprocess.correction import head_corrected, reference_pose
+
+    if not load_palate(palate).metadata.get("head_references"):
+        return {}
+    return reference_pose(head_corrected(recording, rest_interval=prep.rest_interval))
 
 
 def shipped_tongue(model: TongueModel) -> bool:
@@ -470,12 +511,14 @@ def placed_palate(recording: Recording, palate, model: TongueModel | None = None
 
     framed, prep, _ = targets_in_frame(recording, model or TongueModel.default(), frame, landmarks, rest_interval,
                                        smooth_window, tongue_size=tongue_size)
-    return place_palate(palate, prep, quiet=True, model=framed)  # the simulation said it once
+    return place_palate(palate, prep, quiet=True, model=framed,  # the simulation said it once
+                        speech_references=_speech_references(recording, prep, palate))
 
 
 def _contact_context(palate, prep, model, basis, recording) -> dict:
     """What the contact solve needs: the palate in the model frame, candidate nodes and their modes."""
-    palate, shift = place_palate(palate, prep, model=model)
+    palate, shift = place_palate(palate, prep, model=model,
+                                 speech_references=_speech_references(recording, prep, palate))
     candidates = np.asarray(model.dorsal_nodes)
     gap, _ = palate.clearance(model.mesh.points[candidates])
     inside = np.nanmean(gap < -1e-3) if np.isfinite(gap).any() else 0.0
@@ -552,7 +595,8 @@ def _contact_report(pen, contact_area, contact, schedule, times, sensor_depth, n
                       "by_sensor_index": {int(s): sum(1 for _, t in schedule["conflicts"] if t == s) for s in conflicts},
                       "first_s": float(times[schedule["conflicts"][0][0]]) if schedule["conflicts"] else None},
         "palate": {k: v for k, v in contact["palate"].metadata.items()
-                   if k in ("rms_m", "source", "frame", "kept", "joined", "min_bend_radius_m", "bend_radius_m")},
+                   if k in ("rms_m", "source", "frame", "kept", "joined", "min_bend_radius_m", "bend_radius_m",
+                            "head_registration")},
         "palate_raised_mm": float(1e3 * contact.get("registration_shift_m", 0.0)),
     }
     return figures

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from tonguevis._progress import report
-from tonguevis.palate import PalateError, PalateSurface, fit_palate, midline_of, trace_points
+from tonguevis.palate import PalateError, PalateSurface, fit_palate, trace_points
+from tonguevis.preprocess.correction import head_corrected, reference_pose, register_references
 
 __all__ = ["palate_from_traces"]
 
@@ -24,25 +25,48 @@ def palate_from_traces(paths, probe: str = "PROBE", sensor_map=None, progress=No
     its probe's positions head-corrected (:func:`~tonguevis.palate.trace_points`), the midline taken from the
     lateral tongue sensors when the traces have them, one surface fitted to all points
     (:func:`~tonguevis.palate.fit_palate`).  The probe's sample count per file is in ``metadata["samples"]``.
+
+    Traces with head references (>= 3 REF* sensors) are carried into the first one's head frame by
+    them (the residual per file, mm, in ``metadata["trace_registration_mm"]``), and the references'
+    positions are kept in ``metadata["head_references"]``: the simulation then registers the palate
+    into the speech's head frame by the same references instead of guessing a shift.
     """
     from tonguevis.workflows import open_recording  # the package's: one door for reading, scripts may wrap it
 
     paths = list(paths)
     if not paths:
         raise PalateError("no palate-trace recordings given")
-    points, midlines, samples = [], [], {}
+    points, midlines, samples, registration = [], [], {}, {}
+    frame_pose: dict = {}  # the head references of the first trace that has them: the palate's head frame
     for k, path in enumerate(paths):
         report(progress, k, len(paths) + 1, f"reading {Path(path).name}")
         rec = open_recording(path, sensor_map, **{**(read_options or {}), "audio": False})  # traces: no sound needed
-        pts = trace_points(rec, probe)
+        corrected = head_corrected(rec)
+        pts = trace_points(corrected, probe)
+        lateral = {n: corrected.sensors[n] for n in ("TL", "TR") if n in corrected.sensors}
+        pose = reference_pose(corrected)
+        if pose and not frame_pose:
+            frame_pose = pose
+        elif pose:  # another sitting: carried into the first one's head frame by the references
+            rotation, translation, residual, _ = register_references(pose, frame_pose) or (None, None, None, None)
+            if rotation is not None:
+                pts = pts @ rotation.T + translation
+                lateral = {n: v @ rotation.T + translation for n, v in lateral.items()}
+                registration[str(path)] = round(1e3 * residual, 3)
+        if not pose and len(paths) > 1:
+            registration[str(path)] = "no head references: taken as recorded"
         points.append(pts)
         samples[str(path)] = int(len(pts))
-        midline = midline_of(rec)
-        if midline is not None:
-            midlines.append(midline)
+        if len(lateral) == 2:
+            midlines.append(float(np.nanmean(np.concatenate(list(lateral.values()))[:, 1])))
     report(progress, len(paths), len(paths) + 1, "fitting the palate")
     surface = fit_palate(np.concatenate(points), midline_y=float(np.mean(midlines)) if midlines else None,
                          sources=[str(p) for p in paths])
     surface.metadata["samples"] = samples
+    if frame_pose:
+        # Where the head references sat: the simulation carries the palate into the speech's head frame by them.
+        surface.metadata["head_references"] = {n: [float(v) for v in xyz] for n, xyz in frame_pose.items()}
+    if registration:
+        surface.metadata["trace_registration_mm"] = registration
     report(progress, len(paths) + 1, len(paths) + 1, "palate fitted")
     return surface
