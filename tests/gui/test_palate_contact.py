@@ -17,6 +17,16 @@ pytestmark = [pytest.mark.gui, pytest.mark.timeout(180)]
 ROOF_MM = 3.0
 
 
+@pytest.fixture(autouse=True)
+def _in_the_model_frame(request):
+    """These palates are built in the block model's own frame (``ROOF_MM`` above its top) and checked there:
+    the app simulates in the model frame here (its default, the speaker's, places the model and a
+    model-frame palate with it by the rest alignment: tests/test_speaker_frame.py)."""
+    if "window" in request.fixturenames:
+        window = request.getfixturevalue("window")
+        window.state.set_run_settings(window.state.run_settings.replace(frame="model"))
+
+
 def flat_palate(height_mm: float = ROOF_MM, frame: str | None = "model"):
     """A flat palate z = height over the block model (x -80..10 mm, y -30..30 mm)."""
     from tonguevis.palate import PalateSurface
