@@ -56,6 +56,15 @@ def test_the_placed_basis_is_the_eigen_solve_of_the_moved_mesh(keep_frequencies)
     turned = np.einsum("ij,njm->nim", MOVE.rotation, w.reshape(n, 3, m)).reshape(3 * n, m)
     factor = np.sqrt(placed.density_factor * MOVE.scale ** 3) * MOVE.scale
     np.testing.assert_allclose(w_moved * factor, turned, atol=1e-9 * np.abs(w).max())
+    # The point stiffness at the sensors (the sensor springs' unit): a body c times larger of the same E is
+    # c times stiffer per metre at a point, whatever its density, so the springs' multiple means the same.
+    from tonguevis.sim.constrained import point_stiffness
+
+    nodes = np.array(list(model.landmarks.sensors.values()))
+    dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
+    k = point_stiffness(source, model.basis(m, cache=False).phi[dofs].reshape(len(nodes), 3, m))
+    k_moved = point_stiffness(derived.eigenvalues, derived.phi[dofs].reshape(len(nodes), 3, m))
+    assert k_moved == pytest.approx(MOVE.scale * k, rel=1e-9)
 
 
 def test_placed_basis_pure_rotation_and_scale_formula():
@@ -91,6 +100,9 @@ def test_a_speaker_frame_motion_is_the_model_frame_one_seen_through_the_fit(mode
         expected = back.apply(in_model.deformed_points(frame))
         np.testing.assert_allclose(in_speaker.deformed_points(frame), expected, atol=1e-9 * extent)
     np.testing.assert_allclose(in_speaker.volume_change, in_model.volume_change, atol=1e-10)
+    # the same strain in a body 1/s times larger of the same Young's modulus: 1/s³ times the energy
+    np.testing.assert_allclose(in_speaker.energy, in_model.energy / fit["scale"] ** 3, rtol=1e-6,
+                               atol=1e-9 * in_model.energy.max() / fit["scale"] ** 3)
     np.testing.assert_allclose(in_speaker.sensor_residual, in_model.sensor_residual / fit["scale"], atol=1e-10)
     for key in ("amplification", "volume_change_max_percent"):
         assert in_speaker.metadata["plausibility"][key] == pytest.approx(in_model.metadata["plausibility"][key],
