@@ -58,6 +58,24 @@ GHOST_COLOUR = "#9ecbff"
 DEFAULT_RADIUS_MM = 5.0
 
 
+def keep_none_alive() -> None:
+    """Work around PySide6 6.12 on Python < 3.12: every call of a Qt method returning void (``repaint``,
+    ``setText``, ``processEvents``, painting ...) drops one reference to ``None`` (measured: 100 calls,
+    refcount -100).  The live view makes about a hundred such calls per frame at up to 100 frames a
+    second, so within a second None's count (about 5000) reaches zero and Python aborts
+    ("none_dealloc").  None is never freed anyway: its count is raised once by 2**40 (centuries of
+    frames), as Python 3.12 makes it immortal.  A no-op elsewhere (PyPy, Python >= 3.12)."""
+    import ctypes
+    import platform
+    import sys
+
+    if sys.version_info >= (3, 12) or platform.python_implementation() != "CPython" or \
+            getattr(keep_none_alive, "done", False):
+        return
+    ctypes.c_ssize_t.from_address(id(None)).value += 2 ** 40  # ob_refcnt, the first field of every object
+    keep_none_alive.done = True
+
+
 def parse_source(text: str, default_port: int = 3030) -> tuple[str, int]:
     """(host, port) of "HOST:PORT", "HOST" or "[v6]:PORT" (TonguevisError when the port is not a number)."""
     text = text.strip()
@@ -154,6 +172,7 @@ class LiveWindow(QMainWindow):
     def __init__(self, source=None, sensor_names=None, settings=None, model=None, profile=None,
                  profiles_root=None, palate=None, auto_rest: bool = True, modes: int | None = None, parent=None):
         super().__init__(parent)
+        keep_none_alive()
         from tonguevis.workflows.settings import RunSettings
 
         self.setWindowTitle("tonguevis live")
@@ -570,17 +589,23 @@ class LiveWindow(QMainWindow):
             self.sensor_mesh = None
         t1 = time.perf_counter()
         self._draw_targets(frame, names, sensors_head)
+        t2 = time.perf_counter()
+        # VTK's render returns once the frame is submitted; Mesa rasterises it on its own threads while
+        # the midsagittal section is computed here, then the paint reads it back and shows it.
+        self.plotter.render()
+        t3 = time.perf_counter()
         if surface is not None:
             from tonguevis.render.section import plane_section
 
             self.midsagittal.segments = plane_section(surface, sim.surface_faces, self._mid_y)
             self.midsagittal.sensors = np.asarray(drawn_sensors)[:, [0, 2]]
-        self.midsagittal.update()
-        t2 = time.perf_counter()
-        self._render()
-        t3 = time.perf_counter()
+        self.midsagittal.update()  # painted at the next turn of the event loop, after the 3D view
+        t4 = time.perf_counter()
+        self._paint()
+        t5 = time.perf_counter()
         self.stage_ms.append({"reconstruct": 1e3 * (step.timings["reconstruct"] if step is not None else 0.0),
-                              "scene": 1e3 * (t2 - t0), "render": 1e3 * (t3 - t2), "targets": 1e3 * (t2 - t1)})
+                              "scene": 1e3 * (t2 - t0 + t4 - t3), "render": 1e3 * (t3 - t2 + t5 - t4),
+                              "targets": 1e3 * (t2 - t1)})
 
     def _shaded(self, surface: np.ndarray) -> np.ndarray:
         """(k, 3) uint8 colours of the tongue's vertices lit by the view's lights for the camera now."""
@@ -597,6 +622,10 @@ class LiveWindow(QMainWindow):
     def _render(self) -> None:
         """Render the 3D view now and paint it (synchronously: the frame is on screen when this returns)."""
         self.plotter.render()
+        self._paint()
+
+    def _paint(self) -> None:
+        """Paint the 3D view rendered last, now."""
         # Painted now, not at the next turn of the event loop: the image views read the frame back and
         # draw it, the QOpenGLWidget composes it.  (Not QApplication.processEvents(): called at this rate,
         # PySide6 6.12's wrapper drops a reference to None each time until Python aborts.)
