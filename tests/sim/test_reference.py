@@ -15,7 +15,7 @@ from tonguevis.sim.reference import check_reference, describe, export_note, jaw_
 def test_a_tongue_riding_on_the_jaw_moves_in_the_head_frame_and_stays_in_the_jaw_frame(model):  # noqa: F811
     """Known answer: the jaw drops 10 mm (in the model's frame; the recording sees it rotated and scaled) and carries
     the tongue, which does not deform."""
-    motion = simulate(_recording(model, raise_m=0.0, jaw_m=0.01), model, modes=20, landmarks="rule")
+    motion = simulate(_recording(model, raise_m=0.0, jaw_m=0.01), model, modes=20, landmarks="rule", frame="model")
     assert jaw_moves(motion)
     head, jaw = tongue_offset(motion, "head"), tongue_offset(motion, "jaw")
     assert np.abs(jaw).max() == 0.0
@@ -68,7 +68,12 @@ def test_the_views_palate_is_the_one_simulate_used(model, monkeypatch):  # noqa:
         np.testing.assert_allclose(getattr(placed, name), getattr(surface, name), atol=1e-15)
     assert placed.scale == surface.scale and raised == shift
     assert motion.metadata["contact"]["palate_raised_mm"] == pytest.approx(1e3 * raised)
-    # A palate already in the model frame (the generic one) is used as is.
+    # A palate already in the model frame (the generic one) is used as is there, and placed with the model in
+    # the speaker frame (the default).
     as_is = PalateSurface(x, x.copy(), palate.z, metadata={"frame": "model"})
-    same, none = module.placed_palate(rec, as_is, model, landmarks="rule", rest_interval=rest_of(motion))
+    same, none = module.placed_palate(rec, as_is, model, landmarks="rule", rest_interval=rest_of(motion), frame="model")
     assert same is as_is and none == 0.0
+    moved, none = module.placed_palate(rec, as_is, model, landmarks="rule", rest_interval=rest_of(motion))
+    placement = motion.model.placement
+    assert none == 0.0 and moved.scale == pytest.approx(placement.scale)
+    np.testing.assert_allclose(moved.rotation, placement.rotation, atol=1e-12)

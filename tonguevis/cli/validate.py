@@ -2,7 +2,7 @@
 
 For each tongue sensor in turn, the model is driven by the other tongue
 sensors and the held-out sensor's node is compared with its measurement:
-RMSE (mm, model frame) and mean per-axis correlation for the warped model,
+RMSE (mm, the speaker's by default, the model's with --model-frame) and mean per-axis correlation for the warped model,
 the linear modal model, a quasi-static solve and a kinematic (RBF)
 interpolation.  Writes the JSON document (and optionally a Markdown report)
 and prints the table.

@@ -335,3 +335,13 @@ def same_source(a: Any, b: Any) -> bool:
     """Whether two models are placements (or not) of one tongue model: mesh, anchors and material alike."""
     a, b = source_model(a), source_model(b)
     return a is b or (a.mesh.n_nodes == b.mesh.n_nodes and a.basis_key(1) == b.basis_key(1))
+
+
+def frame_words(motion) -> str:
+    """Which frame a motion's coordinates are in, for exports and captions: "the speaker's head-corrected
+    frame (...)" or "the model frame (...)" (motions saved before the speaker frame: the model's)."""
+    fit = getattr(motion, "metadata", {}).get("fit") or {}
+    if fit.get("frame") == "speaker":
+        return (f"the speaker's head-corrected frame: the tongue model placed in the speaker at "
+                f"{1 / fit['scale']:.2f} x its size, the speaker's millimetres")
+    return "the model frame: the speaker's sensors scaled onto the generic tongue, the model's millimetres"

@@ -53,7 +53,7 @@ def describe(frame: str, moves: bool = True) -> str:
     return "jaw frame: the jaw's motion removed (the palate moves)"
 
 
-def export_note(frame: str, moves: bool) -> str:
+def export_note(frame: str, moves: bool, motion=None) -> str:
     """What a VTK series folder's README says about the frame its points are in and their point data."""
     check_reference(frame)
     lines = [f"Frame of reference: {describe(frame, moves)}.", ""]
@@ -70,7 +70,9 @@ def export_note(frame: str, moves: bool) -> str:
         lines += ["The points are the tongue in the jaw frame (the jaw's translation removed), where it is",
                   "simulated: displacement = deformation = the tongue's own deformation (metres).",
                   "Add the jaw's translation (jaw_offset.csv, per frame) to place it in the head frame."]
-    lines += ["", "Units: metres, seconds; axes x anterior, y left, z up (the model frame)."]
+    from tonguevis.sim.placement import frame_words
+
+    lines += ["", f"Units: metres, seconds; axes x anterior, y left, z up ({frame_words(motion)})."]
     return "\n".join(lines) + "\n"
 
 
@@ -81,7 +83,7 @@ def write_export_notes(folder, motion, frame: str) -> None:
     from tonguevis._files import atomic_write_text
 
     folder = Path(folder)
-    atomic_write_text(folder / "README.txt", export_note(frame, jaw_moves(motion)))
+    atomic_write_text(folder / "README.txt", export_note(frame, jaw_moves(motion), motion))
     times = np.asarray(motion.times, dtype=np.float64)
     jaw = np.zeros((len(times), 3)) if motion.jaw_offset is None else np.asarray(motion.jaw_offset, dtype=np.float64)
     rows = "".join(f"{t:.6f},{x:.9g},{y:.9g},{z:.9g}\n" for t, (x, y, z) in zip(times, jaw))

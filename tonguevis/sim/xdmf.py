@@ -94,7 +94,9 @@ def write_xdmf(motion, path, surface_only: bool = False, stride: int = 1, frames
         with h5py.File(tmp_h5, "w", libver=("v110", "v110")) as h5, \
                 open(tmp_xdmf, "w", encoding="utf-8") as xml:
             h5.attrs["format"] = "tonguevis motion (XDMF 3 time series)"
-            h5.attrs["units"] = "metres, seconds; axes x anterior, y left, z up (the model frame)"
+            from tonguevis.sim.placement import frame_words
+
+            h5.attrs["units"] = f"metres, seconds; axes x anterior, y left, z up ({frame_words(motion)})"
             h5.attrs["frame_of_reference"] = note
             h5.attrs["warping"] = bool(motion.warping)
             h5.attrs["modes"] = int(motion.q.shape[1])
