@@ -157,15 +157,56 @@ def _contact_pass(lam, p_act, solve_g, phi_nodes, q, q0, gap, normal, ok, margin
     return lam_a, a_rows, q0 + b_mat @ lam_a
 
 
+def _contact_pass_fast(lam, k_mat, phi_nodes, q, q0, gap, normal, ok, margin):
+    """:func:`_contact_pass` with the sensors' elimination folded into one (m, m) matrix
+    K = Λ⁻¹(Pᵀ G⁻¹ P Λ⁻¹ - I) (:func:`_sensor_operator`, shared by the frames with the same acting
+    sensors and springs), so B = K Aᵀ is one product, and the triangular solve of the NNLS's
+    right-hand side a triangular solve: the same QP, the same result to rounding."""
+    from scipy.linalg import solve_triangular
+    from scipy.optimize import nnls
+
+    near = np.flatnonzero(ok & (gap < margin + BAND))
+    a_rows = -np.einsum("kc,kcm->km", normal[near], phi_nodes[near])
+    b_mat = k_mat @ a_rows.T
+    m_mat = -a_rows @ b_mat
+    r = gap[near] - margin + a_rows @ (q - q0)
+    chol, lower = _factor(0.5 * (m_mat + m_mat.T))
+    rhs = solve_triangular(chol, r, lower=True, check_finite=False) if lower else np.linalg.lstsq(chol, r, rcond=None)[0]
+    lam_a = nnls(chol.T, -rhs, maxiter=50 * len(r))[0]
+    on = lam_a > 0
+    if on.any():  # polish, as _contact_pass
+        polished = np.linalg.lstsq(m_mat[np.ix_(on, on)], -r[on], rcond=None)[0]
+        if np.all(polished >= 0):
+            lam_a[on] = polished
+    return lam_a, a_rows, q0 + b_mat @ lam_a
+
+
+def _factor(matrix: np.ndarray) -> tuple[np.ndarray, bool]:
+    """:func:`_cholesky`'s factor and whether it is the (lower triangular) Cholesky factor."""
+    scale = max(np.trace(matrix) / len(matrix), 1e-300)
+    eye = np.eye(len(matrix))
+    for jitter in (1e-12, 1e-10, 1e-8, 1e-6):
+        try:
+            return np.linalg.cholesky(matrix + jitter * scale * eye), True
+        except np.linalg.LinAlgError:
+            continue
+    return _cholesky(matrix), False
+
+
+def _sensor_operator(lam, p_act, solve_g):
+    """K = Λ⁻¹(Pᵀ G⁻¹ P Λ⁻¹ - I) (m, m): a contact force f moves the shape by K f with the sensors re-balanced."""
+    return ((p_act.T @ solve_g @ p_act) / lam[:, None] - np.eye(len(lam))) / lam[None, :]
+
+
 def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, margin, gap0, normal0):
     """:func:`_active_set` of several frames at once, with what the caller already has.
 
-    solves : per frame, (P of the acting sensors, their G⁻¹) (shared by the frames with the same
-    acting sensors and springs); q0 : (n, m); allowed : (n, k); offsets : (n, 3); gap0 (n, k)
+    solves : per frame, :func:`_sensor_operator` of its acting sensors (shared by the frames with
+    the same acting sensors and springs); q0 : (n, m); allowed : (n, k); offsets : (n, 3); gap0 (n, k)
     and normal0 (n, k, 3): the clearances at q0 (from the compiled pass over every frame);
     query : a :class:`~tonguevis.sim.contact_kernel.Clearance` of the candidates.  The frames
     take their passes in step, so each later pass queries the clearances of all the frames
-    still going in one compiled call; each frame's passes, QP (:func:`_contact_pass`) and guard
+    still going in one compiled call; each frame's passes, QP (:func:`_contact_pass_fast`) and guard
     are :func:`_active_set`'s: the same result to rounding (tests/sim/test_contact_fast.py).
     Returns a list of (q, λ, A) or (q0, None, None), one per frame.
     """
@@ -185,9 +226,8 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
             ok = allowed[i] & np.isfinite(gap[j])
             if not np.any(ok & (gap[j] < margin - 1e-7)):
                 continue
-            p_act, solve_g = solves[i]
-            lam_a, rows, q = _contact_pass(lam, p_act, solve_g, phi_nodes, state[i][0], q0[i], gap[j], normal[j], ok,
-                                           margin)
+            lam_a, rows, q = _contact_pass_fast(lam, solves[i], phi_nodes, state[i][0], q0[i], gap[j], normal[j], ok,
+                                                margin)
             state[i] = (q, lam_a, rows)
             still.append(i)
         going = np.asarray(still, dtype=np.int64)
@@ -241,7 +281,8 @@ def _solve_frames_fast(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset, c_
     for f in frames:
         key = (acting[f].tobytes(), comp3[f][acting[f]].tobytes())
         if key not in inverses:
-            inverses[key] = (P[np.flatnonzero(acting[f])], _sensor_inverse(gram, comp3[f], acting[f]))
+            inverses[key] = _sensor_operator(lam, P[np.flatnonzero(acting[f])],
+                                             _sensor_inverse(gram, comp3[f], acting[f]))
         solves.append(inverses[key])
     solved = _active_sets(lam, solves, phi_nodes, phi_flat, query, jaw_offset[frames], q_all[frames], allowed, margin,
                           gap[frames], normals)
@@ -328,7 +369,7 @@ def _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offse
     solve_g = _sensor_inverse(gram, np.full(len(P), compliance), ones)
     _, normals = query(u[frames], jaw_offset[frames], normals=True)
     ok = np.ones((len(frames), k), bool) if allowed is None else allowed[frames]
-    solved = _active_sets(lam, [(P, solve_g)] * len(frames), phi_nodes, phi_flat, query, jaw_offset[frames], q[frames],
+    solved = _active_sets(lam, [_sensor_operator(lam, P, solve_g)] * len(frames), phi_nodes, phi_flat, query, jaw_offset[frames], q[frames],
                           ok, margin, gap[frames], normals)
     out[frames] = [q_f for q_f, _, _ in solved]
     return out, frames
