@@ -692,7 +692,8 @@ class LiveWindow(QMainWindow):
                 self.ghost_mesh = None
             self.midsagittal.ghost = np.zeros((0, 2))
             return
-        order = [n for n in ("TT", "TB", "TM", "TD", "TL", "TR") if n in ghost] or list(ghost)
+        # The midline sensors joined tip to back (the ghost's profile); the others are not drawn.
+        order = [n for n in ("TT", "TB", "TM", "TD", "TBK") if n in ghost] or list(ghost)
         points = np.nan_to_num(np.array([ghost[n] for n in order], dtype=np.float32))
         if self.ghost_mesh is None or len(self.ghost_mesh.points) != len(points):
             self.ghost_mesh = pv.lines_from_points(points) if len(points) > 1 else pv.PolyData(points)
