@@ -194,6 +194,15 @@ def test_cannot_connect_is_shown(qtbot, live):
     window.connect_from_panel()
     assert "port must be a number" in window.statusBar().currentMessage()
     assert parse_source("[::1]:3031") == ("::1", 3031) and parse_source("host") == ("host", 3030)
+    # Display smoothing: a first-order low-pass of what is drawn, off by default.
+    assert window.smoothing == 0 and window._low_pass("p", np.ones(3), 0.01) is not None
+    np.testing.assert_array_equal(window._low_pass("p", np.full(3, 2.0), 0.01), 2.0)
+    window.smooth_check.setChecked(True)
+    window.smooth_spin.setValue(0.05)
+    window._low_pass("p", np.zeros(3), 0.01)
+    np.testing.assert_allclose(window._low_pass("p", np.ones(3), 0.01), 1 - np.exp(-0.2))
+    window.smooth_check.setChecked(False)
+    np.testing.assert_array_equal(window._low_pass("p", np.ones(3), 0.01), 1.0)
     # A sensor map (name -> NDI Id) names the slots by the ids the device lists, else by their numbers.
     window.given_names = {"TT": 0, "TD": 2}
     assert window.slot_names(3) == ["TT", "slot1", "TD"]
