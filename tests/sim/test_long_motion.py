@@ -22,7 +22,7 @@ def demo():
 
     rec = read_recording(DATA_DIR / "spk1_ta.tsv")
     model = TongueModel.default()
-    motion = simulate(rec, model, sensor_stiffness=None)
+    motion = simulate(rec, model, sensor_stiffness=None, frame="model")  # the checks below rebuild it in this frame
     return model, motion, prepare_targets(rec, model)
 
 
