@@ -27,6 +27,7 @@ that other frame.
 
 from __future__ import annotations
 
+import functools
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -181,10 +182,24 @@ class PalateSurface:
 
 
 def generic_palate() -> PalateSurface:
-    """The shipped generic palate (``meshes/palate.stl``), already in the model frame of the shipped tongue."""
+    """The shipped generic palate (``meshes/palate.stl``), already in the model frame of the shipped tongue.
+
+    Read once per process (and again if the file changes): every simulation with a palate places it,
+    and reading the mesh cost more than the contact solve of the demo.  Each call returns its own copy.
+    """
+    import copy
+
     from tonguevis.mesh.default import context_surface_path
 
     path = context_surface_path("palate")
+    stat = Path(path).stat()
+    surface = _generic_from(str(path), stat.st_mtime_ns, stat.st_size)
+    return PalateSurface(surface.x.copy(), surface.y.copy(), surface.z.copy(), metadata=copy.deepcopy(surface.metadata))
+
+
+@functools.lru_cache(maxsize=2)
+def _generic_from(path: str, mtime_ns: int, size: int) -> PalateSurface:
+    """The generic palate from the shipped file as it is (mtime, size: the cache's key)."""
     surface = from_mesh(path)
     surface.metadata.update({"frame": "model", "generic": True})
     return surface

@@ -22,20 +22,22 @@ def rel_diff(a: np.ndarray, b: np.ndarray) -> float:
 
 def test_the_compiled_clearance_is_the_palates_own():
     """Points inside, below and outside the footprint of a turned, scaled palate: the same gaps
-    (NaN outside) and normals as PalateSurface.clearance."""
+    (NaN outside) and normals as PalateSurface.clearance; also a query large enough to be split
+    over threads."""
     from tonguevis.sim.contact_kernel import Clearance
 
     rng = np.random.default_rng(3)
     turn = np.linalg.qr(rng.normal(size=(3, 3)))[0]
     turn *= np.linalg.det(turn)  # a rotation
-    for palate in (generic_palate(), generic_palate().transformed(turn, 0.8, np.array([0.01, -0.02, 0.003]))):
+    turned = generic_palate().transformed(turn, 0.8, np.array([0.01, -0.02, 0.003]))
+    for palate, n_frames in ((generic_palate(), 30), (turned, 30), (turned, 1100)):  # 1100 x 200: threads
         verts, _ = palate.triangles()
         base = rng.uniform(verts.min(axis=0) - 0.005, verts.max(axis=0) + 0.005, size=(200, 3))
-        disp = rng.normal(size=(30, 200, 3)) * 3e-3
-        offset = rng.normal(size=(30, 3)) * 1e-3
+        disp = rng.normal(size=(n_frames, 200, 3)) * 3e-3
+        offset = rng.normal(size=(n_frames, 3)) * 1e-3
         gap, normal = Clearance(palate, base)(disp, offset, normals=True)
         ref_gap, ref_normal = palate.clearance((base[None] + disp + offset[:, None]).reshape(-1, 3))
-        ref_gap, ref_normal = ref_gap.reshape(30, 200), ref_normal.reshape(30, 200, 3)
+        ref_gap, ref_normal = ref_gap.reshape(n_frames, 200), ref_normal.reshape(n_frames, 200, 3)
         inside = np.isfinite(ref_gap)
         assert 0.2 < inside.mean() < 0.9  # both kinds of point are there
         np.testing.assert_array_equal(np.isfinite(gap), inside)

@@ -15,9 +15,14 @@ step (the NumPy reference; a test proves them equal to 1e-12 m).
 
 from __future__ import annotations
 
+import os
 import threading
 
 import numpy as np
+
+#: Queries of at least this many points per thread are split over threads (at most PARALLEL_WORKERS).
+PARALLEL_POINTS = 100_000
+PARALLEL_WORKERS = 4
 
 _lock = threading.Lock()
 _kernel = None
@@ -112,13 +117,25 @@ class Clearance:
         if n_frames == 0 or self.k == 0:
             return gap, (np.empty((n_frames, self.k, 3)) if normals else None)
         normal = np.empty((n_frames, self.k, 3)) if normals else None
-        outs = [wp.array(gap, dtype=wp.float64, device="cpu", copy=False),
-                wp.array(normal, dtype=wp.vec3d, device="cpu", copy=False) if normals else self._no_normal]
-        wp.launch(_kernel, dim=(n_frames, self.k), device="cpu",
-                  inputs=[self._base, wp.array(disp, dtype=wp.vec3d, device="cpu", copy=False),
-                          wp.array(offset, dtype=wp.vec3d, device="cpu", copy=False), self._z, *self._params,
-                          int(normals)], outputs=outs)
-        wp.synchronize_device("cpu")
+
+        def launch(rows: slice) -> None:
+            outs = [wp.array(gap[rows], dtype=wp.float64, device="cpu", copy=False),
+                    wp.array(normal[rows], dtype=wp.vec3d, device="cpu", copy=False) if normals else self._no_normal]
+            wp.launch(_kernel, dim=(len(gap[rows]), self.k), device="cpu",
+                      inputs=[self._base, wp.array(disp[rows], dtype=wp.vec3d, device="cpu", copy=False),
+                              wp.array(offset[rows], dtype=wp.vec3d, device="cpu", copy=False), self._z,
+                              *self._params, int(normals)], outputs=outs)
+            wp.synchronize_device("cpu")
+
+        workers = min(PARALLEL_WORKERS, os.cpu_count() or 1, n_frames * self.k // PARALLEL_POINTS)
+        if workers <= 1:
+            launch(slice(None))
+        else:  # a launch runs on one core and releases the GIL: the frames in a few blocks, side by side
+            from concurrent.futures import ThreadPoolExecutor
+
+            edges = np.linspace(0, n_frames, workers + 1).astype(int)
+            with ThreadPoolExecutor(workers) as pool:
+                list(pool.map(launch, [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]))
         return gap, normal
 
 
