@@ -185,3 +185,34 @@ def test_weights_cache_round_trip(tmp_path, bar):
     assert load_weights(path, "another key") is None
     path.write_bytes(b"not a zip")
     assert load_weights(path, dm.domains.key) is None
+
+
+def _first_seconds(recording, seconds):
+    n = int(seconds * recording.rate)
+    cut = {k: v[:n] for k, v in recording.sensors.items()}
+    return recording.with_sensors(cut, times=recording.times[:n], audio=None, labels=[],
+                                  orientations={k: v[:n] for k, v in recording.orientations.items()})
+
+
+def test_simulate_method_domains_gives_the_modal_methods_motion():
+    from tonguevis.errors import SimulationError
+    from tonguevis.io import read_recording
+    from tonguevis.paths import DATA_DIR
+    from tonguevis.sim.simulate import simulate
+
+    rec = _first_seconds(read_recording(DATA_DIR / "spk1_ta.tsv"), 6.5)  # 5 s of rest, then /ta/
+    warped = simulate(rec, method="warped")
+    linear = simulate(rec, method="linear")
+    np.testing.assert_array_equal(linear.q, simulate(rec, warping=False).q)  # warping= still works
+    assert warped.warping and not linear.warping
+    domains = simulate(rec, method="domains")
+    assert domains.metadata["method"] == "domains"
+    assert set(warped.metadata) <= set(domains.metadata)  # every key of the modal methods
+    p = domains.metadata["plausibility"]
+    assert p["volume_change_max_percent"] < 2.0 and p["amplification"] < 2.0
+    assert p["sensor_misfit_max_mm"] < 2.0  # held to the compliant targets (as the modal methods are)
+    d = domains.displacements(slice(-1, None))[0]
+    np.testing.assert_allclose(d, domains.model.domain_model.displacement(domains.q[-1]), atol=1e-15)
+    assert domains.energy.max() > 0 and np.all(np.isfinite(domains.energy))
+    with pytest.raises(SimulationError, match="unknown simulation method"):
+        simulate(rec, method="fem")

@@ -530,7 +530,7 @@ def domains_model(model, domain_model: DomainModel):
 def simulate_domains(recording, model=None, landmarks: str = "speaker", rest_interval=None,
                      smooth_window: int | None = None, tolerance: float = 1e-7,
                      sensor_stiffness: float | None | str = "default", backend: str = "warp", palate=None,
-                     progress=None, frame: str = "speaker", tongue_size: float | None = 1.0, cache: bool = True):
+                     progress=None, frame: str = "speaker", tongue_size: float | None = None, cache: bool = True):
     """:func:`tonguevis.sim.simulate` with ``method="domains"``: the same preparation (rest, alignment, frame),
     the same sensor constraints (the compliant projection of :func:`~tonguevis.sim.simulate.drive_schedule`
     with this model's own linear stiffness, dropouts bridged and handed over, then held hard), the reduced

@@ -47,8 +47,13 @@ def simulate(
     sensor_patches: float | None | str = None,
     frame: str = "speaker",
     tongue_size: float | None = None,
+    method: str | None = None,
 ) -> Motion:
     """Drive ``model`` (default: our shipped tongue) with ``recording``.
+
+    method : "warped" (modal warping), "linear" (modal, no warping) or "domains" (seed 001's
+        StVK on quadratic domains, :func:`tonguevis.sim.domains.simulate_domains`); None
+        (default): ``warping`` decides between the first two.
 
     sensor_stiffness : how hard the sensor nodes are pulled onto the sensors,
         in units of the tongue's own stiffness at the sensor nodes (a
@@ -108,6 +113,13 @@ def simulate(
     from tonguevis.sensor_stiffness import sensor_stiffness_value
 
     check_backend(backend)
+    warping = method_warping(method, warping, recording.metadata.get("file"))
+    if method == "domains":  # seed 001's StVK on quadratic domains (tonguevis.sim.domains)
+        from tonguevis.sim.domains import simulate_domains
+
+        return simulate_domains(recording, model, landmarks, rest_interval, smooth_window,
+                                sensor_stiffness=sensor_stiffness, backend=backend, palate=palate, progress=progress,
+                                frame=frame, tongue_size=tongue_size)
     sensor_stiffness = sensor_stiffness_value(sensor_stiffness, recording.metadata.get("file"))  # the CLI's words too
     if sensor_stiffness == "default":
         sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
@@ -196,6 +208,20 @@ def simulate(
     release_freed_memory()
     report(progress, 3, 3, "done")
     return motion
+
+
+#: simulate(method=...): "warped" (modal warping), "linear" (modal, no warping), "domains"
+#: (seed 001's StVK on quadratic domains, tonguevis.sim.domains).
+METHODS = ("warped", "linear", "domains")
+
+
+def method_warping(method: str | None, warping: bool, file=None) -> bool:
+    """The ``warping`` a modal ``method`` means (None: ``warping`` as given); SimulationError for an unknown one."""
+    if method is None:
+        return warping
+    if method not in METHODS:
+        raise SimulationError(f"unknown simulation method {method!r}; choose one of {', '.join(METHODS)}", file)
+    return method == "warped"
 
 
 class _Run:
