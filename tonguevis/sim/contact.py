@@ -269,7 +269,7 @@ def _solve_frames_fast(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset, c_
     gap, _ = query(u, jaw_offset)
     sensor_gap, _ = clearances(palate, sensor_pts, np.nan_to_num(targets), jaw_offset)
     above_all = (sensor_gap < 0) & np.all(np.isfinite(targets), axis=2)  # (F, S)
-    low = np.flatnonzero(np.nanmin(np.where(np.isfinite(gap), gap, np.inf), axis=1) < margin)
+    low = np.flatnonzero(np.fmin.reduce(gap, axis=1, initial=np.inf) < margin)  # fmin: NaN (off the palate) ignored
     allowed = ~((above_all[low].astype(np.int64) @ near_sensor.T.astype(np.int64)) > 0)  # (len(low), k)
     for f in low:
         conflicts.extend((int(f), int(s)) for s in np.flatnonzero(above_all[f]))
@@ -362,7 +362,7 @@ def _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offse
     if allowed is not None:
         gap = np.where(allowed, gap, np.nan)
     out = np.array(q, copy=True)
-    frames = np.flatnonzero(np.nanmin(np.where(np.isfinite(gap), gap, np.inf), axis=1) < margin - 1e-7)
+    frames = np.flatnonzero(np.fmin.reduce(gap, axis=1, initial=np.inf) < margin - 1e-7)
     if len(frames) == 0:
         return out, frames
     ones = np.ones(len(P), dtype=bool)
