@@ -115,7 +115,10 @@ def add_model_arguments(parser: argparse.ArgumentParser, modes: int = 100) -> No
     parser.add_argument("--modes", type=int, default=modes, metavar="M", help=f"vibration modes (default {modes})")
     parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
                         help="sensor nodes: snapped to the speaker's layout (default) or the paper's placement rule")
-    parser.add_argument("--linear", action="store_true", help="linear modal model (no modal warping)")
+    parser.add_argument("--linear", action="store_true", help="linear modal model (no modal warping); --method linear")
+    parser.add_argument("--method", choices=("warped", "linear", "domains"), default=None,
+                        help="the tongue's physics: modal warping (default), the linear modal model, or 'domains': "
+                             "seed 001's nonlinear StVK on quadratic domains (slower: tens of frames/s)")
     add_sensor_stiffness_argument(parser)
     add_sensor_patches_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -264,6 +267,7 @@ def run_settings_of(args, modes: int | None = None):
         warping=not getattr(args, "linear", False), landmarks=getattr(args, "landmarks", defaults.landmarks),
         sensor_stiffness=getattr(args, "sensor_stiffness", defaults.sensor_stiffness),
         sensor_patches=sensor_patches_option(args), rest=rest_arg(args), palate=getattr(args, "palate", None),
+        method=getattr(args, "method", None) or ("linear" if getattr(args, "linear", False) else None),
         **frame_options(args))
 
 

@@ -57,6 +57,8 @@ class RunSettings:
     backend: str = "warp"
     frame: str = "speaker"
     tongue_size: float | None = None
+    #: "warped", "linear" or "domains" (seed 001's StVK on quadratic domains); None: ``warping`` decides.
+    method: str | None = None
 
     def __post_init__(self) -> None:
         from tonguevis.sensor_stiffness import sensor_stiffness_value
@@ -77,6 +79,10 @@ class RunSettings:
             raise SimulationError(f"frame must be one of {', '.join(FRAMES)}, got {self.frame!r}")
         if self.tongue_size is not None and not float(self.tongue_size) > 0:
             raise SimulationError(f"the tongue size must be a positive multiple of the model's, got {self.tongue_size!r}")
+        from tonguevis.sim.simulate import METHODS
+
+        if self.method is not None and self.method not in METHODS:
+            raise SimulationError(f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
         if self.landmarks not in LANDMARK_CHOICES:
             raise SimulationError(f"landmarks must be one of {', '.join(LANDMARK_CHOICES)}, got {self.landmarks!r}")
 
@@ -89,7 +95,7 @@ class RunSettings:
         :func:`build_model` and :meth:`palate_surface`)."""
         return dict(modes=self.modes, warping=self.warping, landmarks=self.landmarks, rest_interval=self.rest,
                     sensor_stiffness=self.sensor_stiffness, sensor_patches=self.sensor_patches, backend=self.backend,
-                    frame=self.frame, tongue_size=self.tongue_size)
+                    frame=self.frame, tongue_size=self.tongue_size, method=self.method)
 
     def palate_surface(self):
         """The :class:`~tonguevis.palate.PalateSurface` of ``palate`` (None: no contact)."""
