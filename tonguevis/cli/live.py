@@ -22,12 +22,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from tonguevis.cli.record import parse_address
-    from tonguevis.gui.app import application, install_error_hook
-    from tonguevis.gui.live_window import LiveWindow
-    from tonguevis.live.source import WaveFrontSource
     from tonguevis.workflows.settings import RunSettings
 
-    settings = RunSettings(modes=args.modes)  # checks the number of modes before any window opens
+    RunSettings(modes=args.modes)  # a bad number of modes is said before Qt starts
+    address = None
+    if args.address:
+        host, port = parse_address(args.address)  # a clear error for a bad HOST:PORT, before any window
+        address = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
     sensor_map = None
     if args.sensors:
         from tonguevis.io.sensor_map import load_sensor_map
@@ -38,9 +39,6 @@ def run(args) -> int:
         from tonguevis.live.profiles import load_profile
 
         profile = load_profile(args.profile)
-    source = WaveFrontSource(*parse_address(args.address)) if args.address else None
-    app = application()
-    window = LiveWindow(source, sensor_names=sensor_map, settings=settings, profile=profile, palate=args.palate)
-    install_error_hook(window)
-    window.show()
-    return app.exec()
+    from tonguevis.gui.live_window import run_live  # the one way into Qt (pyproject's import contracts)
+
+    return run_live(address, sensor_map=sensor_map, profile=profile, palate=args.palate, modes=args.modes)
