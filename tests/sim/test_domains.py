@@ -216,3 +216,19 @@ def test_simulate_method_domains_gives_the_modal_methods_motion():
     assert domains.energy.max() > 0 and np.all(np.isfinite(domains.energy))
     with pytest.raises(SimulationError, match="unknown simulation method"):
         simulate(rec, method="fem")
+
+
+def test_a_saved_domains_motion_loads_with_its_subspace(tmp_path, bar):
+    from tonguevis.sim.domains import domains_model
+    from tonguevis.sim.motion import Motion
+
+    model, nodes, dm = bar
+    dmodel = domains_model(model, dm)
+    z = 1e-3 * np.random.default_rng(2).standard_normal((3, dm.n_dofs))
+    motion = Motion(times=np.arange(3) / 100.0, q=z, model=dmodel, warping=False, sensor_names=["TT"],
+                    sensor_nodes=nodes, targets=np.zeros((3, 1, 3)), sensor_residual=np.zeros((3, 1)),
+                    energy=dm.energies(z), volume_change=np.zeros(3), converged=np.ones(3, dtype=bool),
+                    metadata={"method": "domains", "domains": {"seeds": dm.domains.seeds.tolist()}})
+    motion.save(tmp_path / "m.npz")
+    back = Motion.load(tmp_path / "m.npz")
+    np.testing.assert_allclose(back.displacements(), motion.displacements(), atol=1e-12)

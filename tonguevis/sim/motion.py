@@ -225,6 +225,11 @@ class Motion:
             basis = augmented_basis(model, model.basis(int(patches["global_modes"])), np.array(patches["nodes"]),
                                     1e-3 * float(patches["radius_mm"]), 1e-3 * float(patches["reach_mm"]))
             model = augmented_model(model, basis)
+        domains = meta["metadata"].get("domains")
+        if meta["metadata"].get("method") == "domains" and domains:  # q is z: the same domain subspace again
+            from tonguevis.sim.domains import DomainModel, domains_model
+
+            model = domains_model(model, DomainModel(model, np.array(domains["seeds"][:-1])))
         return cls(
             times=arrays["times"], q=arrays["q"], model=model, warping=meta["warping"],
             sensor_names=meta["sensor_names"], sensor_nodes=arrays["sensor_nodes"],
