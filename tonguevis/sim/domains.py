@@ -46,7 +46,6 @@ Units SI: z and the domain DOFs in m, forces in N, stiffness in N/m.
 from __future__ import annotations
 
 import hashlib
-import logging
 import time
 import zipfile
 from dataclasses import dataclass, field
@@ -61,7 +60,7 @@ from tonguevis._files import atomic_write
 from tonguevis.errors import ModelError
 from tonguevis.sim.stvk import StVK
 
-logger = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 DOFS_PER_DOMAIN = 30
 #: Length (m) the quadratic terms are measured in: y = (x - seed) / L; about a third of the tongue.

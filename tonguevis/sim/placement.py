@@ -193,9 +193,9 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
         placement = fit.inverse()
         volume = placement.scale ** 3
         if not 0.5 <= volume <= 2.0:
-            import logging
+            from tonguevis._logging import logger
 
-            logging.getLogger("tonguevis").warning(
+            logger.warning(
                 "%s: placed in the speaker as the rest alignment scales it (%.2f), the tongue is %.1f times the "
                 "generic one's volume: the rest sensors sit %s than the model's placement rule, which need not "
                 "be the tongue's size; tongue_size=1 ('tonguevis simulate/validate --tongue-size 1') keeps the "
