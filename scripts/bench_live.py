@@ -20,7 +20,8 @@ of warm-up, for ``--seconds`` s it records, for every drawn frame:
 * ``stages_ms``: medians and p95 of the per-frame stages: ``simulate`` (head correction, drive,
   one Newmark step, for every frame received in the tick), ``reconstruct`` (the surface nodes of
   the drawn frame), ``scene`` (the actors' points, normals, targets, midsagittal section),
-  ``render`` (VTK's render and the paint), ``tick`` (the whole poll);
+  ``render`` (VTK's render and the paint: ``submit``, VTK's render call, and ``paint``, the read-back of
+  the rasterised frame and its paint), ``tick`` (the whole poll);
 * ``backlog``: whether the latency grows (its median over the first and the last third of the
   run) and the source's queue left at the end.
 
@@ -112,7 +113,7 @@ def main() -> int:
         "fps": figures["fps"], "stream_hz": (status.frames - status0.frames) / elapsed,
         "stages_ms": {key: {"median": float(np.median([s.get(key, 0.0) for s in stages])),
                             "p95": float(np.percentile([s.get(key, 0.0) for s in stages], 95))}
-                      for key in ("simulate", "reconstruct", "scene", "render", "tick")},
+                      for key in ("simulate", "reconstruct", "scene", "render", "submit", "paint", "tick")},
         "backlog": {"latency_median_first_third_ms": float(np.median(latencies[:third])),
                     "latency_median_last_third_ms": float(np.median(latencies[-third:])),
                     "queue_left": int(queue_left), "source_dropped": status.dropped - status0.dropped},

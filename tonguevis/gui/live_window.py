@@ -605,7 +605,7 @@ class LiveWindow(QMainWindow):
         t5 = time.perf_counter()
         self.stage_ms.append({"reconstruct": 1e3 * (step.timings["reconstruct"] if step is not None else 0.0),
                               "scene": 1e3 * (t2 - t0 + t4 - t3), "render": 1e3 * (t3 - t2 + t5 - t4),
-                              "targets": 1e3 * (t2 - t1)})
+                              "submit": 1e3 * (t3 - t2), "paint": 1e3 * (t5 - t4), "targets": 1e3 * (t2 - t1)})
 
     def _shaded(self, surface: np.ndarray) -> np.ndarray:
         """(k, 3) uint8 colours of the tongue's vertices lit by the view's lights for the camera now."""
