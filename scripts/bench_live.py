@@ -22,8 +22,10 @@ of warm-up, for ``--seconds`` s it records, for every drawn frame:
   the drawn frame), ``scene`` (the actors' points, normals, targets, midsagittal section),
   ``render`` (VTK's render and the paint: ``submit``, VTK's render call, and ``paint``, the read-back of
   the rasterised frame and its paint), ``tick`` (the whole poll);
-* ``backlog``: whether the latency grows (its median over the first and the last third of the
-  run) and the source's queue left at the end.
+* ``backlog``: frames taken from the source per tick (median and max: every frame that came since
+  the last tick, so a backlog would show as a growing count), the latency's median over the first and
+  the last third of the run (which also moves with the machine's load) and the source's queue left at
+  the end; ``machine.load_average_1min_at_end`` says how busy the machine was.
 
 The figures are this machine's; CPU count and OpenGL renderer are in the JSON.
 """
@@ -114,7 +116,9 @@ def main() -> int:
         "stages_ms": {key: {"median": float(np.median([s.get(key, 0.0) for s in stages])),
                             "p95": float(np.percentile([s.get(key, 0.0) for s in stages], 95))}
                       for key in ("simulate", "reconstruct", "scene", "render", "submit", "paint", "tick")},
-        "backlog": {"latency_median_first_third_ms": float(np.median(latencies[:third])),
+        "backlog": {"frames_per_tick_median": float(np.median([s.get("pending", 1) for s in stages])),
+                    "frames_per_tick_max": int(max(s.get("pending", 1) for s in stages)),
+                    "latency_median_first_third_ms": float(np.median(latencies[:third])),
                     "latency_median_last_third_ms": float(np.median(latencies[-third:])),
                     "queue_left": int(queue_left), "source_dropped": status.dropped - status0.dropped},
         "reconnects": status.reconnects - status0.reconnects,

@@ -497,6 +497,7 @@ class LiveWindow(QMainWindow):
         self.latencies_ms.append(1e3 * (t_drawn - newest.arrival_s))
         self.draw_times.append(t_drawn)
         self.stage_ms[-1]["simulate"] = 1e3 * simulate_s
+        self.stage_ms[-1]["pending"] = len(frames)  # frames this tick took from the source (1: no backlog)
         self.stage_ms[-1]["tick"] = 1e3 * (t_drawn - t_start)
 
     def _add_to_sweep(self, frame, corrected) -> None:
