@@ -497,7 +497,7 @@ def _warm_up(recording, model):
                                    orientations={k: v[:n] for k, v in recording.orientations.items()},
                                    audio=None, labels=[])
     try:
-        simulate(short, model, rest_interval=(float(short.times[0]), float(short.times[min(n, 10) - 1])))
+        simulate(short, model, rest=(float(short.times[0]), float(short.times[min(n, 10) - 1])))
     except Exception:  # noqa: BLE001 - a warm-up only
         pass
 

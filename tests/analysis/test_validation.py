@@ -86,7 +86,7 @@ def _generated(model, how: str, n_frames: int = 90) -> Recording:
 def test_a_virtual_sensor_driven_by_the_same_sensors_is_predicted_exactly(box_model, how):
     """TB was recorded from the model driven by TT, TD, TL, TR: holding it out drives with exactly those."""
     rec = _generated(box_model, how)
-    result = validate(rec, box_model, modes=MODES, landmarks="rule", rest_interval=REST, sensor_stiffness=None)
+    result = validate(rec, box_model, modes=MODES, landmarks="rule", rest=REST, sensor_stiffness=None)
     tb = result.sensors["TB"]
     assert tb["drivers"] == ["TT", "TD", "TL", "TR"]
     assert result.held_out["TB"].node == box_model.landmarks.sensors["TB"]
@@ -110,7 +110,7 @@ def test_kinematic_baseline_is_exact_on_an_affine_motion(box_model):
     shift = np.array([0.001, -0.0005, 0.002])
     disp = s * ((rest - rest.mean(axis=0)) @ gradient.T + shift)[None]
     rec = _recording_from(box_model, disp, names)
-    result = validate(rec, box_model, modes=MODES, landmarks="rule", rest_interval=REST, sensor_stiffness=None, quasi_static=False)
+    result = validate(rec, box_model, modes=MODES, landmarks="rule", rest=REST, sensor_stiffness=None, quasi_static=False)
     for name in names:
         assert result.sensors[name]["kinematic_rmse_mm"] < 1e-9, name
         np.testing.assert_allclose(result.held_out[name].predicted["kinematic"],
@@ -120,7 +120,7 @@ def test_kinematic_baseline_is_exact_on_an_affine_motion(box_model):
 
 def test_the_json_has_what_it_promises(box_model, tmp_path):
     rec = _generated(box_model, "model", n_frames=70)
-    result = validate(rec, box_model, modes=MODES, landmarks="rule", rest_interval=REST, sensor_stiffness=None)
+    result = validate(rec, box_model, modes=MODES, landmarks="rule", rest=REST, sensor_stiffness=None)
     path = tmp_path / "v.json"
     result.write_json(path)
     doc = json.loads(path.read_text())
@@ -157,7 +157,7 @@ def test_too_few_tongue_sensors_is_an_error(box_model):
     rec = _generated(box_model, "linear", n_frames=40)
     rec = rec.with_sensors({k: rec.sensors[k] for k in ("TT", "TD")})
     with pytest.raises(SimulationError, match="at least 3 tongue sensors"):
-        validate(rec, box_model, modes=MODES, landmarks="rule", rest_interval=REST, sensor_stiffness=None)
+        validate(rec, box_model, modes=MODES, landmarks="rule", rest=REST, sensor_stiffness=None)
 
 
 def test_quasi_static_solves_the_static_problem(box_model):
@@ -223,7 +223,7 @@ def test_drift_is_measured_after_the_sensors_return_to_rest(box_model):
     disp[:, 0, 2] = 0.006 * bump  # the tip goes up 6 mm and comes back
     disp[:, 1, 2] = 0.003 * bump
     rec = _recording_from(box_model, disp, names)
-    result = validate(rec, box_model, modes=MODES, landmarks="rule", rest_interval=REST, sensor_stiffness=None, quasi_static=False)
+    result = validate(rec, box_model, modes=MODES, landmarks="rule", rest=REST, sensor_stiffness=None, quasi_static=False)
     r = result.recording
     assert r["drift_time_s"] == pytest.approx(t[-1])
     assert r["drift_sensor_offset_mm"] < 1e-9

@@ -62,7 +62,7 @@ def test_the_views_palate_is_the_one_simulate_used(model, monkeypatch):  # noqa:
     original = module.place_palate
     monkeypatch.setattr(module, "place_palate", lambda *a, **k: used.append(original(*a, **k)) or used[-1])
     motion = simulate(rec, model, modes=20, landmarks="rule", palate=palate)
-    placed, raised = module.placed_palate(rec, palate, model, landmarks="rule", rest_interval=rest_of(motion))
+    placed, raised = module.placed_palate(rec, palate, model, landmarks="rule", rest=rest_of(motion))
     (surface, shift), _ = used
     for name in ("rotation", "translation", "z"):
         np.testing.assert_allclose(getattr(placed, name), getattr(surface, name), atol=1e-15)
@@ -71,9 +71,9 @@ def test_the_views_palate_is_the_one_simulate_used(model, monkeypatch):  # noqa:
     # A palate already in the model frame (the generic one) is used as is there, and placed with the model in
     # the speaker frame (the default).
     as_is = PalateSurface(x, x.copy(), palate.z, metadata={"frame": "model"})
-    same, none = module.placed_palate(rec, as_is, model, landmarks="rule", rest_interval=rest_of(motion), frame="model")
+    same, none = module.placed_palate(rec, as_is, model, landmarks="rule", rest=rest_of(motion), frame="model")
     assert same is as_is and none == 0.0
-    moved, none = module.placed_palate(rec, as_is, model, landmarks="rule", rest_interval=rest_of(motion))
+    moved, none = module.placed_palate(rec, as_is, model, landmarks="rule", rest=rest_of(motion))
     placement = motion.model.placement
     assert none == 0.0 and moved.scale == pytest.approx(placement.scale)
     np.testing.assert_allclose(moved.rotation, placement.rotation, atol=1e-12)

@@ -50,7 +50,7 @@ def test_the_whole_tongue_returns_to_rest_when_the_sensors_do(default_model, ta)
         pos = pos.copy()
         pos[-200:] = np.nanmean(pos[:400], axis=0)  # the rest pose of the first 4 s
         still[name] = pos
-    motion = simulate(ta.with_sensors(still), default_model, rest_interval=(0.0, 4.0))
+    motion = simulate(ta.with_sensors(still), default_model, rest=(0.0, 4.0))
     assert np.abs(motion.displacement(motion.n_frames - 1)).max() < 1e-5  # < 0.01 mm
 
 

@@ -93,7 +93,7 @@ def validate(
     model=None,
     modes: int = 100,
     landmarks: str = "speaker",
-    rest_interval=None,
+    rest=None,
     quasi_static: bool = True,
     tolerance: float = 1e-8,
     sensor_stiffness: float | None | str = "default",
@@ -105,7 +105,7 @@ def validate(
     """Leave-one-sensor-out validation of ``model`` (default: the shipped tongue) on ``recording``.
 
     Needs >= 3 tongue sensors with landmarks on the model (each run is driven
-    by >= 2).  ``rest_interval`` (start_s, end_s) or a :class:`~tonguevis.preprocess.RestChoice`
+    by >= 2).  ``rest`` (start_s, end_s) or a :class:`~tonguevis.preprocess.RestChoice`
     defaults to the detected rest, else the stillest 0.2 s window (logged; the JSON says which).
     ``sensor_stiffness`` as :func:`tonguevis.sim.simulate` (every physical predictor uses it), with
     the CLI's words: a positive number, "default" or "hard" (:mod:`tonguevis.sensor_stiffness`).
@@ -139,7 +139,7 @@ def validate(
             f"{candidates or 'none'} (recording sensors: {', '.join(recording.sensor_names)}); "
             + how_to_map(recording), file)
     given = model
-    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest_interval,
+    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest,
                                         tongue_size=tongue_size)  # the model in the frame
     if sensor_patches == "default":  # 3 mm on the generic tongue, as simulate() takes it
         from tonguevis.sim.patches import PATCH_RADIUS
@@ -152,7 +152,7 @@ def validate(
     if sensor_stiffness == "default":
         sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
     motion = simulate(recording, given, modes=modes, warping=True, landmarks=landmarks,
-                      rest_interval=prep.rest, tolerance=tolerance, sensor_stiffness=sensor_stiffness,
+                      rest=prep.rest, tolerance=tolerance, sensor_stiffness=sensor_stiffness,
                       sensor_patches=patch_option, frame=frame, tongue_size=tongue_size)
     centres = prep.aligned_rest
     s = len(names)

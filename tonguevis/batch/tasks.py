@@ -233,7 +233,7 @@ def _validate(task, entry, rec, model, motion, seconds):
     from tonguevis.analysis.validation import validate
 
     s = task.settings
-    result = validate(rec, model, modes=s.modes, landmarks=s.landmarks, rest_interval=s.rest,
+    result = validate(rec, model, modes=s.modes, landmarks=s.landmarks, rest=s.rest,
                       sensor_stiffness=s.sensor_stiffness, quasi_static=s.quasi_static,
                       sensor_patches=s.sensor_patches)
     result.write_json(task.folder / "validation.json")

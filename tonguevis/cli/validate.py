@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     model = load_model_args(args)
     with tqdm_progress("validating", disable=args.quiet) as progress:
         result = validate(recording, model, modes=args.modes, landmarks=args.landmarks,
-                          rest_interval=rest, sensor_stiffness=args.sensor_stiffness,
+                          rest=rest, sensor_stiffness=args.sensor_stiffness,
                           quasi_static=not args.no_static, progress=progress, sensor_patches=args.sensor_patches,
                           **frame_options(args))
     print(plausibility_line(result.recording))

@@ -526,7 +526,7 @@ def domains_model(model, domain_model: DomainModel):
     return copied
 
 
-def simulate_domains(recording, model=None, landmarks: str = "speaker", rest_interval=None,
+def simulate_domains(recording, model=None, landmarks: str = "speaker", rest=None,
                      smooth_window: int | None = None, tolerance: float = 1e-7,
                      sensor_stiffness: float | None | str = "default", backend: str = "warp", palate=None,
                      progress=None, frame: str = "speaker", tongue_size: float | None = None, cache: bool = True):
@@ -558,7 +558,7 @@ def simulate_domains(recording, model=None, landmarks: str = "speaker", rest_int
         sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
     model = model or TongueModel.default()
     recording = recording.on_uniform_grid()
-    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest_interval, smooth_window,
+    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest, smooth_window,
                                         tongue_size=tongue_size)
     report(progress, 0, 3, "building the quadratic domains")
     t0 = time.perf_counter()
@@ -594,7 +594,7 @@ def simulate_domains(recording, model=None, landmarks: str = "speaker", rest_int
     return motion
 
 
-def held_out_domains(recording, model=None, landmarks: str = "speaker", rest_interval=None,
+def held_out_domains(recording, model=None, landmarks: str = "speaker", rest=None,
                      sensor_stiffness: float | None | str = "default", frame: str = "speaker",
                      tongue_size: float | None = None, tolerance: float = 1e-7, cache: bool = True) -> dict:
     """Leave-one-sensor-out with the domains method, as :func:`tonguevis.analysis.validate` does for the modal
@@ -612,7 +612,7 @@ def held_out_domains(recording, model=None, landmarks: str = "speaker", rest_int
     if sensor_stiffness == "default":
         sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
     recording = recording.on_uniform_grid()
-    model, prep, _ = targets_in_frame(recording, model or TongueModel.default(), frame, landmarks, rest_interval,
+    model, prep, _ = targets_in_frame(recording, model or TongueModel.default(), frame, landmarks, rest,
                                       tongue_size=tongue_size)
     nodes = np.asarray(prep.nodes)
     out = {}

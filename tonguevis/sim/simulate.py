@@ -35,7 +35,7 @@ def simulate(
     modes: int = 100,
     warping: bool = True,
     landmarks: str = "speaker",
-    rest_interval: RestChoice | tuple[float, float] | None = None,
+    rest: RestChoice | tuple[float, float] | None = None,
     smooth_window: int | None = None,
     tolerance: float = 1e-8,
     sensor_stiffness: float | None | str = "default",
@@ -48,8 +48,12 @@ def simulate(
     frame: str = "speaker",
     tongue_size: float | None = None,
     method: str | None = None,
+    rest_interval: RestChoice | tuple[float, float] | None = None,
 ) -> Motion:
     """Drive ``model`` (default: our shipped tongue) with ``recording``.
+
+    rest_interval : the old name of ``rest`` (every front end says ``rest``), kept for one release
+        with a DeprecationWarning.
 
     method : "warped" (modal warping), "linear" (modal, no warping) or "domains" (seed 001's
         StVK on quadratic domains, :func:`tonguevis.sim.domains.simulate_domains`); None
@@ -62,7 +66,7 @@ def simulate(
         :data:`DEFAULT_SENSOR_STIFFNESS`.
     backend : "warp" runs the frame loop as a warp-lang kernel
         (:mod:`newmark_kernel`), "numpy" the reference (same result to rounding).
-    rest_interval : a :class:`RestChoice`, a (start_s, end_s) the user gave,
+    rest : a :class:`RestChoice`, a (start_s, end_s) the user gave,
         or None to choose one (detected, else the stillest window); the choice
         is in ``motion.metadata["rest"]``.
 
@@ -113,11 +117,16 @@ def simulate(
     from tonguevis.sensor_stiffness import sensor_stiffness_value
 
     check_backend(backend)
+    if rest_interval is not None:
+        import warnings
+
+        warnings.warn("simulate(rest_interval=) is now simulate(rest=)", DeprecationWarning, stacklevel=3)
+        rest = rest if rest is not None else rest_interval
     warping = method_warping(method, warping, recording.metadata.get("file"))
     if method == "domains":  # seed 001's StVK on quadratic domains (tonguevis.sim.domains)
         from tonguevis.sim.domains import simulate_domains
 
-        return simulate_domains(recording, model, landmarks, rest_interval, smooth_window,
+        return simulate_domains(recording, model, landmarks, rest, smooth_window,
                                 sensor_stiffness=sensor_stiffness, backend=backend, palate=palate, progress=progress,
                                 frame=frame, tongue_size=tongue_size)
     sensor_stiffness = sensor_stiffness_value(sensor_stiffness, recording.metadata.get("file"))  # the CLI's words too
@@ -131,7 +140,7 @@ def simulate(
     recording = recording.on_uniform_grid()
     from tonguevis.sim.placement import targets_in_frame
 
-    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest_interval, smooth_window,
+    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest, smooth_window,
                                         tongue_size=tongue_size)
     basis = model.basis(modes, progress=_stage(progress, 0, 3))
     w_full = model.rotation_matrix(basis)
@@ -523,7 +532,7 @@ def shipped_tongue(model: TongueModel) -> bool:
 
 
 def placed_palate(recording: Recording, palate, model: TongueModel | None = None, landmarks: str = "speaker",
-                  rest_interval: RestChoice | tuple[float, float] | None = None, smooth_window: int | None = None,
+                  rest: RestChoice | tuple[float, float] | None = None, smooth_window: int | None = None,
                   frame: str = "speaker", tongue_size: float | None = None):
     """The palate as :func:`simulate` places it for ``recording`` on ``model`` (unplaced, as given to
     :func:`simulate`): (surface in the motion's ``frame``, raised by m).
@@ -535,7 +544,7 @@ def placed_palate(recording: Recording, palate, model: TongueModel | None = None
     """
     from tonguevis.sim.placement import targets_in_frame
 
-    framed, prep, _ = targets_in_frame(recording, model or TongueModel.default(), frame, landmarks, rest_interval,
+    framed, prep, _ = targets_in_frame(recording, model or TongueModel.default(), frame, landmarks, rest,
                                        smooth_window, tongue_size=tongue_size)
     return place_palate(palate, prep, quiet=True, model=framed,  # the simulation said it once
                         speech_references=_speech_references(recording, prep, palate))

@@ -93,7 +93,7 @@ class RunSettings:
     def simulate_options(self) -> dict:
         """Keyword arguments of :func:`tonguevis.sim.simulate` (the model and the palate aside: see
         :func:`build_model` and :meth:`palate_surface`)."""
-        return dict(modes=self.modes, warping=self.warping, landmarks=self.landmarks, rest_interval=self.rest,
+        return dict(modes=self.modes, warping=self.warping, landmarks=self.landmarks, rest=self.rest,
                     sensor_stiffness=self.sensor_stiffness, sensor_patches=self.sensor_patches, backend=self.backend,
                     frame=self.frame, tongue_size=self.tongue_size, method=self.method)
 

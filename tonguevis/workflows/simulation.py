@@ -65,7 +65,7 @@ def simulate_recording(recording: Recording, model=None, settings: RunSettings |
         model = build_model(settings)
     sim_options = settings.simulate_options()
     if rest_choice is not None:
-        sim_options["rest_interval"] = rest_choice
+        sim_options["rest"] = rest_choice
     palate = palate_given if palate_given is not None else settings.palate
     if palate is not None:
         sim_options["palate"] = palate
@@ -184,6 +184,6 @@ def shown_palate(recording, motion, model, palate):
     else:  # a motion loaded from a file
         fit = motion.metadata.get("fit", {})  # none: saved before the speaker frame, in the model's
         placed, raised = placed_palate(recording, surface, model, landmarks=motion.metadata.get("landmarks", "speaker"),
-                                       rest_interval=rest_of(motion), frame=fit.get("frame", "model"),
+                                       rest=rest_of(motion), frame=fit.get("frame", "model"),
                                        tongue_size=fit.get("tongue_size"))
     return speaker_palate(placed, palate_label(surface), simulated=True, raised_mm=1e3 * raised)
