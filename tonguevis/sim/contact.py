@@ -160,9 +160,10 @@ def _contact_pass(lam, p_act, solve_g, phi_nodes, q, q0, gap, normal, ok, margin
 def _contact_pass_fast(lam, k_mat, phi_nodes, q, q0, gap, normal, ok, margin):
     """:func:`_contact_pass` with the sensors' elimination folded into one (m, m) matrix
     K = Λ⁻¹(Pᵀ G⁻¹ P Λ⁻¹ - I) (:func:`_sensor_operator`, shared by the frames with the same acting
-    sensors and springs), so B = K Aᵀ is one product, and the triangular solve of the NNLS's
-    right-hand side a triangular solve: the same QP, the same result to rounding."""
-    from scipy.linalg import solve_triangular
+    sensors and springs), so B = K Aᵀ is one product, and the small solves by LAPACK directly (the
+    NNLS's right-hand side a triangular solve; the polish a Cholesky solve where the block is positive
+    definite, else least squares as the reference): the same QP, the same result to rounding."""
+    from scipy.linalg.lapack import dpotrf, dpotrs, dtrtrs
     from scipy.optimize import nnls
 
     near = np.flatnonzero(ok & (gap < margin + BAND))
@@ -171,11 +172,19 @@ def _contact_pass_fast(lam, k_mat, phi_nodes, q, q0, gap, normal, ok, margin):
     m_mat = -a_rows @ b_mat
     r = gap[near] - margin + a_rows @ (q - q0)
     chol, lower = _factor(0.5 * (m_mat + m_mat.T))
-    rhs = solve_triangular(chol, r, lower=True, check_finite=False) if lower else np.linalg.lstsq(chol, r, rcond=None)[0]
+    if lower:
+        rhs, info = dtrtrs(chol, r, lower=1)
+    if not lower or info != 0:
+        rhs = np.linalg.lstsq(chol, r, rcond=None)[0]
     lam_a = nnls(chol.T, -rhs, maxiter=50 * len(r))[0]
-    on = lam_a > 0
-    if on.any():  # polish, as _contact_pass
-        polished = np.linalg.lstsq(m_mat[np.ix_(on, on)], -r[on], rcond=None)[0]
+    on = np.flatnonzero(lam_a > 0)
+    if len(on):  # polish, as _contact_pass
+        block = m_mat[on][:, on]
+        factor, info = dpotrf(block, lower=1, clean=0)
+        if info == 0:
+            polished, info = dpotrs(factor, -r[on], lower=1)
+        if info != 0:
+            polished = np.linalg.lstsq(block, -r[on], rcond=None)[0]
         if np.all(polished >= 0):
             lam_a[on] = polished
     return lam_a, a_rows, q0 + b_mat @ lam_a
@@ -183,13 +192,15 @@ def _contact_pass_fast(lam, k_mat, phi_nodes, q, q0, gap, normal, ok, margin):
 
 def _factor(matrix: np.ndarray) -> tuple[np.ndarray, bool]:
     """:func:`_cholesky`'s factor and whether it is the (lower triangular) Cholesky factor."""
+    from scipy.linalg.lapack import dpotrf
+
     scale = max(np.trace(matrix) / len(matrix), 1e-300)
-    eye = np.eye(len(matrix))
     for jitter in (1e-12, 1e-10, 1e-8, 1e-6):
-        try:
-            return np.linalg.cholesky(matrix + jitter * scale * eye), True
-        except np.linalg.LinAlgError:
-            continue
+        shifted = matrix.copy()
+        shifted.flat[::len(matrix) + 1] += jitter * scale
+        factor, info = dpotrf(shifted, lower=1, clean=1)
+        if info == 0:
+            return factor, True
     return _cholesky(matrix), False
 
 
