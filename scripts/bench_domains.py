@@ -6,7 +6,7 @@ the Haskins sentence), each method simulated over the whole trial, default setti
 frames/s of the whole ``simulate`` call (and, for the domains, of its frame loop alone), the
 plausibility figures (far-field amplification, largest volume change, sensor misfit), and,
 unless --no-validate, the held-out RMSE per tongue sensor: warped and linear from
-:func:`tonguevis.analysis.validate`, the domains from :func:`tonguevis.sim.domains.held_out_domains`
+:func:`tonguevis.analysis.validate`, the domains from :func:`tonguevis.analysis.validation_domains.held_out_domains`
 (validate takes no method; the domains are seeded at the driving sensors only).
 
     python scripts/bench_domains.py [--json OUT] [--no-validate] [--demo-only]
@@ -64,7 +64,7 @@ def run(name: str, path: Path, validate_too: bool) -> dict:
         print(f"  [{name}] {method}: {row['frames_per_s']:.1f} frames/s", flush=True)
     if validate_too:
         from tonguevis.analysis import validate
-        from tonguevis.sim.domains import held_out_domains
+        from tonguevis.analysis.validation_domains import held_out_domains
 
         nan = float("nan")
 

@@ -22,7 +22,6 @@ a rest that cannot be taken) go to the status line, never into a crash.
 
 from __future__ import annotations
 
-import logging
 import time
 from collections import deque
 from pathlib import Path
@@ -41,7 +40,7 @@ from tonguevis.live.targets import (
     FollowingTarget, OscillatingTarget, ReplayTarget, StaticTarget, TargetError, accuracy_colour,
 )
 
-log = logging.getLogger("tonguevis")
+from tonguevis._logging import logger
 
 #: How often the source is polled (ms): a frame waits at most this long before it is simulated.
 POLL_MS = 2
@@ -398,7 +397,7 @@ class LiveWindow(QMainWindow):
             try:
                 self.source.close()
             except Exception:  # closing must never fail the window
-                log.exception("closing the live source failed")
+                logger.exception("closing the live source failed")
         self.source = None
 
     def slot_names(self, n_slots: int) -> list[str]:
@@ -451,7 +450,7 @@ class LiveWindow(QMainWindow):
                 self._last_status = now
                 self._update_status()
         except Exception as exc:  # a bug or a bad frame must not take the clinic's window down
-            log.exception("live view: a frame could not be shown")
+            logger.exception("live view: a frame could not be shown")
             self.show_status(f"a frame could not be shown: {exc}")
 
     def _process(self, frames: list) -> None:
@@ -935,7 +934,7 @@ class LiveWindow(QMainWindow):
     def show_error(self, text: str) -> None:
         """Said in the status line, and in a dialog unless running headless (tests, the benchmark)."""
         self.show_status(text)
-        log.warning("live: %s", text)
+        logger.warning("live: %s", text)
         from PySide6.QtGui import QGuiApplication
 
         if QGuiApplication.platformName() not in ("offscreen", "minimal") and not getattr(self, "quiet", False):

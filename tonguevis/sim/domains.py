@@ -291,6 +291,7 @@ class DomainModel:
         self._df = np.einsum("kair,kaj->kijr", b_tet, self.solid.grads).reshape(len(b_tet), 9, -1)
         self._df2 = np.ascontiguousarray(self._df.reshape(-1, self._df.shape[-1]))  # (9k, r)
         self._scatter = self._tet_dofs.ravel()  # (12k,) DOF of each tet's (node, axis) entry
+        self.cubature = None  # every tet (see use_cubature)
 
     @property
     def n_dofs(self) -> int:
@@ -316,7 +317,20 @@ class DomainModel:
         psi = self.solid.mu * np.einsum("kij,kij->k", e, e) + 0.5 * self.solid.lam * tr ** 2
         return float(self.solid.volumes @ psi)
 
+    def use_cubature(self, cubature) -> None:
+        """Evaluate :meth:`force` and :meth:`tangent` by ``cubature`` (a :class:`tonguevis.sim.cubature.Cubature`
+        of this model), or over every tet again (None)."""
+        self.cubature = cubature
+
     def force(self, z: np.ndarray) -> np.ndarray:
+        """(r,) reduced internal force, N: :meth:`full_force`, or the cubature's (:meth:`use_cubature`)."""
+        return self.full_force(z) if self.cubature is None else self.cubature.force(z)
+
+    def tangent(self, z: np.ndarray) -> np.ndarray:
+        """(r, r) reduced tangent, N/m: :meth:`full_tangent`, or the cubature's (:meth:`use_cubature`)."""
+        return self.full_tangent(z) if self.cubature is None else self.cubature.tangent(z)
+
+    def full_force(self, z: np.ndarray) -> np.ndarray:
         """(r,) reduced internal force Bᵀ f_int(Bz), N (Eq. 8 over every tet).
 
         Through the nodes (u = Bz, the tets' forces summed at the nodes, Bᵀf): 14 times fewer
@@ -334,7 +348,7 @@ class DomainModel:
         _, _, p = self.solid.stresses(self._deformation(z))
         return -(self.solid.volumes[:, None] * p.reshape(-1, 9)).ravel() @ self._df2
 
-    def tangent(self, z: np.ndarray) -> np.ndarray:
+    def full_tangent(self, z: np.ndarray) -> np.ndarray:
         """(r, r) reduced tangent stiffness Bᵀ K(Bz) B, N/m (Eq. 9 over every tet)."""
         # The sparse product is 3x faster than projecting each element's 12 x 12 block (0.08 against 0.23 s).
         k = self.solid.tangent(self.displacement(z))
@@ -592,44 +606,3 @@ def simulate_domains(recording, model=None, landmarks: str = "speaker", rest=Non
     }
     report(progress, 3, 3, "done")
     return motion
-
-
-def held_out_domains(recording, model=None, landmarks: str = "speaker", rest=None,
-                     sensor_stiffness: float | None | str = "default", frame: str = "speaker",
-                     tongue_size: float | None = None, tolerance: float = 1e-7, cache: bool = True) -> dict:
-    """Leave-one-sensor-out with the domains method, as :func:`tonguevis.analysis.validate` does for the modal
-    ones (which takes no method): per tongue sensor h, the domains seeded at the *other* sensors (the model
-    does not know where h sits) and the centre, driven by them as :func:`simulate_domains` drives them, and
-    h's node's trajectory scored against h's measurement.  Returns {sensor: {"rmse_mm", "corr", "frames",
-    "unconverged_frames", "frames_per_s"}} (:func:`tonguevis.analysis.validation_scores.trajectory_scores`)."""
-    from tonguevis.analysis.validation_scores import trajectory_scores
-    from tonguevis.sensor_stiffness import sensor_stiffness_value
-    from tonguevis.sim.model import TongueModel
-    from tonguevis.sim.placement import targets_in_frame
-    from tonguevis.sim.simulate import DEFAULT_SENSOR_STIFFNESS, drive_schedule
-
-    sensor_stiffness = sensor_stiffness_value(sensor_stiffness, recording.metadata.get("file"))
-    if sensor_stiffness == "default":
-        sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
-    recording = recording.on_uniform_grid()
-    model, prep, _ = targets_in_frame(recording, model or TongueModel.default(), frame, landmarks, rest,
-                                      tongue_size=tongue_size)
-    nodes = np.asarray(prep.nodes)
-    out = {}
-    for h, name in enumerate(prep.names):
-        keep = np.delete(np.arange(len(nodes)), h)
-        dm = DomainModel(model, nodes[keep], cache=cache)
-        rows = dm.rows(nodes[keep])
-        targets, _, _ = drive_schedule(prep.displacement[:, keep], recording.rate, dm.eigenvalues, rows,
-                                       sensor_stiffness)
-        t0 = time.perf_counter()
-        result = dm.integrate(targets, 1.0 / recording.rate, model.material.alpha, model.material.beta, tolerance)
-        elapsed = time.perf_counter() - t0
-        predicted = np.einsum("cr,fr->fc", dm.rows([nodes[h]])[0], result.q)
-        measured = prep.displacement[:, h]
-        ok = np.all(np.isfinite(measured), axis=1)
-        scores = trajectory_scores(measured[ok], predicted[ok])
-        out[name] = {"rmse_mm": scores["rmse_mm"], "corr": scores["corr"], "frames": int(ok.sum()),
-                     "unconverged_frames": int(np.sum(~result.converged)),
-                     "frames_per_s": len(targets) / elapsed if elapsed > 0 else float("inf")}
-    return out
