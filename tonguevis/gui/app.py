@@ -13,6 +13,9 @@ from tonguevis._logging import logger
 def application():
     from PySide6.QtWidgets import QApplication
 
+    from tonguevis.gui.qt_workarounds import keep_none_alive
+
+    keep_none_alive()  # every window: a long playback makes as many void Qt calls as the live view
     app = QApplication.instance()
     if app is None:
         app = QApplication(sys.argv[:1])
