@@ -222,38 +222,37 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
     Returns a list of (q, λ, A) or (q0, None, None), one per frame.
     """
     n = len(q0)
-    state = [(q0[i], None, None) for i in range(n)]
+    q = np.array(q0, copy=True)
+    lams: list = [None] * n
+    rows: list = [None] * n
     going = np.arange(n)
     for n_pass in range(MAX_PASSES):
         if len(going) == 0:
             break
         if n_pass:
-            qs = np.array([state[i][0] for i in going])
-            gap, normal = query((qs @ phi_flat.T).reshape(len(going), -1, 3), offsets[going], normals=True)
+            gap, normal = query((q[going] @ phi_flat.T).reshape(len(going), -1, 3), offsets[going], normals=True)
         else:
             gap, normal = gap0[going], normal0[going]
-        still = []
-        for j, i in enumerate(going):
+        # a frame goes on while a candidate it may constrain is inside the margin (NaN: off the palate)
+        inside = np.any(allowed[going] & (gap < margin - 1e-7), axis=1)
+        for j in np.flatnonzero(inside):
+            i = going[j]
             ok = allowed[i] & np.isfinite(gap[j])
-            if not np.any(ok & (gap[j] < margin - 1e-7)):
-                continue
-            lam_a, rows, q = _contact_pass_fast(lam, solves[i], phi_nodes, state[i][0], q0[i], gap[j], normal[j], ok,
-                                                margin)
-            state[i] = (q, lam_a, rows)
-            still.append(i)
-        going = np.asarray(still, dtype=np.int64)
+            lams[i], rows[i], q[i] = _contact_pass_fast(lam, solves[i], phi_nodes, q[i], q0[i], gap[j], normal[j], ok,
+                                                        margin)
+        going = going[inside]
+    # the guard, every frame at once: a push much further than the surface was inside has failed
+    depth = np.maximum(0.0, -np.fmin.reduce(np.where(allowed, gap0, np.nan), axis=1, initial=np.inf))
+    moved = np.abs((q - q0) @ phi_flat.T).reshape(n, -1, 3)
+    moved = np.where(allowed[:, :, None], moved, 0.0).reshape(n, -1).max(axis=1, initial=0.0)
     out = []
-    for i, (q, lam_a, rows) in enumerate(state):
-        if lam_a is None or not np.any(lam_a > 0):
-            out.append((q0[i], None, None))
-            continue
-        depth = max(0.0, -float(np.nanmin(gap0[i][allowed[i]])))  # as _active_set's guard
-        moved = float(np.abs((phi_flat @ (q - q0[i])).reshape(-1, 3)[allowed[i]]).max())
-        if not np.isfinite(moved) or moved > 2 * depth + 2e-3:
+    for i in range(n):
+        lam_a = lams[i]
+        if lam_a is None or not np.any(lam_a > 0) or not np.isfinite(moved[i]) or moved[i] > 2 * depth[i] + 2e-3:
             out.append((q0[i], None, None))
             continue
         used = lam_a > 0
-        out.append((q, lam_a[used], rows[used]))
+        out.append((q[i], lam_a[used], rows[i][used]))
     return out
 
 
