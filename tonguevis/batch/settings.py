@@ -159,11 +159,10 @@ class ModelSpec:
     def build(self):
         """The :class:`~tonguevis.sim.TongueModel` this spec describes."""
         from tonguevis.sim import TongueModel
+        from tonguevis.workflows.settings import build_model
 
-        if self.kind == "default":
-            return TongueModel.default()
-        if self.kind == "file":
-            return TongueModel.from_mesh(self.mesh, **({"axes": self.axes} if self.axes else {}))
+        if self.kind in ("default", "file"):  # the one way a model is built from settings
+            return build_model(RunSettings(mesh=self.mesh, mesh_axes=self.axes))
         if self.kind == "parts":
             return TongueModel(self.mesh, self.landmarks, self.material)
         raise BatchError(f"unknown model kind {self.kind!r}")
