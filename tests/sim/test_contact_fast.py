@@ -118,6 +118,17 @@ def test_many_frames_in_contact_are_solved_as_the_reference_does(demo):
     assert_same(ref, fast)
 
 
+def test_a_palate_the_tongue_never_reaches_costs_no_solve(demo):
+    """The demo on 40 modes with its springs stays below the generic palate: no frame to solve in
+    either stage (the fast path's empty cases), nothing in contact."""
+    from tonguevis.sim import simulate
+
+    held = simulate(demo[0], modes=40, palate="generic")
+    c = held.metadata["contact"]
+    assert c["frames_with_contact_forces"] == 0 and c["frames_corrected_after_the_dynamics"] == 0
+    assert held.penetration.max() == 0 and held.contact_area.max() == 0
+
+
 def test_simulate_reports_the_same_contact_on_both_backends(demo):
     """The whole run against the generic palate 4 mm lower (still the model's frame: used as is):
     the contact's figures of simulate() are the reference's to rounding."""

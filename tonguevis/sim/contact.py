@@ -222,6 +222,8 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
     Returns a list of (q, λ, A) or (q0, None, None), one per frame.
     """
     n = len(q0)
+    if n == 0:
+        return []
     q = np.array(q0, copy=True)
     lams: list = [None] * n
     rows: list = [None] * n
