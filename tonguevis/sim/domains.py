@@ -32,8 +32,9 @@ displacement does).
 
 **Dynamics (Eq. 11).**  Backward Euler in the reduced coordinates z (B made
 mass-orthonormal, BᵀMB = I), Rayleigh damping C = αI + βBᵀK₀B, the reduced StVK force
-over every tet of the mesh (no cubature: the error of a cubature need not be stated
-because there is none, and the speed is what that costs), solved by Newton with the
+over every tet of the mesh by default (exact; its cost, ~8 ms a force on the shipped tongue,
+bounds the frame loop at tens of frames/s) or by an optional cubature
+(:mod:`tonguevis.sim.cubature`: ~20x less work, its error stated there), solved by Newton with the
 sensor constraints as hard multipliers on the targets :func:`tonguevis.sim.simulate.drive_schedule`
 makes (the compliant projection, with the domain model's own linear stiffness, and the
 dropout handover; the same constraints as the modal methods').  Newton keeps the tangent of
