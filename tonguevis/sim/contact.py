@@ -436,21 +436,28 @@ def contact_frames(displacements: np.ndarray, points: np.ndarray, candidates: np
     if check_backend(backend) == "warp":
         from tonguevis.sim.contact_kernel import clearances
 
-        gap, _ = clearances(palate, points[candidates], displacements[:, candidates], jaw_offset)
+        every = len(candidates) == displacements.shape[1] and np.array_equal(candidates, np.arange(len(candidates)))
+        gap, _ = clearances(palate, points[candidates], displacements if every else displacements[:, candidates],
+                            jaw_offset)  # (the figures pass the candidates' displacements alone: no copy)
     else:
         pts = points[candidates][None] + displacements[:, candidates] + jaw_offset[:, None]
         gap, _ = palate.clearance(pts.reshape(-1, 3))
         gap = gap.reshape(n_frames, -1)
     counted = gap if exclude is None else np.where(exclude, np.nan, gap)
-    deepest = np.nanmin(np.where(np.isfinite(counted), counted, np.inf), axis=1) if n_frames else np.zeros(0)
+    deepest = np.fmin.reduce(counted, axis=1, initial=np.inf)  # NaN (off the palate, excluded) ignored
     pen = np.maximum(0.0, -np.where(np.isfinite(deepest), deepest, 0.0))
-    full = np.full((n_frames, n_nodes), np.inf)
-    full[:, candidates] = np.where(np.isfinite(gap), gap, np.inf)
-    touching = np.all(full[:, faces] < touch, axis=2)  # (F, faces)
+    close = gap < touch  # (F, k); NaN: False
     area = np.zeros(n_frames)
-    for f in np.flatnonzero(touching.any(axis=1)):  # only the frames in contact: a few of them
-        p = points + displacements[f]
-        tri = faces[touching[f]]
-        a, b, c = p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]]
-        area[f] = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
+    rows = np.flatnonzero(close.any(axis=1))  # only frames with a node that close can have a triangle in contact
+    if len(rows):
+        near = np.zeros((len(rows), n_nodes), dtype=bool)
+        near[:, candidates] = close[rows]
+        touching = np.all(near[:, faces], axis=2)  # (rows, faces)
+        for r, f in enumerate(rows):
+            if not touching[r].any():
+                continue
+            p = points + displacements[f]
+            tri = faces[touching[r]]
+            a, b, c = p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]]
+            area[f] = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
     return pen, area
