@@ -10,7 +10,8 @@ rest positions, the nodes' displacements and the frame's jaw offset, so the
 (F, k, 3) query array is never built.
 
 The arithmetic is :meth:`tonguevis.palate.PalateSurface.clearance`'s, step by
-step (the NumPy reference; a test proves them equal to 1e-12 m).
+step but with reciprocals for its divisions (the NumPy reference; a test proves
+them equal to 1e-12 m).
 """
 
 from __future__ import annotations
@@ -46,14 +47,18 @@ def _build():
                       gap: wp.array2d(dtype=f64), normal: wp.array2d(dtype=wp.vec3d)):
             f, k = wp.tid()
             p = (base[k] + disp[f, k]) + offset[f] - shift
-            # the palate's own frame: (p - t) R / s, as PalateSurface._to_own
-            ox = (p[0] * rot[0, 0] + p[1] * rot[1, 0] + p[2] * rot[2, 0]) / scale
-            oy = (p[0] * rot[0, 1] + p[1] * rot[1, 1] + p[2] * rot[2, 1]) / scale
-            oz = (p[0] * rot[0, 2] + p[1] * rot[1, 2] + p[2] * rot[2, 2]) / scale
+            # the palate's own frame: (p - t) R / s, as PalateSurface._to_own (reciprocals: a division
+            # costs as much as the rest of the query; the result moves by a few ulps)
+            inv_scale = f64(1.0) / scale
+            ox = (p[0] * rot[0, 0] + p[1] * rot[1, 0] + p[2] * rot[2, 0]) * inv_scale
+            oy = (p[0] * rot[0, 1] + p[1] * rot[1, 1] + p[2] * rot[2, 1]) * inv_scale
+            oz = (p[0] * rot[0, 2] + p[1] * rot[1, 2] + p[2] * rot[2, 2]) * inv_scale
             nx = z.shape[1]
             ny = z.shape[0]
-            fx = (ox - x0) / (x1 - x0)
-            fy = (oy - y0) / (y1 - y0)
+            inv_dx = f64(1.0) / (x1 - x0)
+            inv_dy = f64(1.0) / (y1 - y0)
+            fx = (ox - x0) * inv_dx
+            fy = (oy - y0) * inv_dy
             inside = fx >= f64(0.0) and fx <= f64(nx - 1) and fy >= f64(0.0) and fy <= f64(ny - 1)
             # the cell, clipped to the grid as NumPy's (outside the footprint the height is NaN anyway)
             i = 0
@@ -69,14 +74,14 @@ def _build():
             z01 = z[j + 1, i]
             z11 = z[j + 1, i + 1]
             h = (f64(1.0) - ty) * ((f64(1.0) - tx) * z00 + tx * z10) + ty * ((f64(1.0) - tx) * z01 + tx * z11)
-            dx = ((f64(1.0) - ty) * (z10 - z00) + ty * (z11 - z01)) / (x1 - x0)
-            dy = ((f64(1.0) - tx) * (z01 - z00) + tx * (z11 - z10)) / (y1 - y0)
+            dx = ((f64(1.0) - ty) * (z10 - z00) + ty * (z11 - z01)) * inv_dx
+            dy = ((f64(1.0) - tx) * (z01 - z00) + tx * (z11 - z10)) * inv_dy
             if not inside:
                 h = f64(wp.nan)
-            norm = wp.sqrt(dx * dx + dy * dy + f64(1.0))
-            gap[f, k] = (h - oz) / norm * scale
+            inv_norm = f64(1.0) / wp.sqrt(dx * dx + dy * dy + f64(1.0))
+            gap[f, k] = (h - oz) * inv_norm * scale
             if want_normal != 0:
-                n = wp.vec3d(dx / norm, dy / norm, f64(-1.0) / norm)
+                n = wp.vec3d(dx * inv_norm, dy * inv_norm, -inv_norm)
                 normal[f, k] = wp.vec3d(n[0] * rot[0, 0] + n[1] * rot[0, 1] + n[2] * rot[0, 2],
                                         n[0] * rot[1, 0] + n[1] * rot[1, 1] + n[2] * rot[1, 2],
                                         n[0] * rot[2, 0] + n[1] * rot[2, 1] + n[2] * rot[2, 2])
