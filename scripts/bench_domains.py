@@ -11,6 +11,13 @@ unless --no-validate, the held-out RMSE per tongue sensor: warped and linear fro
 
     python scripts/bench_domains.py [--json OUT] [--no-validate] [--demo-only]
 
+Measured 2026-12-03 (2 shared cores, default settings; whole-call frames/s, frame loop in brackets):
+demo /ta/ 1,762 frames: warped 1,857, linear 4,375, domains 21 (24), domains+cubature 151 (409);
+Opti-Speech /ta/ 009, 1,093 frames: warped 4,209, linear 5,365, domains 31 (37), +cubature 93 (284);
+Haskins sentence, 262 frames: warped 2,083, linear 2,931, domains 15 (17), +cubature 87 (442).
+Held-out RMSE, mean over sensors (mm): Haskins warped 4.14, linear 4.11, kinematic 5.64, domains 4.20;
+Opti-Speech /ta/ 009 warped 3.50, linear 3.48, kinematic 3.53, domains 3.72.
+
 The machine's load changes the speed figures; run it alone.  Never commit the JSON of the
 third-party recordings' figures per sample (only these summary figures).
 """
