@@ -65,6 +65,19 @@ def solve_contact(eigenvalues, phi_nodes, phi_s, targets, compliance, points, se
     solve may constrain is inside the margin; "numpy" is the reference (the same solution to
     rounding: tests/sim/test_contact_fast.py).
     """
+    if check_backend(backend) == "warp":
+        from tonguevis._blas import single_threaded_blas
+
+        with single_threaded_blas():  # many small products: a threaded BLAS's wake-ups cost more than they do
+            return _solve_contact(eigenvalues, phi_nodes, phi_s, targets, compliance, points, sensor_nodes,
+                                  candidates, palate, jaw_offset, margin, backend)
+    return _solve_contact(eigenvalues, phi_nodes, phi_s, targets, compliance, points, sensor_nodes, candidates,
+                          palate, jaw_offset, margin, backend)
+
+
+def _solve_contact(eigenvalues, phi_nodes, phi_s, targets, compliance, points, sensor_nodes, candidates, palate,
+                   jaw_offset, margin, backend):
+    """:func:`solve_contact`, on the BLAS threads the caller set."""
     lam = np.asarray(eigenvalues, dtype=np.float64)
     n_frames, n_s, _ = targets.shape
     m = len(lam)
@@ -85,10 +98,10 @@ def solve_contact(eigenvalues, phi_nodes, phi_s, targets, compliance, points, se
     active_count = np.zeros(n_frames, dtype=np.int64)
     conflicts: list[tuple[int, int]] = []
     near_sensor = np.linalg.norm(cand_pts[:, None] - points[sensor_nodes][None], axis=2) < CONFLICT_RADIUS  # (k, S)
-    if check_backend(backend) == "warp":
+    if backend == "warp":
         _solve_frames_fast(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset, c_all, comp3, acting, q_all,
-                           targets, points[sensor_nodes], near_sensor, margin, out_targets, external, active_count,
-                           conflicts)
+                           targets, points[sensor_nodes], near_sensor, margin, out_targets, external,
+                           active_count, conflicts)
         return {"targets": out_targets, "external": external, "active": active_count, "conflicts": conflicts}
     u = np.einsum("kcm,fm->fkc", phi_nodes, q_all)
     gap, _ = palate.clearance((cand_pts[None] + u + jaw_offset[:, None]).reshape(-1, 3))
@@ -357,8 +370,11 @@ def correct_frames(eigenvalues, phi_nodes, phi_s, q, points, candidates, palate,
     gram = (P / lam) @ P.T
     cand_pts = points[candidates]
     if check_backend(backend) == "warp":
-        return _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offset, allowed, margin,
-                                    compliance)
+        from tonguevis._blas import single_threaded_blas
+
+        with single_threaded_blas():  # as solve_contact's
+            return _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offset, allowed, margin,
+                                        compliance)
     u = np.einsum("kcm,fm->fkc", phi_nodes, q)
     gap, _ = palate.clearance((cand_pts[None] + u + jaw_offset[:, None]).reshape(-1, 3))
     gap = gap.reshape(len(q), -1)
