@@ -261,12 +261,17 @@ def run_settings_of(args, modes: int | None = None):
     from tonguevis.workflows.settings import RunSettings
 
     defaults = RunSettings()
+    palate = getattr(args, "palate", None)
+    if palate is not None:  # read now: a bad file is said before anything runs (one line, naming it)
+        from tonguevis.palate import load_palate
+
+        palate = load_palate(palate)
     return RunSettings(
         mesh=getattr(args, "mesh", None), mesh_axes=getattr(args, "mesh_axes", None),
         modes=getattr(args, "modes", defaults.modes) if modes is None else modes,
         warping=not getattr(args, "linear", False), landmarks=getattr(args, "landmarks", defaults.landmarks),
         sensor_stiffness=getattr(args, "sensor_stiffness", defaults.sensor_stiffness),
-        sensor_patches=sensor_patches_option(args), rest=rest_arg(args), palate=getattr(args, "palate", None),
+        sensor_patches=sensor_patches_option(args), rest=rest_arg(args), palate=palate,
         method=getattr(args, "method", None) or ("linear" if getattr(args, "linear", False) else None),
         **frame_options(args))
 

@@ -54,10 +54,11 @@ def run(args) -> int:
         width, height = (int(v) for v in args.size.lower().split("x"))
     except ValueError:
         raise RecordingError(f"--size must look like 1280x720, got {args.size!r}") from None
+    settings = run_settings_of(args)  # first: a bad palate or setting is said before anything runs
     options = reading_options(args)  # -O, then --audio FILE
     session = load_session(path, sensor_map=args.sensors, rest=rest_arg(args), **options)
     with tqdm_progress("simulating", disable=args.quiet) as progress:
-        simulate_session(session, run_settings_of(args), progress=progress)
+        simulate_session(session, settings, progress=progress)
     with tqdm_progress("rendering", disable=args.quiet) as progress:
         out = export_video(session, args.out, args.start, args.end, fps=args.fps, size=(width, height),
                            mode=args.color, progress=progress, frame=args.reference)
