@@ -170,6 +170,8 @@ def _motion(task: Task, manifest: dict, rec, model, save: bool):
         from tonguevis.sim.placement import placed_model_of
 
         motion = Motion.load(path)
+        if getattr(motion.model, "base_model", None) is not None:
+            return motion  # with sensor patches: its own model, the modes and the patches (Motion.load rebuilt it)
         placed = placed_model_of(motion.model)
         # the same model (the key says so), with its caches; placed in the speaker as the saved one was
         motion.model = model if placed is None else model.placed(placed.placement, placed.keep_frequencies)
