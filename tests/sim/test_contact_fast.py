@@ -215,3 +215,24 @@ def test_the_height_field_of_a_mesh_is_the_lowest_triangle_over_each_grid_point(
     z = np.where(np.isfinite(z), z, np.nan)
     assert np.isfinite(z).mean() > 0.5
     np.testing.assert_array_equal(fast.z, z)
+
+
+def test_contact_area_is_the_surface_the_touching_nodes_stand_for():
+    """A node inside the palate or within TOUCH of it brings its share of the surface, however large the
+    triangles (a tongue placed at 1.6 times the model read 0 mm² while pressing into the palate)."""
+    from tonguevis.palate import PalateSurface
+    from tonguevis.sim.contact import TOUCH, contact_frames, node_areas
+
+    # Two 10 mm triangles in a square under a flat roof at z = 0; one corner pushed up into it.
+    points = np.array([[0, 0, -1e-3], [1e-2, 0, -1e-3], [0, 1e-2, -1e-3], [1e-2, 1e-2, -1e-3]])
+    faces = np.array([[0, 1, 2], [1, 3, 2]])
+    areas = node_areas(points, faces)
+    assert areas.sum() == pytest.approx(1e-4) and areas[0] == pytest.approx(1e-4 / 6)
+    roof = PalateSurface(np.array([-0.01, 0.03]), np.array([-0.01, 0.03]), np.zeros((2, 2)))
+    push = np.zeros((3, 4, 3))
+    push[1, 0, 2] = 1.5e-3  # node 0 0.5 mm inside
+    push[2, :, 2] = 1e-3 - TOUCH / 2  # every node within TOUCH below the roof
+    pen, area = contact_frames(push, points, np.arange(4), roof, np.zeros((3, 3)), faces)
+    assert pen[0] == 0 and area[0] == 0
+    assert pen[1] == pytest.approx(5e-4) and area[1] == pytest.approx(areas[0])  # one node: its share
+    assert pen[2] == 0 and area[2] == pytest.approx(1e-4)  # all touching: the whole square

@@ -434,21 +434,35 @@ def penetration(displacements: np.ndarray, points: np.ndarray, nodes: np.ndarray
 TOUCH = 3e-4
 
 
+def node_areas(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(n,) m²: the surface area each node stands for, a third of each surface triangle ``faces`` (f, 3)
+    it belongs to (at ``points`` (n, 3) m); 0 off the surface."""
+    a, b, c = points[faces[:, 0]], points[faces[:, 1]], points[faces[:, 2]]
+    third = np.linalg.norm(np.cross(b - a, c - a), axis=1) / 6.0
+    out = np.zeros(len(points))
+    np.add.at(out, faces.ravel(), np.repeat(third, 3))
+    return out
+
+
 def contact_frames(displacements: np.ndarray, points: np.ndarray, candidates: np.ndarray, palate,
                    jaw_offset: np.ndarray, faces: np.ndarray, exclude: np.ndarray | None = None,
-                   touch: float = TOUCH, backend: str = "numpy") -> tuple[np.ndarray, np.ndarray]:
+                   touch: float = TOUCH, backend: str = "numpy",
+                   areas: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per frame of ``displacements`` (F, n, 3) m: (deepest penetration (F,) m, contact area (F,) m²).
 
     Penetration as :func:`penetration` over the ``candidates`` (exclude : (F, k)
-    candidates not counted: sensor conflicts); contact area: the surface
-    triangles ``faces`` (f, 3) whose three nodes are all within ``touch`` of the
-    palate (only candidates can touch it).  ``jaw_offset`` (F, 3) carries the
-    tongue into the palate's frame.  One clearance evaluation serves both, and
-    any run of frames gives the same values as the whole motion, so a long
-    motion is measured chunk by chunk (:func:`tonguevis.sim.figures.frame_figures`).
+    candidates not counted: sensor conflicts); contact area: the surface the candidates
+    within ``touch`` of the palate (or inside it) stand for, each node's share of the surface
+    triangles ``faces`` (f, 3) at rest (:func:`node_areas`; ``areas`` (n,) m² when the caller has
+    them).  So a frame with any penetration or touch has an area, however large the mesh's
+    triangles: a measure needing a triangle's three nodes within ``touch`` read 0 mm² on a
+    tongue placed at 1.6 times the model's size while its dorsum pressed into the palate.
+    ``jaw_offset`` (F, 3) carries the tongue into the palate's frame.  One clearance
+    evaluation serves both, and any run of frames gives the same values as the whole motion,
+    so a long motion is measured chunk by chunk (:func:`tonguevis.sim.figures.frame_figures`).
     backend : "numpy" (default) or "warp" (the clearances in one compiled pass, the same to 1e-12 m).
     """
-    n_frames, n_nodes = displacements.shape[0], len(points)
+    n_frames = displacements.shape[0]
     if check_backend(backend) == "warp":
         from tonguevis.sim.contact_kernel import clearances
 
@@ -462,18 +476,8 @@ def contact_frames(displacements: np.ndarray, points: np.ndarray, candidates: np
     counted = gap if exclude is None else np.where(exclude, np.nan, gap)
     deepest = np.fmin.reduce(counted, axis=1, initial=np.inf)  # NaN (off the palate, excluded) ignored
     pen = np.maximum(0.0, -np.where(np.isfinite(deepest), deepest, 0.0))
+    if areas is None:
+        areas = node_areas(points, faces)
     close = gap < touch  # (F, k); NaN: False
-    area = np.zeros(n_frames)
-    rows = np.flatnonzero(close.any(axis=1))  # only frames with a node that close can have a triangle in contact
-    if len(rows):
-        near = np.zeros((len(rows), n_nodes), dtype=bool)
-        near[:, candidates] = close[rows]
-        touching = np.all(near[:, faces], axis=2)  # (rows, faces)
-        for r, f in enumerate(rows):
-            if not touching[r].any():
-                continue
-            p = points + displacements[f]
-            tri = faces[touching[r]]
-            a, b, c = p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]]
-            area[f] = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
+    area = close.astype(np.float64) @ np.asarray(areas, dtype=np.float64)[candidates]
     return pen, area

@@ -125,6 +125,10 @@ def frame_figures(model, q: np.ndarray, warping: bool = True, backend: str = "wa
             cand_faces = among[contact.faces]
             cand_faces = cand_faces[np.all(cand_faces >= 0, axis=1)]
             cand_points = contact.points[contact.candidates]
+    if contact is not None:
+        from tonguevis.sim.contact import node_areas
+
+        areas = node_areas(contact.points, contact.faces)  # every surface triangle's share, once
 
     def measure(start: int):
         from tonguevis.sim.contact import contact_frames
@@ -140,14 +144,14 @@ def frame_figures(model, q: np.ndarray, warping: bool = True, backend: str = "wa
                 d = model.displacements(q[start:stop], warping=warping, backend=backend, nodes=contact.candidates)
                 out += contact_frames(d, cand_points, np.arange(len(cand_points)), contact.palate,
                                       contact.jaw_offset[start:stop], cand_faces, contact.exclude(start, stop),
-                                      backend=backend)
+                                      backend=backend, areas=areas[contact.candidates])
             return start, stop, out
         d = model.displacements(q[start:stop], warping=warping, backend=backend, nodes=surface)
         out = [model.volume_change(d, backend=backend, nodes=surface),
                np.sqrt(np.einsum("fnc,fnc->fn", d, d).max(axis=1))]
         if contact is not None:
             out += contact_frames(d, points, candidates, contact.palate, contact.jaw_offset[start:stop], faces,
-                                  contact.exclude(start, stop))
+                                  contact.exclude(start, stop), areas=areas[surface])
         return start, stop, out
 
     def store(result) -> None:
