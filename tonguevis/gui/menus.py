@@ -69,11 +69,39 @@ class MenusMixin:
                                        "own local deformation under it (tonguevis simulate --sensor-patches)")
         self.patches_action.toggled.connect(self.set_sensor_patches)
         simulation.addAction(self.patches_action)
+        method_menu = simulation.addMenu("&Method")
+        methods = QActionGroup(self)
+        self.method_actions = {}
+        for key, text, tip in (
+                ("warped", "&Modal warping (the paper)", "linear FEM modes made nonlinear by modal warping (Yang 2013)"),
+                ("linear", "&Linear modes", "the linear modal model, no warping"),
+                ("domains", "&Quadratic domains (StVK, seed 001; slow)",
+                 "the successor's nonlinear StVK tongue on quadratic domains: tens of frames per second")):
+            action = QAction(text, self)
+            action.setCheckable(True)
+            action.setToolTip(tip)
+            action.setChecked(key == self._method())
+            action.triggered.connect(lambda _checked=False, key=key: self.set_method(key))
+            methods.addAction(action)
+            method_menu.addAction(action)
+            self.method_actions[key] = action
+        method_menu.setToolTipsVisible(True)
         play = bar.addMenu("&Playback")
         self._action(play, "&Play / pause", lambda: self.state.toggle_playing(self), "Space")
         self._action(play, "Step &forward", lambda: self.state.step(1, self), "Right")
         self._action(play, "Step &back", lambda: self.state.step(-1, self), "Left")
         self._action(play, "&Loop current production", self.transport.loop.toggle, "L")
+
+    def _method(self) -> str:
+        settings = self.state.run_settings
+        return settings.method or ("warped" if settings.warping else "linear")
+
+    def set_method(self, method: str) -> None:
+        """Simulate with ``method`` ("warped", "linear" or "domains") from now on, and the open recording again."""
+        self.state.change_run_settings(self, method=method, warping=method != "linear")
+        self.method_actions[method].setChecked(True)
+        if self.session is not None:
+            self._simulate(self.session)
 
     def set_sensor_patches(self, on: bool) -> None:
         """Simulate with (or without) the sensor patches, and simulate the open recording again."""
