@@ -15,6 +15,8 @@ The tangent of the cubature force is the same sum of the kept tets' exact tangen
 
 from __future__ import annotations
 
+from tonguevis._logging import logger
+
 import numpy as np
 
 from tonguevis.sim.stvk import StVK
@@ -121,7 +123,6 @@ def cubature_for(dm, tolerance: float = 0.01, max_tets: int = 400, cache: bool =
     """The cubature of ``dm`` from the disk cache (tets and weights, .npz without pickle) or built (30 s on the
     shipped tongue) and cached; keyed by the domains, the subspace size and the settings."""
     import hashlib
-    import logging
     import zipfile
 
     from tonguevis._files import atomic_write
@@ -140,7 +141,7 @@ def cubature_for(dm, tolerance: float = 0.01, max_tets: int = 400, cache: bool =
                         return Cubature.from_weights(dm, np.array(data["tets"]), np.array(data["weights"]),
                                                      float(data["training_error"]))
             except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
-                logging.getLogger("tonguevis").warning("ignoring unreadable cubature cache %s (%s)", path, exc)
+                logger.warning("ignoring unreadable cubature cache %s (%s)", path, exc)
     cub = Cubature(dm, tolerance=tolerance, max_tets=max_tets)
     if path is not None:
         def write(tmp):
@@ -150,5 +151,5 @@ def cubature_for(dm, tolerance: float = 0.01, max_tets: int = 400, cache: bool =
         try:
             atomic_write(path, write)
         except OSError as exc:
-            logging.getLogger("tonguevis").warning("could not cache the cubature at %s: %s", path, exc)
+            logger.warning("could not cache the cubature at %s: %s", path, exc)
     return cub
