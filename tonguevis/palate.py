@@ -45,6 +45,8 @@ OUTLIER_SIGMAS = 3.0
 MIN_BEND_RADIUS = 3e-3
 #: The seam (m) over which a traced palate blends into the generic one behind and beside it.
 SEAM = 3e-3
+#: m: how far outward the generic roof eases back from meeting the traced edge (joined_palate)
+FEATHER = 10e-3
 #: Grid cells where a traced and the generic palate must both lie before they are joined.
 MIN_OVERLAP_CELLS = 20
 
@@ -387,17 +389,18 @@ def _fit_palate(points: np.ndarray, midline_y: float | None, smoothing: float, s
 
 
 def joined_palate(traced: PalateSurface, generic: PalateSurface, step: float = GRID_STEP,
-                  seam: float = SEAM) -> PalateSurface:
+                  seam: float = SEAM, feather: float = FEATHER) -> PalateSurface:
     """A whole roof: ``traced`` (a speaker's palate, placed in the query frame) where it was traced,
     ``generic`` (the same frame) behind and beside it, moved up or down to meet it.
 
     Both become height fields on one grid of ``step`` m in the query frame (the lowest surface
     above each point).  The generic palate is moved vertically by the median height difference
-    where both are defined, then the two blend over ``seam`` m inside the traced part's edge (a
-    smooth step), so the roof is continuous.  The result is in the query frame (identity
+    where both are defined; where they still differ along the traced part's edge, the generic roof
+    is bent to meet it, easing back over ``feather`` m outward, and the two blend over ``seam`` m
+    inside the edge (smooth steps), so the roof is continuous and without a cliff.  The result is in the query frame (identity
     transform); ``metadata["joined"]``: {"generic_shift_mm", "traced_share", "seam_mm"}.
     """
-    from scipy.ndimage import distance_transform_edt
+    from scipy.ndimage import distance_transform_edt, gaussian_filter
 
     pts_t, tri_t = traced.triangles()
     pts_g, tri_g = generic.triangles()
@@ -416,13 +419,24 @@ def joined_palate(traced: PalateSurface, generic: PalateSurface, step: float = G
     shift = float(np.median(h_t[overlap] - h_g[overlap]))
     moved = h_g + shift
     inside = np.isfinite(h_t)
+    # Where the two roofs still differ along the traced part's edge (by up to 10 mm on real traces: the
+    # shapes differ, not only their heights), the generic roof is bent to meet the traced edge and
+    # eases back to itself over ``feather`` m outward: the traced heights are kept, no cliff at the seam.
+    mismatch = np.where(overlap, h_t - moved, np.nan)
+    bend = np.zeros_like(moved)
+    if np.isfinite(mismatch).any():
+        nearest = distance_transform_edt(~np.isfinite(mismatch), return_distances=False, return_indices=True)
+        edge = gaussian_filter(mismatch[tuple(nearest)], sigma=2.0)  # the edge's mismatch, smoothed along it
+        out = np.clip(1.0 - distance_transform_edt(~inside) * step / max(feather, 1e-12), 0.0, 1.0)
+        bend = edge * out * out * (3.0 - 2.0 * out)  # a smooth step from the edge (1) to feather away (0)
     depth = distance_transform_edt(inside) * step  # m from the traced part's edge, inward
     weight = np.clip(depth / max(seam, 1e-12), 0.0, 1.0)
     weight = weight * weight * (3.0 - 2.0 * weight)  # a smooth step
-    z = np.where(inside & np.isfinite(moved), weight * h_t + (1.0 - weight) * moved, np.where(inside, h_t, moved))
+    met = moved + bend
+    z = np.where(inside & np.isfinite(met), weight * h_t + (1.0 - weight) * met, np.where(inside, h_t, met))
     metadata = {**traced.metadata, "joined": {"generic_shift_mm": 1e3 * shift,
                                               "traced_share": float(inside.sum() / max(np.isfinite(z).sum(), 1)),
-                                              "seam_mm": 1e3 * seam}}
+                                              "seam_mm": 1e3 * seam, "feather_mm": 1e3 * feather}}
     return PalateSurface(grid_t.x, grid_t.y, z, metadata=metadata)
 
 

@@ -343,3 +343,27 @@ def test_the_height_field_of_triangles_equals_a_plain_reference():
                 h = a[2] + u * (b[2] - a[2]) + v * (c[2] - a[2])
                 expected[j, i] = h if np.isnan(expected[j, i]) else min(expected[j, i], h)
     np.testing.assert_allclose(fast.z, expected, atol=1e-12, equal_nan=True)
+
+
+def test_a_traced_palate_shaped_unlike_the_generic_one_joins_without_a_cliff():
+    """Real traces differ from the generic roof in shape, not only in height (up to 10 mm along the
+    edge): the generic roof is bent to meet the traced edge, the traced heights kept inside."""
+    from tonguevis.palate import SEAM, generic_palate, joined_palate
+
+    generic = generic_palate()
+    gx, gy = np.meshgrid(generic.x, generic.y)
+    defined = np.isfinite(generic.z)
+    front = defined & (gx > np.nanpercentile(gx[defined], 60))
+    tilt = 0.25 * (gy - float(np.mean(gy[front])))  # the traced roof tilted sideways: +-4 mm at its edges
+    traced = PalateSurface(generic.x, generic.y, np.where(front, generic.z + 0.002 + tilt, np.nan))
+    plain_steps = np.nanmax(np.abs(np.diff(np.asarray(generic.z), axis=0)))
+    whole = joined_palate(traced, generic)
+    z = np.asarray(whole.z)
+    steps = max(np.nanmax(np.abs(np.diff(z, axis=0))), np.nanmax(np.abs(np.diff(z, axis=1))))
+    assert steps < plain_steps + 1e-3  # no cliff: at most the generic roof's own slope and 1 mm per mm
+    # deep inside the traced part its own heights
+    from scipy.ndimage import binary_erosion
+
+    deep = binary_erosion(front, iterations=int(np.ceil(SEAM / 1e-3)) + 1)
+    grid_x = np.searchsorted(whole.x, gx[deep]); grid_y = np.searchsorted(whole.y, gy[deep])
+    np.testing.assert_allclose(z[grid_y, grid_x], (generic.z + 0.002 + tilt)[deep], atol=1e-6)

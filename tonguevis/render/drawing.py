@@ -65,9 +65,45 @@ class ShownPalate:
         return text
 
 
+def smooth_outline_triangles(surface, blur_cells: float = 2.5) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) vertices and (f, 3) triangles of ``surface`` (a PalateSurface) with a smooth outline.
+
+    The height field is defined on a mask of grid cells, whose edge drawn as the cells' own
+    triangles is a staircase (a sawtooth along the palate's sides).  Here the mask is blurred
+    (``blur_cells`` grid steps) and the surface cut where the blur crosses one half: the outline
+    follows the mask's, rounded, the heights untouched inside (outside the mask they are the
+    nearest defined ones, only under the cut's last half cell).  Drawing only: the simulation and
+    the figures use the height field itself.
+    """
+    import pyvista as pv
+    from scipy import ndimage
+
+    z = np.asarray(surface.z, dtype=np.float64)
+    ok = np.isfinite(z)
+    if ok.all() or not ok.any():
+        return surface.triangles()
+    nearest = ndimage.distance_transform_edt(~ok, return_distances=False, return_indices=True)
+    filled = z[tuple(nearest)]
+    inside = ndimage.gaussian_filter(ok.astype(np.float64), blur_cells)
+    gx, gy = np.meshgrid(surface.x, surface.y)  # (ny, nx), as z
+    grid = pv.StructuredGrid(gx, gy, filled)
+    grid.point_data["inside"] = inside.ravel(order="F")  # StructuredGrid's points run x fastest per column
+    cut = grid.clip_scalar(scalars="inside", value=0.5, invert=False).extract_surface(algorithm="dataset_surface")
+    cut = cut.triangulate()
+    if cut.n_cells == 0:
+        return surface.triangles()
+    faces = cut.faces.reshape(-1, 4)[:, 1:]
+    return surface._from_own(np.asarray(cut.points)), faces
+
+
 def speaker_palate(surface, label: str, simulated: bool = True, raised_mm: float = 0.0) -> ShownPalate:
-    """A placed palate (model frame) drawn as its own height field's triangles."""
-    points, faces = surface.triangles()
+    """A placed palate (model frame) drawn as its own height field, its outline smoothed
+    (:func:`smooth_outline_triangles`)."""
+    try:
+        points, faces = smooth_outline_triangles(surface)
+    except Exception as exc:  # drawing only: the cells' own triangles will do
+        logger.info("palate drawn without a smoothed outline: %s", exc)
+        points, faces = surface.triangles()
     return ShownPalate(surface, np.asarray(points, dtype=np.float32), np.asarray(faces), label, simulated,
                        float(raised_mm), bool(surface.metadata.get("generic", False)))
 
