@@ -51,6 +51,8 @@ def main() -> int:
     parser.add_argument("--size", default="1280x800", help="window size (default 1280x800)")
     parser.add_argument("--targets", type=int, default=3, help="targets shown (default 3: static, oscillating, "
                                                                 "following)")
+    parser.add_argument("--render-scale", type=float, default=None,
+                        help="the 3D view's render scale (default: the live window's, LIVE_RENDER_SCALE)")
     args = parser.parse_args()
 
     os.environ.setdefault("QT_QPA_PLATFORM", "xcb")
@@ -79,6 +81,8 @@ def main() -> int:
     with ReplayServer(rec, loop=True) as server:
         window = LiveWindow(WaveFrontSource("127.0.0.1", server.port), profiles_root=profiles, modes=args.modes)
         window.quiet = True
+        if args.render_scale is not None and hasattr(window.plotter, "set_render_scale"):
+            window.plotter.set_render_scale(args.render_scale)
         window.resize(width, height)
         window.show()
         deadline = time.perf_counter() + 60
@@ -113,6 +117,7 @@ def main() -> int:
         "dropped_frames": figures["dropped_frames"], "skipped_frames": figures["skipped_frames"],
         "frames_drawn": figures["frames_drawn"], "frames_received": figures["frames_received"],
         "fps": figures["fps"], "stream_hz": (status.frames - status0.frames) / elapsed,
+        "render_scale": float(getattr(window.plotter, "render_scale", 1.0)), "load_average": os.getloadavg()[0],
         "stages_ms": {key: {"median": float(np.median([s.get(key, 0.0) for s in stages])),
                             "p95": float(np.percentile([s.get(key, 0.0) for s in stages], 95))}
                       for key in ("simulate", "reconstruct", "scene", "render", "submit", "paint", "tick")},

@@ -260,8 +260,17 @@ class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
     def paintEngine(self):  # noqa: N802 (Qt name): QVTKRenderWindowInteractor returns None (paint on screen)
         return QWidget.paintEngine(self)
 
+    def set_render_scale(self, scale: float) -> None:
+        """Render at ``scale`` (0.5-1) times the widget's pixels and draw the picture scaled up: a
+        software rasteriser's time goes with the pixels (the live view trades a little sharpness
+        for its latency)."""
+        self.render_scale = float(min(max(scale, 0.5), 1.0))
+        self._resize_render_window()
+        self._rendered, self._dirty = False, True
+        QWidget.update(self)
+
     def _resize_render_window(self) -> None:
-        ratio = self.devicePixelRatioF() or 1.0
+        ratio = (self.devicePixelRatioF() or 1.0) * getattr(self, "render_scale", 1.0)
         w, h = max(1, int(round(ratio * self.width()))), max(1, int(round(ratio * self.height())))
         self._RenderWindow.SetDPI(int(round(72 * ratio)))
         self._RenderWindow.SetSize(w, h)
@@ -312,7 +321,10 @@ class ImageInteractor(QVTKRenderWindowInteractor, BasePlotter):
                 self._painting = False
         self.paints += 1
         painter = QPainter(self)
-        painter.drawImage(QPoint(0, 0), self._image)
+        if getattr(self, "render_scale", 1.0) != 1.0:  # fewer pixels rendered: drawn scaled to the widget
+            painter.drawImage(self.rect(), self._image)
+        else:
+            painter.drawImage(QPoint(0, 0), self._image)
         painter.end()
         if self.on_painted is not None:
             self.on_painted()

@@ -138,6 +138,11 @@ class MidsagittalView(QWidget):
         painter.end()
 
 
+#: The live 3D view renders at this share of its pixels in each direction and is drawn scaled up:
+#: under software OpenGL the render is most of the latency and goes with the pixels (0.8: 36 % fewer).
+LIVE_RENDER_SCALE = 0.8
+
+
 class LiveWindow(QMainWindow):
     """The live view of ``source`` (a started or unstarted :class:`~tonguevis.live.source.Source`, or None
     to connect from the panel).
@@ -219,6 +224,8 @@ class LiveWindow(QMainWindow):
 
         split = QSplitter(Qt.Orientation.Horizontal, self)
         self.plotter = make_plotter(split, multi_samples=0, auto_update=False)
+        if hasattr(self.plotter, "set_render_scale"):  # the picture drawn from fewer pixels: less latency
+            self.plotter.set_render_scale(LIVE_RENDER_SCALE)
         self.plotter.set_background(BACKGROUND)
         renderer = self.plotter.renderer
         # As the app's scene (tonguevis.render.scene): under software OpenGL, VTK's order-independent
