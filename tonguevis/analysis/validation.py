@@ -30,6 +30,7 @@ tables in :mod:`tonguevis.analysis.validation_report`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -101,6 +102,7 @@ def validate(
     sensor_patches: float | None | str = None,
     frame: str = "speaker",
     tongue_size: float | None = None,
+    keep_volume: bool = False,
 ) -> ValidationResult:
     """Leave-one-sensor-out validation of ``model`` (default: the shipped tongue) on ``recording``.
 
@@ -114,6 +116,10 @@ def validate(
     ``frame`` as :func:`tonguevis.sim.simulate`: "speaker" (default) scores in the speaker's millimetres
     (the model placed in the speaker, at ``tongue_size`` times its size, as :func:`~tonguevis.sim.simulate`),
     "model" in the generic tongue's (the speaker scaled onto it).
+    ``keep_volume``: besides each dynamic method, the same runs with the volume kept
+    (:func:`tonguevis.sim.volume.volume_subspace`, the driving sensors' nodes held, the held-out
+    node free), scored as ``{method}_kept`` (``model_kept``, ``linear_kept``; the projection is applied
+    after the dynamics, so the runs are shared); the summary is of the run without it.
     """
     from tonguevis.sim import TongueModel
     from tonguevis.io.sensor_map import how_to_map
@@ -175,14 +181,24 @@ def validate(
     predicted: dict[str, list] = {}
 
     def keep_held_out(method: str, runs, warping: bool) -> None:
-        out = []
+        out, kept = [], []
         for h, (q, conv) in enumerate(runs):
             run_basis, run_w = basis, w_full
             if sensor_patches is not None:  # the drivers' patches close their gaps; the held-out one has none
                 run_basis, run_w, q = _patched(model, basis, np.delete(nodes, h), q,
                                                np.delete(prep.displacement, h, axis=1), warping, sensor_patches)
             out.append((_node_trajectory(run_basis, run_w, int(nodes[h]), q, warping), np.asarray(conv, bool)))
+            if keep_volume:  # the same run projected, the drivers' nodes held, h's free
+                from tonguevis.sim.volume import held_nodes, volume_subspace
+
+                extra, c, _ = volume_subspace(model, run_basis.phi, run_w if warping else None, q,
+                                              held_nodes(model, np.delete(nodes, h)))
+                kept.append((_node_trajectory(SimpleNamespace(phi=np.hstack([run_basis.phi, extra])),
+                                              np.hstack([run_w, np.zeros_like(extra)]), int(nodes[h]),
+                                              np.hstack([q, c]), warping), np.asarray(conv, bool)))
         predicted[method] = out
+        if keep_volume:
+            predicted[f"{method}_kept"] = kept
 
     for k, (method, warping) in enumerate((("model", True), ("linear", False))):
         report(progress, 1 + k, 4, f"leave-one-out: {method}")

@@ -119,6 +119,9 @@ def add_model_arguments(parser: argparse.ArgumentParser, modes: int = 100) -> No
     parser.add_argument("--method", choices=("warped", "linear", "domains"), default=None,
                         help="the tongue's physics: modal warping (default), the linear modal model, or 'domains': "
                              "seed 001's nonlinear StVK on quadratic domains (slower: tens of frames/s)")
+    parser.add_argument("--keep-volume", action="store_true",
+                        help="keep the tongue's volume: each frame projected onto volume-preserving shapes (a "
+                             "pressure projection, the sensor nodes held; any --method)")
     add_sensor_stiffness_argument(parser)
     add_sensor_patches_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -273,7 +276,7 @@ def run_settings_of(args, modes: int | None = None):
         sensor_stiffness=getattr(args, "sensor_stiffness", defaults.sensor_stiffness),
         sensor_patches=sensor_patches_option(args), rest=rest_arg(args), palate=palate,
         method=getattr(args, "method", None) or ("linear" if getattr(args, "linear", False) else None),
-        **frame_options(args))
+        keep_volume=bool(getattr(args, "keep_volume", False)), **frame_options(args))
 
 
 def load_model_args(args):

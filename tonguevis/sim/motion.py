@@ -176,6 +176,9 @@ class Motion:
                     tets=model.mesh.tets,
                     anchors=model.anchors,
                     **({"source_points": placed.source.mesh.points} if placed is not None else {}),
+                    # the pressure subspace of a motion with its volume kept (tonguevis.sim.volume): q's last columns
+                    **({"volume_basis": model._bases[self.q.shape[1]].phi[:, -model.volume_columns:]}
+                       if getattr(model, "volume_columns", 0) else {}),
                     meta=np.array(json.dumps(meta, default=_json_default)),
                 )
 
@@ -230,6 +233,11 @@ class Motion:
             from tonguevis.sim.domains import DomainModel, domains_model
 
             model = domains_model(model, DomainModel(model, np.array(domains["seeds"][:-1])))
+        if "volume_basis" in arrays:  # the volume kept: the stored pressure subspace after the basis
+            from tonguevis.sim.volume import volume_kept_model
+
+            extra = arrays["volume_basis"]
+            model = volume_kept_model(model, arrays["q"].shape[1] - extra.shape[1], extra)
         return cls(
             times=arrays["times"], q=arrays["q"], model=model, warping=meta["warping"],
             sensor_names=meta["sensor_names"], sensor_nodes=arrays["sensor_nodes"],

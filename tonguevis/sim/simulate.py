@@ -49,8 +49,14 @@ def simulate(
     tongue_size: float | None = None,
     method: str | None = None,
     rest_interval: RestChoice | tuple[float, float] | None = None,
+    keep_volume: bool = False,
 ) -> Motion:
     """Drive ``model`` (default: our shipped tongue) with ``recording``.
+
+    keep_volume : the volume kept (seed 001 §8): each frame's displacement projected onto the volume-preserving
+        shapes of a pressure subspace with the sensor nodes held (:func:`tonguevis.sim.volume.keep_volume`;
+        ``metadata["keep_volume"]`` says its key frames and the volume change before and after).  Any method.
+        The preview, if any, is shown before the projection.
 
     rest_interval : the old name of ``rest`` (every front end says ``rest``), kept for one release
         with a DeprecationWarning.
@@ -126,9 +132,10 @@ def simulate(
     if method == "domains":  # seed 001's StVK on quadratic domains (tonguevis.sim.domains)
         from tonguevis.sim.domains import simulate_domains
 
-        return simulate_domains(recording, model, landmarks, rest, smooth_window,
-                                sensor_stiffness=sensor_stiffness, backend=backend, palate=palate, progress=progress,
-                                frame=frame, tongue_size=tongue_size)
+        motion = simulate_domains(recording, model, landmarks, rest, smooth_window,
+                                  sensor_stiffness=sensor_stiffness, backend=backend, palate=palate,
+                                  progress=progress, frame=frame, tongue_size=tongue_size)
+        return _kept(motion, backend) if keep_volume else motion
     sensor_stiffness = sensor_stiffness_value(sensor_stiffness, recording.metadata.get("file"))  # the CLI's words too
     if sensor_stiffness == "default":
         sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
@@ -214,9 +221,23 @@ def simulate(
         figures = frame_figures(run.model, result.q, warping, backend, None if contact is None else
                                 _contact_probe(contact, schedule, run.model), progress=_stage(progress, 2, 3))
     motion = run.motion(result, figures, len(targets))
+    if keep_volume:
+        motion = _kept(motion, backend)
     release_freed_memory()
     report(progress, 3, 3, "done")
     return motion
+
+
+def _kept(motion: Motion, backend: str) -> Motion:
+    """``motion`` with the volume kept (:func:`tonguevis.sim.volume.keep_volume`), said once in the log."""
+    from tonguevis.sim.volume import keep_volume
+
+    kept = keep_volume(motion, backend=backend)
+    info = kept.metadata["keep_volume"]
+    logger.info("volume kept: largest change %.3f %% -> %.4f %% (pressure subspace of %d shapes)",
+                100 * info["volume_change_max_before"], 100 * info["volume_change_max_after"],
+                info["subspace_size"])
+    return kept
 
 
 #: simulate(method=...): "warped" (modal warping), "linear" (modal, no warping), "domains"

@@ -59,6 +59,8 @@ class RunSettings:
     tongue_size: float | None = None
     #: "warped", "linear" or "domains" (seed 001's StVK on quadratic domains); None: ``warping`` decides.
     method: str | None = None
+    #: the volume kept: each frame projected onto volume-preserving shapes (:mod:`tonguevis.sim.volume`)
+    keep_volume: bool = False
 
     def __post_init__(self) -> None:
         from tonguevis.sensor_stiffness import sensor_stiffness_value
@@ -95,7 +97,8 @@ class RunSettings:
         :func:`build_model` and :meth:`palate_surface`)."""
         return dict(modes=self.modes, warping=self.warping, landmarks=self.landmarks, rest=self.rest,
                     sensor_stiffness=self.sensor_stiffness, sensor_patches=self.sensor_patches, backend=self.backend,
-                    frame=self.frame, tongue_size=self.tongue_size, method=self.method)
+                    frame=self.frame, tongue_size=self.tongue_size, method=self.method,
+                    keep_volume=bool(self.keep_volume))
 
     def palate_surface(self):
         """The :class:`~tonguevis.palate.PalateSurface` of ``palate`` (None: no contact)."""
