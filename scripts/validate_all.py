@@ -568,6 +568,16 @@ def from_json(folder: Path):
     return groups, sensitivity, study, elapsed
 
 
+def _with_methods_section(text: str, out: Path) -> str:
+    """``text`` with the section scripts/validate_methods.py wrote into ``out`` kept (its own script writes it)."""
+    from validate_methods import BEGIN, END
+
+    old = out.read_text() if out.exists() else ""
+    if BEGIN not in old or END not in old:
+        return text
+    return text.rstrip("\n") + "\n\n" + old[old.index(BEGIN):old.index(END) + len(END)] + "\n"
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--mesh", type=Path, help="tongue mesh (default: the shipped tongue)")
@@ -621,6 +631,7 @@ def main(argv=None) -> int:
                                                                         default=fidelity_study._json_default))
         elapsed = time.perf_counter() - t0
     text = render(groups, sensitivity, elapsed, study)
+    text = _with_methods_section(text, args.out)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     from tonguevis._files import atomic_write_text
 
