@@ -167,3 +167,26 @@ def test_the_settings_and_the_command_line_pass_it_on():
 def test_held_nodes_are_the_anchors_and_the_sensors():
     m = SimpleNamespace(anchors=np.array([5, 1]))
     np.testing.assert_array_equal(held_nodes(m, [7, 1]), [1, 5, 7])
+
+
+def test_batch_settings_carry_it_into_the_simulation_and_its_cache_key():
+    from tonguevis.batch import BatchSettings
+
+    kept = BatchSettings(keep_volume=True)
+    assert kept.run_settings().keep_volume is True
+    assert kept.step_settings("simulate")["keep_volume"] is True
+    assert "keep_volume" not in BatchSettings().step_settings("simulate")  # old cache keys stay valid
+
+
+def test_held_out_scores_with_the_volume_kept(model, demo):
+    from tonguevis.analysis import validate
+
+    n = 400
+    short = demo.with_sensors({k: v[:n] for k, v in demo.sensors.items()}, times=demo.times[:n],
+                              orientations={k: v[:n] for k, v in demo.orientations.items()}, audio=None, labels=[])
+    res = validate(short, model, modes=40, quasi_static=False, sensor_patches=None, keep_volume=True)
+    for scores in res.sensors.values():
+        for method in ("model", "linear"):
+            assert np.isfinite(scores[f"{method}_kept_rmse_mm"])
+    # the projection moves the held-out (free) nodes: some prediction changes
+    assert any(abs(s["model_kept_rmse_mm"] - s["model_rmse_mm"]) > 1e-4 for s in res.sensors.values())

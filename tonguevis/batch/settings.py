@@ -102,6 +102,8 @@ class BatchSettings(RunSettings):
         if self.sensor_patches is not None:  # likewise: only when asked for
             read["sensor_patches"] = self.sensor_patches
         sim.update(read)
+        if self.keep_volume:  # likewise; the simulation's results only (validate does not project)
+            sim["keep_volume"] = True
         if step == "simulate":
             return sim
         if step == "energy":

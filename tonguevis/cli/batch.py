@@ -74,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
         sensor_stiffness=args.sensor_stiffness, sensor_patches=args.sensor_patches, rest=rest_arg(args),
         sensor_map=args.sensors,
         read_options=parse_options(args.option), keep=None if args.all else (2, 3, 4), window=args.window, tier=args.productions_from,
-        segment_first=args.segment_first, quasi_static=not args.no_static, csv=args.csv)
+        segment_first=args.segment_first, quasi_static=not args.no_static, csv=args.csv,
+        keep_volume=args.keep_volume)
     model, mesh = load_model(args)
     client = None
     if args.scheduler is not None:
