@@ -140,7 +140,7 @@ def test_saved_and_loaded_with_the_volume_kept(kept, tmp_path):
     assert again.metadata["keep_volume"]["subspace_size"] == kept.metadata["keep_volume"]["subspace_size"]
 
 
-def test_every_method_keeps_it_on_a_short_stretch(model, demo):
+def test_every_method_keeps_it_on_a_short_stretch(model, demo, tmp_path):
     n = 400  # 4 s: the domains model runs some 25 frames/s
     short = demo.with_sensors({k: v[:n] for k, v in demo.sensors.items()}, times=demo.times[:n],
                               orientations={k: v[:n] for k, v in demo.orientations.items()}, audio=None, labels=[])
@@ -148,6 +148,9 @@ def test_every_method_keeps_it_on_a_short_stretch(model, demo):
         motion = simulate(short, model, modes=40, method=method, keep_volume=True)
         assert np.abs(motion.volume_change).max() <= GOAL, method
         assert motion.metadata["keep_volume"]["sensor_shift_max_m"] == 0.0
+        motion.save(tmp_path / f"{method}.npz")  # the method's model again, then the pressure subspace on it
+        again = Motion.load(tmp_path / f"{method}.npz")
+        np.testing.assert_allclose(again.displacement(300), motion.displacement(300), atol=1e-15)
 
 
 def test_the_settings_and_the_command_line_pass_it_on():
