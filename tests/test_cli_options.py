@@ -200,3 +200,65 @@ def test_a_silent_video_says_it_is_silent_and_why(monkeypatch, tmp_path, capsys)
     sound["audio"] = Audio(np.zeros(160), 16000.0)
     assert main(["export-video", str(take), "--out", str(out), "--quiet"]) == 0
     assert "is silent" not in capsys.readouterr().out
+
+
+SIMULATING = ("simulate", "segment", "energy", "morph", "batch")
+PHYSICS_OPTIONS = [
+    ([], {"sensor_patches": "default", "method": None, "keep_volume": False}),
+    (["--no-sensor-patches"], {"sensor_patches": None}),
+    (["--sensor-patches", "4"], {"sensor_patches": 0.004}),
+    (["--method", "linear", "--keep-volume"], {"method": "linear", "keep_volume": True}),
+    (["--sensor-stiffness", "hard"], {"sensor_stiffness": None}),
+]
+
+
+@pytest.mark.parametrize("options, expected", PHYSICS_OPTIONS, ids=lambda v: " ".join(v) if isinstance(v, list) else "")
+def test_every_simulating_command_takes_the_same_physics_options(options, expected, monkeypatch, tmp_path):
+    """The same options make the same simulation in every command that simulates (segment lacked the
+    patches, the method and the volume, and the batch dropped --method: their motions differed from
+    `tonguevis simulate`'s); the sensors on the surface are everyone's default."""
+    import argparse
+
+    from tonguevis.cli import build_parser
+    from tonguevis.cli._common import run_settings_of
+
+    seen = {}
+    for command in SIMULATING:
+        given = {"segment": [DEMO, "--out", str(tmp_path / "s.vtu")], "batch": [DEMO, "--out", str(tmp_path)],
+                 "energy": [DEMO, "--csv", str(tmp_path / "e.csv")],
+                 "morph": [f"{DEMO}@1.0", f"{DEMO}@2.0", "--out", str(tmp_path / "m.png")]}.get(command, [DEMO])
+        try:
+            args = build_parser().parse_args([command, *given, *options])
+        except SystemExit:
+            pytest.fail(f"tonguevis {command} does not take {options}")
+        assert isinstance(args, argparse.Namespace)
+        if command == "segment":  # its --modes also takes the old kind words: resolved first, as its run does
+            from tonguevis.cli.segment import resolve_mode_options
+
+            resolve_mode_options(args)
+        settings = run_settings_of(args)
+        for name, value in expected.items():
+            assert getattr(settings, name) == pytest.approx(value) if isinstance(value, float) else \
+                getattr(settings, name) == value, (command, name)
+        seen[command] = settings.simulate_options()
+    first = seen["simulate"]
+    assert all(options_ == first for options_ in seen.values()), seen
+
+
+def test_batch_simulates_with_the_command_line_method(monkeypatch, tmp_path):
+    import tonguevis.batch as batch
+
+    given = {}
+
+    def run_batch(paths, out, settings, **kw):
+        given["settings"] = settings
+        raise _Read
+
+    monkeypatch.setattr(batch, "run", run_batch)
+    with pytest.raises(_Read):
+        main(["batch", "data", "--out", str(tmp_path), "--method", "domains", "--no-sensor-patches", "--quiet"])
+    settings = given["settings"]
+    assert settings.run_settings().method == "domains" and settings.sensor_patches is None
+    default = batch.BatchSettings()
+    assert settings.step_settings("simulate") != default.step_settings("simulate")  # a different cache key
+    assert default.step_settings("simulate")["sensor_patches"] == "default"

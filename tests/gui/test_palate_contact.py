@@ -364,16 +364,20 @@ def test_fitting_a_palate_to_a_recording_without_a_probe_is_a_dialog(qtbot, wind
 
 
 def test_sensors_on_the_surface_from_the_simulation_menu(qtbot, window):
-    """Simulation ▸ Sensors on the surface simulates again with the sensor patches: every measured
-    sensor is then on its node, and unticking it goes back to the modes alone."""
+    """Sensors on the surface is the default (the menu item ticked, every measured sensor on its node);
+    unticking Simulation ▸ Sensors on the surface simulates again with the modes alone, ticking it
+    puts the patches back."""
     session = show_and_simulate(qtbot, window, demo_session())
-    assert "sensor_patches" not in session.motion.metadata
+    assert window.patches_action.isChecked() and window.sensor_patches == "default"
+    assert session.motion.metadata["sensor_patches"]["shapes"] == 3 * len(session.motion.sensor_nodes)
+    assert np.nanmax(session.motion.sensor_residual) < 1e-9
     with qtbot.waitSignal(window.simulation_finished, timeout=60000) as blocker:
+        window.patches_action.setChecked(False)
+    assert blocker.args == [True] and window.sensor_patches is None
+    assert "sensor_patches" not in window.session.motion.metadata
+    assert np.nanmax(window.session.motion.sensor_residual) > 1e-4  # the modes alone leave a gap
+    with qtbot.waitSignal(window.simulation_finished, timeout=60000):
         window.patches_action.setChecked(True)
-    assert blocker.args == [True] and window.sensor_patches == "default"
     motion = window.session.motion
     assert motion.metadata["sensor_patches"]["shapes"] == 3 * len(motion.sensor_nodes)
     assert np.nanmax(motion.sensor_residual) < 1e-9
-    with qtbot.waitSignal(window.simulation_finished, timeout=60000):
-        window.patches_action.setChecked(False)
-    assert "sensor_patches" not in window.session.motion.metadata

@@ -104,6 +104,10 @@ class BatchSettings(RunSettings):
         sim.update(read)
         if self.keep_volume:  # likewise; the simulation's results only (validate does not project)
             sim["keep_volume"] = True
+        if self.method not in (None, "warped" if self.warping else "linear"):  # likewise: only when it changes
+            sim["method"] = self.method
+        if self.frame != "speaker" or self.tongue_size is not None:  # likewise
+            sim.update(frame=self.frame, tongue_size=self.tongue_size)
         if step == "simulate":
             return sim
         if step == "energy":

@@ -115,6 +115,14 @@ def add_model_arguments(parser: argparse.ArgumentParser, modes: int = 100) -> No
     parser.add_argument("--modes", type=int, default=modes, metavar="M", help=f"vibration modes (default {modes})")
     parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
                         help="sensor nodes: snapped to the speaker's layout (default) or the paper's placement rule")
+    add_physics_arguments(parser)
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def add_physics_arguments(parser: argparse.ArgumentParser) -> None:
+    """How the tongue follows the sensors: ``--linear``, ``--method``, ``--keep-volume``,
+    ``--sensor-stiffness``, ``--sensor-patches``/``--no-sensor-patches`` (every simulating command has them,
+    so two commands given the same options simulate the same motion)."""
     parser.add_argument("--linear", action="store_true", help="linear modal model (no modal warping); --method linear")
     parser.add_argument("--method", choices=("warped", "linear", "domains"), default=None,
                         help="the tongue's physics: modal warping (default), the linear modal model, or 'domains': "
@@ -124,7 +132,6 @@ def add_model_arguments(parser: argparse.ArgumentParser, modes: int = 100) -> No
                              "pressure projection, the sensor nodes held; any --method)")
     add_sensor_stiffness_argument(parser)
     add_sensor_patches_argument(parser)
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def add_mesh_axes_argument(parser: argparse.ArgumentParser) -> None:
@@ -143,13 +150,17 @@ def add_sensor_stiffness_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def add_sensor_patches_argument(parser: argparse.ArgumentParser) -> None:
-    """``--sensor-patches [MM]``: close each sensor's gap to the surface with its patch (tonguevis.sim.patches)."""
-    parser.add_argument("--sensor-patches", type=_patch_radius_arg, nargs="?", const="default", default=None,
+    """``--sensor-patches [MM]`` (the default) and ``--no-sensor-patches``: close each sensor's gap to the
+    surface with its patch (tonguevis.sim.patches), or not."""
+    parser.add_argument("--sensor-patches", type=_patch_radius_arg, nargs="?", const="default", default="default",
                         metavar="MM",
-                        help="put every sensor on the tongue's surface: after the dynamics, the tongue's own local "
-                             "deformation under each sensor (a patch of MM millimetres on the model, default 3, "
-                             "fading out by 5/3 of it) closes the gap the modes leave (up to 2-4 mm on real "
-                             "recordings); the held-out sensors are predicted as without it")
+                        help="put every sensor on the tongue's surface (the default): after the dynamics, the "
+                             "tongue's own local deformation under each sensor (a patch of MM millimetres on the "
+                             "model, default 3, fading out by 5/3 of it) closes the gap the modes leave (up to "
+                             "2-6 mm on real recordings); the held-out sensors are predicted as without it")
+    parser.add_argument("--no-sensor-patches", dest="sensor_patches", action="store_const", const=None,
+                        help="no patches: the sensor nodes only pulled by springs towards the sensors (the "
+                             "sensors may float millimetres off the surface)")
 
 
 def add_frame_arguments(parser: argparse.ArgumentParser) -> None:
@@ -196,8 +207,11 @@ def _patch_radius_arg(text: str):
 
 
 def sensor_patches_option(args):
-    """The library's ``sensor_patches`` from ``--sensor-patches``: None, "default" or metres."""
-    return getattr(args, "sensor_patches", None)
+    """The library's ``sensor_patches`` from ``--sensor-patches``/``--no-sensor-patches``: None, "default" or
+    metres; a command without the options gets the run settings' default."""
+    from tonguevis.workflows.settings import RunSettings
+
+    return getattr(args, "sensor_patches", RunSettings.sensor_patches)
 
 
 def sensor_stiffness_arg(text: str):

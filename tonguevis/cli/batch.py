@@ -67,15 +67,21 @@ def load_model(args):
 def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
     from tonguevis.batch import BatchSettings, run as run_batch
-    from tonguevis.cli._common import parse_options, rest_arg
+    import dataclasses
 
+    from tonguevis.cli._common import parse_options, run_settings_of
+    from tonguevis.workflows.settings import RunSettings
+
+    # How each recording is simulated comes from the options every simulating command shares (so the
+    # batch simulates what `tonguevis simulate` and `segment` do with the same options); the model's mesh
+    # goes to the workers apart (load_model).
+    run_settings = run_settings_of(args)
+    simulation = {f.name: getattr(run_settings, f.name) for f in dataclasses.fields(RunSettings)
+                  if f.name not in ("mesh", "mesh_axes", "palate")}
     settings = BatchSettings(
-        steps=args.steps, modes=args.modes, landmarks=args.landmarks, warping=not args.linear,
-        sensor_stiffness=args.sensor_stiffness, sensor_patches=args.sensor_patches, rest=rest_arg(args),
-        sensor_map=args.sensors,
-        read_options=parse_options(args.option), keep=None if args.all else (2, 3, 4), window=args.window, tier=args.productions_from,
-        segment_first=args.segment_first, quasi_static=not args.no_static, csv=args.csv,
-        keep_volume=args.keep_volume)
+        **simulation, steps=args.steps, sensor_map=args.sensors,
+        read_options=parse_options(args.option), keep=None if args.all else (2, 3, 4), window=args.window,
+        tier=args.productions_from, segment_first=args.segment_first, quasi_static=not args.no_static, csv=args.csv)
     model, mesh = load_model(args)
     client = None
     if args.scheduler is not None:

@@ -19,8 +19,9 @@ DEFAULT_MODES = 100
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import (DeprecatedAlias, add_companion_arguments, add_mesh_axes_argument,
-                                       add_productions_from_argument, add_reader_options_argument, add_rest_argument)
+    from tonguevis.cli._common import (DeprecatedAlias, add_companion_arguments, add_frame_arguments,
+                                       add_mesh_axes_argument, add_physics_arguments, add_productions_from_argument,
+                                       add_reader_options_argument, add_rest_argument)
 
     parser.add_argument("file", type=Path,
                         help="the recording (NDI Wave TSV, Carstens .pos, EST .ema, ...) or a saved motion (.npz)")
@@ -58,7 +59,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--modal-modes", type=int, action=DeprecatedAlias, new="--modes")
     parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
                         help="sensor nodes: the speaker's own layout (default) or the paper's placement rule")
-    parser.add_argument("--linear", action="store_true", help="linear modal model (no modal warping)")
+    add_physics_arguments(parser)  # the batch's and simulate's options: the same motion as theirs
+    add_frame_arguments(parser)
     add_rest_argument(parser)
     parser.add_argument("--out", type=Path, required=True, metavar="OUT.vtu", help="VTU file to write")
     parser.add_argument("--png", type=Path, metavar="OUT.png", help="also render a picture (off screen)")

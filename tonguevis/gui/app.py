@@ -39,7 +39,7 @@ def install_error_hook(window) -> None:
 
 def create_window(file=None, sensor_map=None, mesh=None, modes: int = 100, settings=None, feature_tabs: bool = True,
                   rest=None, audio=None, labels=None, palate=None, frame: str | None = None,
-                  options: dict | None = None, sensor_patches=None):
+                  options: dict | None = None, sensor_patches="default"):
     """A shown MainWindow that opens ``file`` (default: the demo), with ``rest`` (start_s, end_s) if given,
     and the sound ``audio`` and TextGrid ``labels`` if given (else those found beside the file);
     simulated against ``palate`` (a PalateSurface, a file or "generic"; None: no contact), shown in
@@ -49,10 +49,10 @@ def create_window(file=None, sensor_map=None, mesh=None, modes: int = 100, setti
 
     application()
     window = MainWindow(settings=settings, modes=modes, mesh_path=mesh, palate=palate)
-    if sensor_patches is not None:
+    if sensor_patches != window.sensor_patches:
         window.sensor_patches = sensor_patches
         window.patches_action.blockSignals(True)
-        window.patches_action.setChecked(True)
+        window.patches_action.setChecked(sensor_patches is not None)
         window.patches_action.blockSignals(False)
     if frame is not None:
         window.state.set_reference(frame)
@@ -96,7 +96,7 @@ def opening_problem(window, file):
 def run_view(file=None, sensor_map=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None,
              rest=None, audio=None, labels=None, palate=None, reference: str | None = None,
              color: str | None = None, compare: dict | None = None, options: dict | None = None,
-             sensor_patches=None) -> int:
+             sensor_patches="default") -> int:
     """``tonguevis view``: run the app; with ``screenshot``, save the window at ``frame``, print the
     rest line and exit.  ``rest``: (start_s, end_s) of the rest interval, None to find it; ``audio``,
     ``labels``: a WAV and a TextGrid, None for those beside the file; ``palate``: simulate against it

@@ -67,6 +67,7 @@ class MenusMixin:
         self.patches_action.setCheckable(True)
         self.patches_action.setToolTip("close the gap between each sensor and the tongue's surface with the tongue's "
                                        "own local deformation under it (tonguevis simulate --sensor-patches)")
+        self.patches_action.setChecked(self.state.run_settings.sensor_patches is not None)
         self.patches_action.toggled.connect(self.set_sensor_patches)
         simulation.addAction(self.patches_action)
         method_menu = simulation.addMenu("&Method")

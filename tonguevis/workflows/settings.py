@@ -34,7 +34,10 @@ class RunSettings:
     landmarks : "speaker" (sensor nodes snapped to the speaker's layout) or "rule" (the paper's).
     sensor_stiffness : "default", a positive number (in units of the tongue's own stiffness
         at the sensors) or None for hard constraints (the paper's); the CLI's word "hard" is None.
-    sensor_patches : None, "default" or a radius in metres (:mod:`tonguevis.sim.patches`).
+    sensor_patches : "default" (every sensor on the surface, 3 model-mm patches), a radius in metres,
+        or None (the sensor nodes pulled by springs only, the sensors left up to 2-6 mm off the surface on
+        real recordings; :mod:`tonguevis.sim.patches`).  Ignored by the domains method, whose quadratic
+        domains hold the sensor nodes themselves.
     rest : (start_s, end_s) of the rest, None to find it.
     palate : None (no contact), "generic" or a palate file (``tonguevis palate``).
     backend : "warp" (compiled frame loop) or "numpy" (the reference).
@@ -51,7 +54,7 @@ class RunSettings:
     warping: bool = True
     landmarks: str = "speaker"
     sensor_stiffness: float | None | str = "default"
-    sensor_patches: float | str | None = None
+    sensor_patches: float | str | None = "default"
     rest: tuple[float, float] | None = None
     palate: str | None = None
     backend: str = "warp"
