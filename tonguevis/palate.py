@@ -108,6 +108,7 @@ class PalateSurface:
         fx = (xy[:, 0] - x[0]) / (x[1] - x[0])
         fy = (xy[:, 1] - y[0]) / (y[1] - y[0])
         inside = (fx >= 0) & (fx <= len(x) - 1) & (fy >= 0) & (fy <= len(y) - 1)
+        fx, fy = np.where(inside, fx, 0.0), np.where(inside, fy, 0.0)  # a NaN point (a dropout): NaN, no cast warning
         i = np.clip(np.floor(fx).astype(int), 0, len(x) - 2)
         j = np.clip(np.floor(fy).astype(int), 0, len(y) - 2)
         tx, ty = np.clip(fx - i, 0, 1), np.clip(fy - j, 0, 1)

@@ -164,13 +164,19 @@ def simulate(
     if palate is not None:
         contact = _contact_context(palate, prep, model, basis, recording)
         contact["backend"] = backend  # its clearances and solves: compiled, or the NumPy reference
-    targets, compliance, schedule = drive_schedule(prep.displacement, recording.rate, basis.eigenvalues, phi_s,
+    drive = prep.displacement  # what the tongue follows; the sensors are drawn and scored where measured
+    if contact is not None:
+        reach = TOUCH_REACH * (1.0 if frame == "speaker" else fit["scale"])  # the speaker's mm in this frame
+        drive, contact["held_to_palate"] = held_to_palate(contact, model.mesh.points[prep.nodes], drive, reach,
+                                                          prep.names)
+    targets, compliance, schedule = drive_schedule(drive, recording.rate, basis.eigenvalues, phi_s,
                                                    sensor_stiffness, contact=contact)
     release_freed_memory()  # the preparation's temporaries: 150 MB kept for 30 minutes otherwise
     report(progress, 1, 3, "integrating")
     run = _Run(model, recording, prep, basis, phi_s, w_s, targets, compliance, schedule, warping, backend, modes,
                landmarks, sensor_stiffness, k_ref, contact)
     run.fit = fit
+    run.drive = drive
     from tonguevis.sim.patches import PATCH_RADIUS, PATCH_REACH
 
     length = 1.0 / fit["scale"] if frame == "speaker" else 1.0  # the model's millimetres in this frame
@@ -266,6 +272,7 @@ class _Run:
         self.sensor_stiffness, self.k_ref, self.contact = sensor_stiffness, k_ref, contact
         self.previewed = False
         self.patches: dict | None = None
+        self.drive = prep.displacement  # (F, S, 3) m: what the sensor nodes follow (held_to_palate)
 
     def prepare_patches(self, radius: float, reach: float) -> None:
         """Use the sensor patches (:mod:`tonguevis.sim.patches`) of ``radius`` fading out by ``reach`` (m): the
@@ -288,8 +295,7 @@ class _Run:
         modal coordinates (from the frame loop) are ``q`` (end - start, m)."""
         from tonguevis.sim.patches import close_sensor_gaps
 
-        return close_sensor_gaps(self.basis, self.rotation, self.prep.nodes, q, self.prep.displacement[start:end],
-                                 self.warping)
+        return close_sensor_gaps(self.basis, self.rotation, self.prep.nodes, q, self.drive[start:end], self.warping)
 
     def motion(self, result, figures, n: int) -> Motion:
         """The :class:`Motion` of frames 0..n-1 (``n`` = all: the simulation's result, made from ``result``
@@ -320,7 +326,7 @@ class _Run:
                 modes, rows = self.global_rows
                 fixed = compliant_shapes(modes.eigenvalues, rows, self.targets[absurd], self.compliance[absurd])
                 fixed = np.hstack([fixed, close_sensor_gaps(basis, self.rotation, prep.nodes, fixed,
-                                                            prep.displacement[absurd], warping)])
+                                                            self.drive[absurd], warping)])
             else:
                 fixed = compliant_shapes(basis.eigenvalues, phi_s, self.targets[absurd], self.compliance[absurd])
             sub = frame_figures(model, fixed, warping, backend)
@@ -616,6 +622,37 @@ def _contact_probe(contact, schedule, model):
                         np.zeros((0, 2), dtype=np.int64), np.zeros((len(cand), 0), dtype=bool))
 
 
+#: m (the speaker's): a sensor this close under the palate is taken to touch it.  The coil and its glue
+#: lie between tongue and palate (an NDI Wave sensor is about 1 mm thick with its glue) and the Wave's
+#: stated accuracy is 0.5 mm: a coil measured within 1 mm of the palate at a closure is pressed on it,
+#: with the tongue around it touching.  Without this the tongue stopped 1-2 mm short of the palate at
+#: every /t/ closure of the real Opti-Speech /ta/ while its tip sensor came within 0.8 mm of it.
+TOUCH_REACH = 1e-3
+
+
+def held_to_palate(contact: dict, rest: np.ndarray, displacement: np.ndarray, reach: float,
+                   names) -> tuple[np.ndarray, dict]:
+    """The sensor displacements the tongue follows: those of a sensor within ``reach`` (m) below the
+    palate moved up onto it, along the palate's normal; and what was moved, for the metadata.
+
+    rest : (S, 3) the sensor nodes' rest positions (m, the simulation's frame).
+    displacement : (F, S, 3) m, the measured sensors' displacements (NaN where not measured).
+    Returns ((F, S, 3) displacements, {"reach_mm", "frames": {name: frames held}, "largest_move_mm"}).
+    Sensors above the palate, far below it or outside its footprint are left as measured.
+    """
+    frames, sensors = displacement.shape[:2]
+    where = rest[None] + displacement + contact["jaw_offset"][:frames, None]
+    gap, normal = contact["palate"].clearance(where.reshape(-1, 3))
+    gap, normal = gap.reshape(frames, sensors), normal.reshape(frames, sensors, 3)
+    near = np.isfinite(gap) & (gap > 0) & (gap <= reach)
+    held = displacement.copy()
+    held[near] -= normal[near] * gap[near][:, None]  # the normal points down, away from the palate
+    info = {"reach_mm": 1e3 * reach,
+            "frames": {name: int(near[:, k].sum()) for k, name in enumerate(names) if near[:, k].any()},
+            "largest_move_mm": float(1e3 * gap[near].max()) if near.any() else 0.0}
+    return held, info
+
+
 def _sensor_depth(contact, sensors: np.ndarray, cut: slice) -> np.ndarray:
     """(F, S) how far (m, >= 0) each sensor (F, S, 3, model frame, jaw's frame) lies above the palate;
     0 below it, NaN where not measured or no palate lies above."""
@@ -654,6 +691,7 @@ def _contact_report(pen, contact_area, contact, schedule, times, sensor_depth, n
                    if k in ("rms_m", "source", "frame", "kept", "joined", "min_bend_radius_m", "bend_radius_m",
                             "head_registration")},
         "palate_raised_mm": float(1e3 * contact.get("registration_shift_m", 0.0)),
+        **({"sensors_held_to_palate": contact["held_to_palate"]} if "held_to_palate" in contact else {}),
     }
     return figures
 
