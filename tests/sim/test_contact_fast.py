@@ -236,3 +236,153 @@ def test_contact_area_is_the_surface_the_touching_nodes_stand_for():
     assert pen[0] == 0 and area[0] == 0
     assert pen[1] == pytest.approx(5e-4) and area[1] == pytest.approx(areas[0])  # one node: its share
     assert pen[2] == 0 and area[2] == pytest.approx(1e-4)  # all touching: the whole square
+
+
+@pytest.fixture(scope="module")
+def first_passes(demo):
+    """Every frame's first QP pass on the demo against the generic palate 6 mm lower (all sensors held):
+    (K, phi_nodes, q0 (F, m), gap (F, k), normal (F, k, 3), ok (F, k)) of the frames with a candidate
+    inside the margin, (2, F) bool: whether each frame's QP is well posed (the active block's condition
+    number below 1e4, no force below 1e-4 of the largest, no other near candidate within 1e-4 of the
+    largest |residual| of the margin) and whether it is ambiguous (condition number above 1e8 or a
+    force below 1e-8 of the largest), and the reference's pass of each (NNLS: λ > 0, their candidates, q)."""
+    from tonguevis.sim.contact import BAND, MARGIN, _contact_pass_fast, _sensor_inverse, _sensor_operator
+    from tonguevis.sim.contact_kernel import Clearance
+
+    rec, model, prep, basis, phi_s, w_s, context = demo
+    low = context["palate"].transformed(np.eye(3), 1.0, np.array([0.0, 0.0, -0.006]))
+    lam = basis.eigenvalues
+    P = phi_s.reshape(-1, len(lam))
+    gram = (P / lam) @ P.T
+    k_mat = _sensor_operator(lam, P, _sensor_inverse(gram, np.zeros(len(P)), np.ones(len(P), bool)))
+    measured = np.all(np.isfinite(prep.displacement.reshape(len(prep.displacement), -1)), axis=1)
+    targets = prep.displacement[measured].reshape(int(measured.sum()), -1)
+    q0 = (np.linalg.solve(gram, targets.T).T @ P) / lam  # the sensors where measured, least elastic energy
+    phi_nodes = context["phi_nodes"]
+    cand = context["points"][context["candidates"]]
+    offset = context["jaw_offset"][measured]
+    gap, normal = Clearance(low, cand)((q0 @ phi_nodes.reshape(-1, len(lam)).T).reshape(len(q0), -1, 3), offset,
+                                      normals=True)
+    frames = np.flatnonzero(np.any(gap < MARGIN - 1e-7, axis=1))
+    q0, gap, normal = q0[frames], gap[frames], normal[frames]
+    ok = np.isfinite(gap)
+    ref, posed = [], []
+    for j in range(len(frames)):
+        lam_a, rows, q = _contact_pass_fast(lam, k_mat, phi_nodes, q0[j], q0[j], gap[j], normal[j], ok[j], MARGIN)
+        near = np.flatnonzero(ok[j] & (gap[j] < MARGIN + BAND))
+        on = lam_a > 0
+        ref.append((lam_a[on], near[on], q))
+        m_mat = -rows @ (k_mat @ rows.T)
+        r = gap[j, near] - MARGIN
+        eig = np.linalg.eigvalsh(m_mat[np.ix_(on, on)])
+        w = (m_mat @ lam_a + r)[~on]
+        posed.append((eig[0] > 1e-4 * eig[-1] and lam_a[on].min() > 1e-4 * lam_a.max()
+                      and (w.min(initial=np.inf) > 1e-4 * np.abs(r).max()),
+                      eig[0] < 1e-8 * eig[-1] or lam_a[on].min() < 1e-8 * lam_a.max()))
+    return k_mat, phi_nodes, q0, gap, normal, ok, np.array(posed).T, ref
+
+
+def guessed(first_passes, stale):
+    """_guessed_passes on every frame of ``first_passes`` at once, each starting from the active set
+    ``stale`` (F, k) bool: (done (F,), q (F, m), λ per frame, support (F, k))."""
+    from tonguevis.sim.contact import MARGIN, _guessed_passes
+
+    k_mat, phi_nodes, q0, gap, normal, ok = first_passes[:6]
+    n = len(q0)
+    q, support = q0.copy(), stale.copy()
+    lams: list = [None] * n
+    rows: list = [None] * n
+    done = _guessed_passes([k_mat] * n, np.arange(n), phi_nodes, phi_nodes.reshape(-1, q0.shape[1]), q, q0, gap,
+                           normal, ok, MARGIN, support, lams, rows)
+    return done, q, lams, support
+
+
+def true_sets(first_passes) -> np.ndarray:
+    """(F, k) bool: each frame's active set in the reference's pass."""
+    truth = np.zeros(first_passes[3].shape, bool)
+    for j, (_, nodes, _) in enumerate(first_passes[-1]):
+        truth[j, nodes] = True
+    return truth
+
+
+def test_a_guessed_active_set_gives_the_references_pass(first_passes):
+    """Each frame's first pass started from the active set of the frame 5 before it (the warm start a
+    stale guess gives where contact moved, was released or began between frames): the frames the
+    guess solves get the NNLS pass's q, λ and active set to 1e-10; nine in ten of the well-posed ones are
+    solved so (the others: sets of three the corrections do not reach), and none of the ambiguous ones
+    (near-duplicate rows pressing with forces 1e-10 of the largest: which of them NNLS keeps is its
+    rounding's choice), which the NNLS takes instead."""
+    (posed, ambiguous), ref = first_passes[-2], first_passes[-1]
+    truth = true_sets(first_passes)
+    stale = np.roll(truth, 5, axis=0)
+    wrong = np.any(stale != truth, axis=1)
+    released = np.any(stale & ~truth, axis=1)  # a node pressed 5 frames before, free now
+    assert wrong.sum() > 100 and released.sum() > 50 and posed.sum() > 250 and ambiguous.sum() > 50
+    done, q, lams, support = guessed(first_passes, stale)
+    assert done[posed].mean() > 0.9 and not done[ambiguous].any()
+    assert done[wrong & released].sum() > 30  # wrong guesses corrected, not just given up
+    for j in np.flatnonzero(done):
+        lam_ref, nodes, q_ref = ref[j]
+        np.testing.assert_array_equal(np.flatnonzero(support[j]), nodes)
+        assert rel_diff(q_ref, q[j]) < REL and rel_diff(lam_ref, lams[j]) < REL
+
+
+def test_a_wrong_active_set_is_never_taken(first_passes, monkeypatch):
+    """One guess, no correction: a guess that is not the frame's active set (the one of 5 frames
+    before where it differs; the right one with a near candidate added or an active one taken out)
+    is refused, every time; the right one is taken in every well-posed frame."""
+    from tonguevis.sim import contact
+
+    monkeypatch.setattr(contact, "GUESS_ROUNDS", 1)
+    posed = first_passes[-2][0]
+    truth = true_sets(first_passes)
+    near = first_passes[5] & (first_passes[3] < contact.MARGIN + contact.BAND)
+    rng = np.random.default_rng(11)
+    extra, fewer = truth.copy(), truth.copy()
+    for j in range(len(truth)):
+        free = np.flatnonzero(near[j] & ~truth[j])
+        if len(free):
+            extra[j, rng.choice(free)] = True
+        if truth[j].sum() > 1:
+            fewer[j, rng.choice(np.flatnonzero(truth[j]))] = False
+    for stale in (np.roll(truth, 5, axis=0), extra, fewer):
+        stale = stale & near  # (as the guess is made; no guess left: the deepest node is the guess)
+        wrong = np.any(stale != truth, axis=1) & stale.any(axis=1)
+        assert wrong.sum() > 50
+        done, *_ = guessed(first_passes, stale)
+        assert not done[wrong].any()
+    done, q, lams, support = guessed(first_passes, truth)
+    assert done[posed].all() and np.array_equal(support[done], truth[done])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["009_OSN12_Tah_withFb_natural_HR.tsv", "006_OSN12_Kah_nofb_natural_take2_HR.tsv"])
+def test_real_speech_on_the_speakers_palate_is_solved_as_the_reference_does(name, monkeypatch):
+    """Opti-Speech /ta/ 009 and /ka/ 006 against the palate fitted from the speaker's traces (002-004),
+    hundreds of frames in contact: simulate() with the contact on its NumPy reference and on the fast
+    path (guessed active sets) gives the same q to 1e-10 and the same contact figures.  Skips
+    without ../shared."""
+    from tests.conftest import shared_file
+    from tonguevis.io import read_recording
+    from tonguevis.sim import TongueModel, contact, simulate
+    from tonguevis.workflows.palate import palate_from_traces
+
+    traces = [shared_file("ema", "optispeech", f) for f in (
+        "002_OSN12_Palate_MidSagital_HR.tsv", "003_OSN12_Palate_Coronal_HR.tsv", "004_OSN12_Palate_Scribble_HR.tsv")]
+    rec = read_recording(shared_file("ema", "optispeech", name))
+    palate, model = palate_from_traces(traces), TongueModel.default()
+    fast = simulate(rec, model, palate=palate)
+    on_numpy = []
+    for solve in ("solve_contact", "correct_frames"):
+        def reference(*a, _f=getattr(contact, solve), **k):
+            on_numpy.append(_f)
+            return _f(*a, **{**k, "backend": "numpy"})
+        monkeypatch.setattr(contact, solve, reference)
+    ref = simulate(rec, model, palate=palate)
+    assert len(on_numpy) == 2  # both stages on the reference
+    c, r = fast.metadata["contact"], ref.metadata["contact"]
+    assert r["frames_with_contact_forces"] > 200 and r["frames_corrected_after_the_dynamics"] > 200
+    for key in ("frames_in_contact", "frames_with_contact_forces", "frames_corrected_after_the_dynamics",
+                "sensors_above_palate", "conflicts"):
+        assert c[key] == r[key]
+    assert rel_diff(ref.q, fast.q) < REL

@@ -27,11 +27,17 @@ NumPy clearances (:func:`_active_set`); ``"warp"`` (the default), every
 frame's clearances in one compiled pass (:mod:`tonguevis.sim.contact_kernel`),
 the active set only in the frames where a candidate it may constrain is inside
 the margin, those frames' passes in step (one compiled query a pass), the
-sensors' elimination one matrix per sensor pattern and each pass's small
-solves by LAPACK directly (:func:`_active_sets`).  What bounds the fast path
-is that per-pass QP in Python: about 0.1 ms a pass, two to three passes a
-frame in contact (a warp kernel for it ran slower: warp's CPU code manages some
-0.3 GFMA/s on these indexed loops).
+sensors' elimination one matrix per sensor pattern (:func:`_active_sets`), and
+each pass's QP solved for all those frames at once from a guessed active set
+(the frame's set after its last pass, else its deepest node), taken only where
+it provably is the QP's one solution, corrected a few times where it is not
+(:func:`_guessed_passes`); the frames left (ill-conditioned or ambiguous sets:
+near-duplicate rows) get the reference's NNLS, its small solves by LAPACK
+directly.  On the Opti-Speech /ka/ 006 against the speaker's palate the NNLS
+took 2,594 passes of about 0.1 ms each (a warp kernel for them ran slower: warp's
+CPU code manages some 0.3 GFMA/s on these indexed loops); the guesses now take
+all of them, and what bounds the fast path is the clearance queries and the
+whole-array work around them (scripts/bench_simulation.py).
 """
 
 from __future__ import annotations
@@ -234,7 +240,8 @@ def _sensor_operator(lam, p_act, solve_g):
     return ((p_act.T @ solve_g @ p_act) / lam[:, None] - np.eye(len(lam))) / lam[None, :]
 
 
-def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, margin, gap0, normal0):
+def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, margin, gap0, normal0,
+                 guess: bool = True):
     """:func:`_active_set` of several frames at once, with what the caller already has.
 
     solves : per frame, :func:`_sensor_operator` of its acting sensors (shared by the frames with
@@ -242,8 +249,10 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
     and normal0 (n, k, 3): the clearances at q0 (from the compiled pass over every frame);
     query : a :class:`~tonguevis.sim.contact_kernel.Clearance` of the candidates.  The frames
     take their passes in step, so each later pass queries the clearances of all the frames
-    still going in one compiled call; each frame's passes, QP (:func:`_contact_pass_fast`) and guard
-    are :func:`_active_set`'s: the same result to rounding (tests/sim/test_contact_fast.py).
+    still going in one compiled call; each frame's passes, QP and guard are :func:`_active_set`'s:
+    the same result to rounding (tests/sim/test_contact_fast.py).  Each pass's QP: from a guessed
+    active set for every frame at once (:func:`_guessed_passes`), by NNLS
+    (:func:`_contact_pass_fast`) where no guess holds; guess=False: by NNLS everywhere.
     Returns a list of (q, λ, A) or (q0, None, None), one per frame.
     """
     n = len(q0)
@@ -252,6 +261,7 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
     q = np.array(q0, copy=True)
     lams: list = [None] * n
     rows: list = [None] * n
+    support = np.zeros(allowed.shape, dtype=bool)  # (n, k) each frame's active set after its last pass
     going = np.arange(n)
     for n_pass in range(MAX_PASSES):
         if len(going) == 0:
@@ -262,11 +272,20 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
             gap, normal = gap0[going], normal0[going]
         # a frame goes on while a candidate it may constrain is inside the margin (NaN: off the palate)
         inside = np.any(allowed[going] & (gap < margin - 1e-7), axis=1)
-        for j in np.flatnonzero(inside):
-            i = going[j]
-            ok = allowed[i] & np.isfinite(gap[j])
-            lams[i], rows[i], q[i] = _contact_pass_fast(lam, solves[i], phi_nodes, q[i], q0[i], gap[j], normal[j], ok,
-                                                        margin)
+        js = np.flatnonzero(inside)
+        ok = allowed[going[js]] & np.isfinite(gap[js])
+        if guess:  # the frames whose QP a guessed active set solves exactly (see _guessed_passes)
+            done = _guessed_passes(solves, going[js], phi_nodes, phi_flat, q, q0, gap[js], normal[js], ok, margin,
+                                   support, lams, rows)
+        else:
+            done = np.zeros(len(js), dtype=bool)
+        for j in np.flatnonzero(~done):  # the others: the QP by NNLS, as the reference
+            i = going[js[j]]
+            lams[i], rows[i], q[i] = _contact_pass_fast(lam, solves[i], phi_nodes, q[i], q0[i], gap[js[j]],
+                                                        normal[js[j]], ok[j], margin)
+            near = np.flatnonzero(ok[j] & (gap[js[j]] < margin + BAND))
+            support[i] = False
+            support[i, near[lams[i] > 0]] = True
         going = going[inside]
     # the guard, every frame at once: a push much further than the surface was inside has failed
     depth = np.maximum(0.0, -np.fmin.reduce(np.where(allowed, gap0, np.nan), axis=1, initial=np.inf))
@@ -281,6 +300,120 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
         used = lam_a > 0
         out.append((q[i], lam_a[used], rows[i][used]))
     return out
+
+
+#: A guessed active set is taken only with this much to spare: each of its contact forces above
+#: GUESS_MARGIN times the largest, each other near candidate's linearised clearance above the margin
+#: by GUESS_MARGIN times the largest |residual|, and its block's condition number below GUESS_CONDITION
+#: (so neither the 1e-12 jitter of the reference's factor nor rounding can move it: λ equal to 1e-10).
+GUESS_MARGIN = 1e-5
+GUESS_CONDITION = 1e4
+GUESS_ROUNDS = 6  # guesses a frame tries (each corrected from the last) before the NNLS takes it
+GUESS_MAX = 24  # largest active set guessed; more goes to the NNLS
+
+
+def _guessed_passes(solves, frames, phi_nodes, phi_flat, q, q0, gap, normal, ok, margin, support, lams, rows):
+    """One pass of :func:`_active_sets` for the frames whose QP a guessed active set solves; the rest untouched.
+
+    frames : (F,) the frames (rows of q, q0 (n, m), support (n, k) and the lists lams, rows) taking a
+    pass; gap (F, k) m, normal (F, k, 3), ok (F, k) their clearances at q and the candidates that may
+    get a constraint.  The QP of a pass (:func:`_contact_pass_fast`'s, min ½λᵀMλ + rᵀλ over λ >= 0, a
+    strictly convex problem with one solution) is solved by NNLS there; here a guess S of its active
+    set (the frame's after its last pass, else its deepest candidate) is solved as equalities,
+    M_SS λ_S = -r_S, every frame at once, and taken when it satisfies the optimality conditions with
+    room to spare (λ_S > 0 and w = Mλ + r > 0 off S, by GUESS_MARGIN; M_SS well conditioned): then it
+    is that one solution, the set NNLS finds and the λ its polish computes (M_SS λ_S = -r_S again),
+    so the same result to rounding; a wrong set never passes (tests/sim/test_contact_fast.py).
+    A guess that fails is corrected (the forces that came out negative leave, the candidate furthest
+    inside joins; a singular block starts again from the deepest) up to GUESS_ROUNDS times.  The frames taken
+    have q, lams, rows and support filled; returns (F,) bool, which.  Vectorised over the frames:
+    one pass's Python costs a few microseconds a frame instead of some 90 (most frames'
+    first guess holds: consecutive frames press on the same few nodes).
+    """
+    n_f, k = gap.shape
+    m = q.shape[1]
+    done = np.zeros(n_f, dtype=bool)
+    if n_f == 0:
+        return done
+    near = ok & (gap < margin + BAND)
+    # only the candidates near the palate in some frame matter (a few dozen of some 300)
+    cols = np.flatnonzero(near.any(axis=0))
+    k = len(cols)
+    near, gap, normal = near[:, cols], gap[:, cols], normal[:, cols]
+    phi_nodes = phi_nodes[cols]
+    phi_flat = phi_nodes.reshape(3 * k, m)
+    # r = gap - margin + A(q - q0) at every candidate, A's row i being -n_iᵀΦ_i
+    shift = ((q[frames] - q0[frames]) @ phi_flat.T).reshape(n_f, k, 3)
+    r_all = gap - margin - np.einsum("fkc,fkc->fk", normal, shift)
+    # the first guess: the frame's active set after its last pass, else its deepest candidate
+    guess = near & support[frames][:, cols]
+    deepest = np.zeros_like(guess)
+    deepest[np.arange(n_f), np.argmin(np.where(near, r_all, np.inf), axis=1)] = True
+    fresh = ~guess.any(axis=1)
+    guess[fresh] = deepest[fresh]
+    pending = np.arange(n_f)
+    for _ in range(GUESS_ROUNDS):
+        counts = guess[pending].sum(axis=1)
+        pending = pending[(counts > 0) & (counts <= GUESS_MAX)]
+        if len(pending) == 0:
+            break
+        g = guess[pending]
+        n_p, width = len(pending), int(g.sum(axis=1).max())
+        idx = np.argsort(~g, axis=1, kind="stable")[:, :width]  # the guessed candidates, ascending (as NNLS's rows)
+        valid = np.take_along_axis(g, idx, axis=1)
+        nrm = normal[pending[:, None], idx]  # (P, s, 3)
+        a = -np.einsum("psc,pscm->psm", nrm, phi_nodes[idx])  # (P, s, m) the guessed rows of A
+        a[~valid] = 0.0
+        bt = np.empty_like(a)  # rows K aᵢ (B = K Aᵀ, transposed), one product per sensor pattern
+        patterns: dict = {}
+        for j, i in enumerate(frames[pending]):
+            patterns.setdefault(id(solves[i]), (solves[i], []))[1].append(j)
+        for k_mat, members in patterns.values():
+            members = np.asarray(members)
+            bt[members] = (a[members].reshape(-1, m) @ k_mat.T).reshape(len(members), width, m)
+        m_ss = -np.matmul(a, bt.transpose(0, 2, 1))  # (P, s, s) M_SS
+        r_s = np.where(valid, np.take_along_axis(r_all[pending], idx, axis=1), 0.0)
+        # padding: λ = 0 there, the block's eigenvalues those of the guess and its mean diagonal
+        diag = np.einsum("pii->pi", m_ss)
+        mean = np.sum(np.where(valid, diag, 0.0), axis=1) / np.maximum(valid.sum(axis=1), 1)
+        m_ss += np.where(valid, 0.0, mean[:, None])[:, :, None] * np.eye(width)[None]
+        eig = np.linalg.eigvalsh(0.5 * (m_ss + m_ss.transpose(0, 2, 1)))
+        top_eig = np.maximum(eig[:, -1], 1e-300)
+        well = eig[:, 0] * GUESS_CONDITION > top_eig  # to be taken
+        solvable = eig[:, 0] > 1e-10 * top_eig  # to guide the next guess
+        with np.errstate(all="ignore"):
+            lam_s = np.linalg.solve(np.where(solvable[:, None, None], m_ss, np.eye(width)[None]),
+                                    -r_s[:, :, None])[:, :, 0]
+        dq = np.einsum("ps,psm->pm", lam_s, bt)  # B λ
+        w = r_all[pending] + np.einsum("pkc,pkc->pk", normal[pending], (dq @ phi_flat.T).reshape(n_p, k, 3))
+        off = near[pending] & ~g
+        top = np.max(np.where(valid, lam_s, -np.inf), axis=1)
+        scale = np.max(np.where(near[pending], np.abs(r_all[pending]), 0.0), axis=1)
+        positive = np.all(~valid | (lam_s > GUESS_MARGIN * top[:, None]), axis=1) & (top > 0)
+        feasible = np.all(~off | (w > GUESS_MARGIN * scale[:, None]), axis=1)
+        taken = well & positive & feasible & np.all(np.isfinite(lam_s), axis=1)
+        got = frames[pending[taken]]
+        q[got] = q0[got] + dq[taken]
+        support[got] = False
+        support[got[:, None], cols[None, :]] = g[taken]
+        done[pending[taken]] = True
+        for j, i in zip(np.flatnonzero(taken), got):
+            lams[i], rows[i] = lam_s[j, valid[j]], a[j, valid[j]]
+        # the next guess: the forces that came out negative leave, the candidate furthest inside joins
+        lam_full = np.zeros((n_p, k))
+        np.put_along_axis(lam_full, idx, np.where(valid, lam_s, 0.0), axis=1)
+        fixed = g & (lam_full > 0)
+        w_off = np.where(off, w, np.inf)
+        worst = np.argmin(w_off, axis=1)
+        join = np.flatnonzero(w_off[np.arange(n_p), worst] < 0)
+        fixed[join, worst[join]] = True
+        # a singular block (rows of near-duplicate nodes): start again from the deepest node, once
+        restart = ~solvable & np.any(g != deepest[pending], axis=1)
+        fixed[restart] = deepest[pending[restart]]
+        moved = np.any(fixed != g, axis=1) & ~taken
+        guess[pending] = fixed
+        pending = pending[moved]
+    return done
 
 
 def _sensor_inverse(gram, comp, acting):
