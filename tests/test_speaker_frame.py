@@ -49,13 +49,16 @@ def test_the_placed_basis_is_the_eigen_solve_of_the_moved_mesh(keep_frequencies)
         np.testing.assert_allclose(vals, source, rtol=1e-8)
     else:  # same tissue, c times larger: c times slower
         np.testing.assert_allclose(vals, source / MOVE.scale ** 2, rtol=1e-8)
-    # Modal warping's W = CΦ of the moved mesh: the same rotations (turned by the move) per modal
-    # displacement of the same shape, i.e. W' = Q_b W / √(f c⁵)
-    w, w_moved = model.rotation_matrix(model.basis(m, cache=False)), placed.rotation_matrix(derived)
+    # Modal warping's W = CΦ of the moved mesh (its own curl operator): the same rotations (turned by the
+    # move) per modal displacement of the same shape, i.e. W' = Q_b W / √(f c⁵), which is how
+    # PlacedModel.rotation_matrix derives it from the source's
+    w = model.rotation_matrix(model.basis(m, cache=False))
+    w_own = np.asarray(placed.curl_operator @ derived.phi)
     n = model.mesh.n_nodes
     turned = np.einsum("ij,njm->nim", MOVE.rotation, w.reshape(n, 3, m)).reshape(3 * n, m)
     factor = np.sqrt(placed.density_factor * MOVE.scale ** 3) * MOVE.scale
-    np.testing.assert_allclose(w_moved * factor, turned, atol=1e-9 * np.abs(w).max())
+    np.testing.assert_allclose(w_own * factor, turned, atol=1e-9 * np.abs(w).max())
+    np.testing.assert_allclose(placed.rotation_matrix(derived), w_own, rtol=0, atol=1e-12 * np.abs(w_own).max())
     # The point stiffness at the sensors (the sensor springs' unit): a body c times larger of the same E is
     # c times stiffer per metre at a point, whatever its density, so the springs' multiple means the same.
     from tonguevis.sim.constrained import point_stiffness

@@ -99,6 +99,26 @@ class PlacedModel(TongueModel):
                                           self.density_factor, self.basis_key(m))
         return self._bases[m]
 
+    def rotation_matrix(self, basis: ModalBasis) -> np.ndarray:
+        """W' = C'φ' (3n, m) of this model's placed modes, from the source's W (cached there) as its modes are moved.
+
+        On the moved mesh ∇' = det(Q) Q ∇ / c for a rotation vector (a pseudo-vector) and φ' = Q_b φ / √(f c³),
+        so C'φ' = det(Q) Q_b (C φ) / (c √(f c³)): no curl operator of this mesh (its assembly cost some
+        60 ms in every simulate() in the speaker's frame), the same W to rounding (tests/test_speaker_frame.py).
+        Any other basis: its own curl operator, as :meth:`TongueModel.rotation_matrix`.
+        """
+        m = basis.phi.shape[1]
+        source = self.source._bases.get(m)
+        if basis.key in self._rotation_matrices or basis.key != self.basis_key(m) or source is None:
+            return super().rotation_matrix(basis)
+        q = np.asarray(self.placement.rotation, dtype=np.float64)
+        c, f = float(self.placement.scale), float(self.density_factor)
+        w = self.source.rotation_matrix(source)
+        moved = np.einsum("ij,njm->nim", q, w.reshape(-1, 3, m)).reshape(w.shape)
+        moved *= np.sign(np.linalg.det(q)) / (c * np.sqrt(f * c ** 3))
+        self._rotation_matrices[basis.key] = moved
+        return moved
+
     @cached_property
     def dorsal_nodes(self) -> np.ndarray:
         """The source's: which nodes a sensor may sit on is the model's anatomy, not the speaker's head pose."""
