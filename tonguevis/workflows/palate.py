@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from tonguevis._progress import report
-from tonguevis.palate import PalateError, PalateSurface, fit_palate, trace_points
+from tonguevis.palate import PalateError, PalateSurface, fit_palate, symmetry_midline, trace_points
 from tonguevis.preprocess.correction import head_corrected, reference_pose, register_references
 
 __all__ = ["palate_from_traces"]
@@ -22,8 +22,9 @@ def palate_from_traces(paths, probe: str = "PROBE", sensor_map=None, progress=No
                        read_options: dict | None = None) -> PalateSurface:
     """The speaker's palate fitted to palate-trace recordings (``tonguevis palate`` and the app's
     File > Fit palate from traces): each read (with the reader's ``read_options``, ``-O``),
-    its probe's positions head-corrected (:func:`~tonguevis.palate.trace_points`), the midline taken from the
-    lateral tongue sensors when the traces have them, one surface fitted to all points
+    its probe's positions head-corrected (:func:`~tonguevis.palate.trace_points`), the midline from the
+    traces' own mirror symmetry (:func:`~tonguevis.palate.symmetry_midline`; the lateral tongue sensors
+    when one side only was traced), one surface fitted to all points
     (:func:`~tonguevis.palate.fit_palate`).  The probe's sample count per file is in ``metadata["samples"]``.
 
     Traces with head references (>= 3 REF* sensors) are carried into the first one's head frame by
@@ -60,8 +61,15 @@ def palate_from_traces(paths, probe: str = "PROBE", sensor_map=None, progress=No
         if len(lateral) == 2:
             midlines.append(float(np.nanmean(np.concatenate(list(lateral.values()))[:, 1])))
     report(progress, len(paths), len(paths) + 1, "fitting the palate")
-    surface = fit_palate(np.concatenate(points), midline_y=float(np.mean(midlines)) if midlines else None,
-                         sources=[str(p) for p in paths])
+    # The palate's own mirror symmetry gives the midline; the lateral tongue sensors (pushed aside by the
+    # probe while tracing) only when the traces cannot tell (one side traced).
+    everything = np.concatenate(points)
+    midline, how = symmetry_midline(everything), "the traces' mirror symmetry"
+    if midline is None and midlines:
+        midline, how = float(np.mean(midlines)), "the lateral tongue sensors (the traces' symmetry could not tell)"
+    surface = fit_palate(everything, midline_y=midline, sources=[str(p) for p in paths])
+    if midline is not None:
+        surface.metadata["midline_from"] = how
     surface.metadata["samples"] = samples
     if frame_pose:
         # Where the head references sat: the simulation carries the palate into the speech's head frame by them.
