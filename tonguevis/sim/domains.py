@@ -32,14 +32,18 @@ displacement does).
 
 **Dynamics (Eq. 11).**  Backward Euler in the reduced coordinates z (B made
 mass-orthonormal, BᵀMB = I), Rayleigh damping C = αI + βBᵀK₀B, the reduced StVK force
-over every tet of the mesh by default (exact; its cost, ~8 ms a force on the shipped tongue,
-bounds the frame loop at tens of frames/s) or by an optional cubature
+over every tet of the mesh by default (exact; compiled by :mod:`tonguevis.sim.domains_kernel`,
+~0.75 ms a force on the shipped tongue against ~5.5 ms through NumPy: with ~1.6-2.5 forces a
+frame, :meth:`DomainModel.integrate_fast`, this bounds the frame loop at a few hundred frames/s on
+one core) or by an optional cubature
 (:mod:`tonguevis.sim.cubature`: ~20x less work, its error stated there), solved by Newton with the
 sensor constraints as hard multipliers on the targets :func:`tonguevis.sim.simulate.drive_schedule`
 makes (the compliant projection, with the domain model's own linear stiffness, and the
 dropout handover; the same constraints as the modal methods').  Newton keeps the tangent of
 the previous iteration or frame while the force residual falls fast (modified Newton) and
-refreshes it otherwise.
+refreshes it otherwise.  :meth:`DomainModel.integrate` is the plain reference loop (NumPy force,
+Newton to 0.1 µm); :meth:`DomainModel.integrate_fast` the default one (compiled force, the previous
+frame's force carried to a first step, Newton to 1 µm), proven within a stated distance of it.
 
 Units SI: z and the domain DOFs in m, forces in N, stiffness in N/m.
 """
@@ -69,6 +73,10 @@ LENGTH_SCALE = 0.03
 CACHE_VERSION = 1
 #: Columns of the blended basis whose mass is below this share of the largest are dropped (dependent).
 DEPENDENCE = 1e-10
+#: simulate_domains(scheme=...): see its docstring.
+SCHEMES = ("newton", "linearised", "reference")
+#: Newton's tolerance (m, on the step's nodal size) in the fast schemes: 1 µm (the reference's is 0.1 µm).
+FAST_TOLERANCE = 1e-6
 
 
 # ---------------------------------------------------------------------------------------- kinematics
@@ -224,6 +232,40 @@ def load_weights(path: Path, key: str) -> DomainWeights | None:
         return None
 
 
+def _basis_path(key: str) -> Path:
+    from tonguevis.paths import cache_dir
+
+    return cache_dir() / f"domains-basis-{key}.npz"
+
+
+def _load_basis(key: str):
+    """(eigenvalues, domain_dofs, basis) cached for the domains ``key`` (which covers the mesh, the material,
+    the anchors and the seeds), or None."""
+    path = _basis_path(key)
+    if not path.exists():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if int(data["version"]) != CACHE_VERSION or str(data["key"]) != key:
+                return None
+            return np.array(data["eigenvalues"]), np.array(data["domain_dofs"]), np.array(data["basis"])
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        logger.warning("ignoring unreadable domain basis cache %s (%s): it is computed again", path, exc)
+        return None
+
+
+def _save_basis(key: str, eigenvalues, domain_dofs, basis) -> None:
+    def write(tmp):
+        with open(tmp, "wb") as fh:
+            np.savez(fh, eigenvalues=eigenvalues, domain_dofs=domain_dofs, basis=basis, key=np.array(key),
+                     version=np.array(CACHE_VERSION))
+
+    try:
+        atomic_write(_basis_path(key), write)
+    except OSError as exc:
+        logger.warning("could not cache the domain basis at %s: %s", _basis_path(key), exc)
+
+
 def domain_weights(model, sensor_nodes, cache: bool = True) -> DomainWeights:
     """The domains of ``model`` seeded at ``sensor_nodes`` and its centre: from the disk cache or computed."""
     nodes = np.asarray(sensor_nodes, dtype=np.int64)
@@ -263,17 +305,39 @@ class DomainModel:
     """
 
     def __init__(self, model, sensor_nodes, cache: bool = True, young: float | None = None,
-                 poisson: float | None = None):
+                 poisson: float | None = None, backend: str = "warp"):
+        from tonguevis._backend import check_backend
+
+        self.backend = check_backend(backend)
         self.model = model
         self.domains = domain_weights(model, sensor_nodes, cache=cache)
         mat = model.material
         self.solid = StVK(model.mesh.points, model.mesh.tets, mat.young if young is None else young,
                           mat.poisson if poisson is None else poisson, mat.density)
+        from tonguevis._blas import single_threaded_blas
+
+        loaded = _load_basis(self.domains.key) if cache else None
+        if loaded is not None:  # the model's mass and stiffness are then not even assembled (0.25 s)
+            self.eigenvalues, self.domain_dofs, self.basis = loaded
+        else:
+            with single_threaded_blas():  # 150 x 150 eigenproblems: two threads on a busy core took 0.5 s
+                self.eigenvalues, self.domain_dofs, self.basis = self._subspace(model)
+            if cache:
+                _save_basis(self.domains.key, self.eigenvalues, self.domain_dofs, self.basis)
+        self.rest_tangent = np.diag(self.eigenvalues)  # BᵀK₀B
+        self.sensor_nodes = np.asarray(sensor_nodes, dtype=np.int64)
+        self._tet_dofs = (3 * model.mesh.tets[:, :, None] + np.arange(3)).reshape(-1, 12)
+        self._scatter = self._tet_dofs.ravel()  # (12k,) DOF of each tet's (node, axis) entry
+        self._df_cache = None  # dF/dz, built when first needed (88 MB and 0.3 s on the shipped tongue)
+        self._compiled = None
+        self.cubature = None  # every tet (see use_cubature)
+
+    def _subspace(self, model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(eigenvalues (r,), domain_dofs (30d, r), basis (3n, r)) of the blended domains of ``model``."""
         pts = model.mesh.points
         g = np.hstack([domain_columns(pts, pts[s], self.domains.weights[:, j])
                        for j, s in enumerate(self.domains.seeds)])
-        mass = model.mass
-        gram = g.T @ (mass @ g)
+        gram = g.T @ (model.mass @ g)
         vals, vecs = np.linalg.eigh(gram)
         keep = vals > DEPENDENCE * vals.max()
         dofs = vecs[:, keep] / np.sqrt(vals[keep])
@@ -281,18 +345,29 @@ class DomainModel:
         # z along the subspace's own vibration modes: BᵀMB = I and BᵀK₀B = Λ diagonal, so the modal
         # machinery (compliant projection, point stiffness, energy at rest) takes the domains as they are.
         lam, rot = np.linalg.eigh(basis.T @ (model.stiffness @ basis))
-        self.eigenvalues = lam  # (r,) 1/s², ascending
-        self.domain_dofs = dofs @ rot
-        self.basis = basis @ rot
-        self.rest_tangent = np.diag(lam)  # BᵀK₀B
-        self.sensor_nodes = np.asarray(sensor_nodes, dtype=np.int64)
-        self._tet_dofs = (3 * model.mesh.tets[:, :, None] + np.arange(3)).reshape(-1, 12)
-        # dF/dz per tet: F_ij = δ_ij + Σ_a u_ai g_aj with u = B z, so (k, 9, r) constant
-        b_tet = self.basis[self._tet_dofs].reshape(len(model.mesh.tets), 4, 3, -1)  # (k, 4, 3, r)
-        self._df = np.einsum("kair,kaj->kijr", b_tet, self.solid.grads).reshape(len(b_tet), 9, -1)
-        self._df2 = np.ascontiguousarray(self._df.reshape(-1, self._df.shape[-1]))  # (9k, r)
-        self._scatter = self._tet_dofs.ravel()  # (12k,) DOF of each tet's (node, axis) entry
-        self.cubature = None  # every tet (see use_cubature)
+        return lam, dofs @ rot, basis @ rot  # eigenvalues 1/s², ascending
+
+    @property
+    def _df(self) -> np.ndarray:
+        """(k, 9, r) dF/dz per tet: F_ij = δ_ij + Σ_a u_ai g_aj with u = B z, so constant."""
+        if self._df_cache is None:
+            b_tet = self.basis[self._tet_dofs].reshape(len(self._tet_dofs), 4, 3, -1)  # (k, 4, 3, r)
+            self._df_cache = np.einsum("kair,kaj->kijr", b_tet, self.solid.grads).reshape(len(b_tet), 9, -1)
+        return self._df_cache
+
+    @property
+    def _df2(self) -> np.ndarray:
+        """(9k, r) :attr:`_df` flattened."""
+        return self._df.reshape(-1, self._df.shape[-1])
+
+    @property
+    def compiled(self):
+        """The warp kernels of the exact force, energy and tangent (:class:`tonguevis.sim.domains_kernel.CompiledStVK`)."""
+        if self._compiled is None:
+            from tonguevis.sim.domains_kernel import CompiledStVK
+
+            self._compiled = CompiledStVK(self)
+        return self._compiled
 
     @property
     def n_dofs(self) -> int:
@@ -324,12 +399,18 @@ class DomainModel:
         self.cubature = cubature
 
     def force(self, z: np.ndarray) -> np.ndarray:
-        """(r,) reduced internal force, N: :meth:`full_force`, or the cubature's (:meth:`use_cubature`)."""
-        return self.full_force(z) if self.cubature is None else self.cubature.force(z)
+        """(r,) reduced internal force, N: over every tet (compiled with ``backend="warp"``, else
+        :meth:`full_force`), or the cubature's (:meth:`use_cubature`)."""
+        if self.cubature is not None:
+            return self.cubature.force(z)
+        return self.compiled.force(z) if self.backend == "warp" else self.full_force(z)
 
     def tangent(self, z: np.ndarray) -> np.ndarray:
-        """(r, r) reduced tangent, N/m: :meth:`full_tangent`, or the cubature's (:meth:`use_cubature`)."""
-        return self.full_tangent(z) if self.cubature is None else self.cubature.tangent(z)
+        """(r, r) reduced tangent, N/m: over every tet (compiled with ``backend="warp"``, else
+        :meth:`full_tangent`), or the cubature's (:meth:`use_cubature`)."""
+        if self.cubature is not None:
+            return self.cubature.tangent(z)
+        return self.compiled.tangent(z) if self.backend == "warp" else self.full_tangent(z)
 
     def full_force(self, z: np.ndarray) -> np.ndarray:
         """(r,) reduced internal force Bᵀ f_int(Bz), N (Eq. 8 over every tet).
@@ -468,6 +549,102 @@ class DomainModel:
                     report(progress, i + 1, n_frames, "integrating the domains (StVK)")
         return IntegrationResult(q, None, None, residual, converged, iterations, recovered)
 
+    def integrate_fast(self, targets: np.ndarray, dt: float, alpha: float, beta: float, tolerance: float = 1e-6,
+                       max_iterations: int = 20, linearised: bool = False, refresh: float = 0.5, carry: bool = True,
+                       progress=None):
+        """:meth:`integrate`'s backward Euler, made fast: returns (:class:`~tonguevis.sim.newmark.IntegrationResult`,
+        energy (F,) J of each frame's shape).
+
+        The same incremental potential, constraints, predictor (z₀ + h v₀), stopping rule and recovery as
+        :meth:`integrate` (the reference), with:
+
+        * the exact force over every tet by the compiled kernel (:meth:`force`, ``backend="warp"``);
+        * ``carry``: before the first force call of a frame, a Newton step on the previous frame's last
+          force carried to the predictor by the stiffness, f ≈ f_last − K (z − z_last): it costs no
+          force and lands near the solution (1.6 forces a frame instead of 3.0 on the demo);
+        * each Newton matrix's KKT solve as two precomputed dense operators per set of acting sensors
+          (a step is two r × r products);
+        * the tangent refreshed only when the step shrinks less than ``refresh``× per iteration (0.25 in
+          :meth:`integrate`; at 0.5 the rest tangent serves a whole trial of the demo);
+        * the frame's energy from the last force call, carried to the accepted shape to second order
+          (E(z + s) ≈ E(z) − f·s + ½ sᵀK s, K the stiffness part of the Newton matrix; the last step is
+          under the tolerance, so the energy is within 1e-5 of :meth:`energies`).
+
+        tolerance : m, on the Newton step's nodal size (|Δz|/√mass) as in :meth:`integrate`; 1e-6 here (1e-7
+        there).  Each frame then stops within about a step of that size of its solution; over a trial
+        the shapes differ from :meth:`integrate`'s by the figures scripts/bench_domains.py prints
+        (largest node difference 0.003 mm on the demo, 0.12 mm on the Opti-Speech /ta/ 009, RMS under
+        0.005 mm; tests/sim/test_domains.py bounds it on a 12 mm raise).
+        linearised : one force call a frame (after the carried step), whatever the step's size: one
+        linearised backward-Euler step; ``converged`` then says only whether that step was below
+        ``tolerance``, and the energies are measured afresh (its step is not small).  Its cost in
+        accuracy is printed by scripts/bench_domains.py (tenths of a mm at most).
+        """
+        from tonguevis._blas import single_threaded_blas
+        from tonguevis._progress import report
+        from tonguevis.sim.newmark import IntegrationResult
+
+        targets = np.asarray(targets, dtype=np.float64)
+        n_frames, n_s, _ = targets.shape
+        r, h = self.n_dofs, float(dt)
+        rows_all = self.rows(self.sensor_nodes)  # (S, 3, r)
+        damping = alpha + beta * self.eigenvalues
+        inertia = np.diag(1.0 / h ** 2 + damping / h)
+        scale = np.sqrt(self.solid.density * float(self.solid.volumes.sum()))  # √mass, as in integrate
+        q = np.zeros((n_frames, r))
+        energy = np.zeros(n_frames)
+        residual = np.full((n_frames, n_s), np.nan)
+        converged = np.zeros(n_frames, dtype=bool)
+        iterations = np.zeros(n_frames, dtype=np.int64)
+        recovered = np.zeros(n_frames, dtype=bool)
+        z0, v0 = np.zeros(r), np.zeros(r)
+        f_last = z_last = None
+        stiffness = self.rest_tangent
+        solver = _DenseKKT(inertia + stiffness)
+        iterations_allowed = 1 if linearised else max_iterations
+        with single_threaded_blas():
+            for i in range(n_frames):
+                acting = np.all(np.isfinite(targets[i]), axis=1)
+                rows = rows_all[acting].reshape(-1, r)
+                c = targets[i, acting].ravel()
+                z = z0 + h * v0
+                if carry and f_last is not None:  # a first Newton step on the last force, carried here by the
+                    dz_ = z - z0                    # stiffness: no force call
+                    grad = (dz_ - h * v0) / h ** 2 + damping * dz_ / h - (f_last - stiffness @ (z - z_last))
+                    z = z + solver.solve(acting, rows, -grad, c - rows @ z)
+                ok, last, e_z = False, np.inf, 0.0
+                for it in range(1, iterations_allowed + 1):
+                    dz_ = z - z0
+                    f = self.force(z)
+                    f_last, z_last = f, z
+                    e_z = self.compiled.last_energy if self.cubature is None and self.backend == "warp" else None
+                    grad = (dz_ - h * v0) / h ** 2 + damping * dz_ / h - f
+                    step = solver.solve(acting, rows, -grad, c - rows @ z)
+                    if e_z is not None:  # the energy at z + step, to second order
+                        e_z = e_z - f @ step + 0.5 * step @ (stiffness @ step)
+                    z = z + step
+                    size = np.linalg.norm(step) / scale
+                    iterations[i] = it
+                    if size <= tolerance:
+                        ok = True
+                        break
+                    if it < iterations_allowed and size > refresh * last:  # slow: a fresh tangent here
+                        stiffness = self.tangent(z)
+                        solver = _DenseKKT(inertia + stiffness)
+                    last = size
+                self._frame_done(i, z, z0, v0, h, ok, acting, rows, c, q, converged, residual, recovered)
+                energy[i] = np.nan if (e_z is None or recovered[i] or linearised) else e_z
+                v0 = np.zeros(r) if recovered[i] else (z - z0) / h
+                if recovered[i]:
+                    f_last = None
+                z0 = q[i]
+                if progress is not None and (i % 200 == 0 or i == n_frames - 1):
+                    report(progress, i + 1, n_frames, "integrating the domains (StVK)")
+        missing = ~np.isfinite(energy)
+        if missing.any():  # the cubature's or NumPy's force, or recovered frames: measured afresh
+            energy[missing] = self.energies(q[missing])
+        return IntegrationResult(q, None, None, residual, converged, iterations, recovered), energy
+
     @staticmethod
     def _frame_done(i, z, z0, v0, h, ok, acting, rows, c, q, converged, residual, recovered):
         """Store frame i (a non-finite one keeps the previous shape and is flagged recovered)."""
@@ -478,8 +655,11 @@ class DomainModel:
             residual[i, acting] = np.linalg.norm((rows @ z - c).reshape(-1, 3), axis=1)
 
     def energies(self, z: np.ndarray, chunk: int = 64) -> np.ndarray:
-        """(F,) StVK elastic energy (J) of every frame of z (F, r), vectorised over chunks of frames."""
+        """(F,) StVK elastic energy (J) of every frame of z (F, r), vectorised over chunks of frames
+        (compiled with ``backend="warp"``)."""
         z = np.atleast_2d(np.asarray(z, dtype=np.float64))
+        if self.backend == "warp":
+            return self.compiled.energies(z)
         out = np.empty(len(z))
         vol, mu, lam = self.solid.volumes, self.solid.mu, self.solid.lam
         for start in range(0, len(z), chunk):
@@ -519,6 +699,33 @@ class _KKT:
         return ab - a_rt @ lam
 
 
+class _DenseKKT:
+    """:class:`_KKT`'s solve as dense operators: for a fixed A (r, r) and each set of acting sensors (rows R),
+    x = P b + Q d with P = A⁻¹ − A⁻¹Rᵀ S⁻¹ R A⁻¹, Q = A⁻¹Rᵀ S⁻¹, S = R A⁻¹ Rᵀ (built once per set: ~1 ms
+    at r = 150; a solve is then two products, against ~0.2 ms of LAPACK calls)."""
+
+    def __init__(self, a: np.ndarray):
+        from scipy.linalg import cho_factor, cho_solve, lu_factor, lu_solve
+
+        eye = np.eye(len(a))
+        try:
+            self.inverse = cho_solve(cho_factor(a), eye)
+        except np.linalg.LinAlgError:  # a tangent softer than the inertia (buckling): LU instead
+            self.inverse = lu_solve(lu_factor(a), eye)
+        self._ops: dict[bytes, tuple] = {}
+
+    def solve(self, acting: np.ndarray, rows: np.ndarray, b: np.ndarray, d: np.ndarray) -> np.ndarray:
+        if len(d) == 0:
+            return self.inverse @ b
+        key = np.asarray(acting).tobytes()
+        if key not in self._ops:
+            a_rt = self.inverse @ rows.T
+            q = np.linalg.solve(rows @ a_rt, a_rt.T).T  # A⁻¹Rᵀ S⁻¹ (S symmetric)
+            self._ops[key] = (self.inverse - q @ (rows @ self.inverse), q)
+        p, q = self._ops[key]
+        return p @ b + q @ d
+
+
 # ---------------------------------------------------------------------------------------- simulate(method="domains")
 def domains_model(model, domain_model: DomainModel):
     """A shallow copy of ``model`` whose basis of r "modes" is the domain subspace B (eigenvalues Λ of its
@@ -545,7 +752,7 @@ def simulate_domains(recording, model=None, landmarks: str = "speaker", rest=Non
                      smooth_window: int | None = None, tolerance: float = 1e-7,
                      sensor_stiffness: float | None | str = "default", backend: str = "warp", palate=None,
                      progress=None, frame: str = "speaker", tongue_size: float | None = None, cache: bool = True,
-                     cubature: bool = False):
+                     cubature: bool = False, scheme: str = "newton"):
     """:func:`tonguevis.sim.simulate` with ``method="domains"``: the same preparation (rest, alignment, frame),
     the same sensor constraints (the compliant projection of :func:`~tonguevis.sim.simulate.drive_schedule`
     with this model's own linear stiffness, dropouts bridged and handed over, then held hard), the reduced
@@ -558,6 +765,11 @@ def simulate_domains(recording, model=None, landmarks: str = "speaker", rest=Non
     cubature : the force and tangent from a few hundred weighted tets (:mod:`tonguevis.sim.cubature`,
     cached; its force error on shapes it was not built from in ``metadata["domains"]["cubature"]``) instead
     of every tet: about 20 times less work per force.
+    scheme : the frame loop. "newton" (default): :meth:`DomainModel.integrate_fast`, Newton to 1 µm with the
+    exact force compiled; "linearised": one force call a frame (its cost in accuracy in
+    scripts/bench_domains.py); "reference": :meth:`DomainModel.integrate`, the NumPy force, to 0.1 µm
+    (what the others are checked against).  ``backend="numpy"`` takes the NumPy force in any scheme
+    (``tolerance`` is the reference's; the fast schemes take at least :data:`FAST_TOLERANCE`).
     """
     from tonguevis._progress import report
     from tonguevis.errors import SimulationError
@@ -569,6 +781,8 @@ def simulate_domains(recording, model=None, landmarks: str = "speaker", rest=Non
     from tonguevis.sim.simulate import DEFAULT_SENSOR_STIFFNESS, _Run, drive_schedule
 
     file = recording.metadata.get("file")
+    if scheme not in SCHEMES:
+        raise ValueError(f"scheme must be one of {', '.join(map(repr, SCHEMES))}, got {scheme!r}")
     if palate is not None:
         raise SimulationError("the domains method has no palate contact yet: simulate it with method='warped' or "
                               "without the palate", file)
@@ -581,7 +795,8 @@ def simulate_domains(recording, model=None, landmarks: str = "speaker", rest=Non
                                         tongue_size=tongue_size)
     report(progress, 0, 3, "building the quadratic domains")
     t0 = time.perf_counter()
-    dm = DomainModel(model, prep.nodes, cache=cache)
+    dm = DomainModel(model, prep.nodes, cache=cache,
+                     backend="numpy" if scheme == "reference" or backend == "numpy" else "warp")
     build_s = time.perf_counter() - t0
     cub_info = None
     if cubature:
@@ -600,7 +815,13 @@ def simulate_domains(recording, model=None, landmarks: str = "speaker", rest=Non
                                                    sensor_stiffness)
     report(progress, 1, 3, "integrating")
     t0 = time.perf_counter()
-    result = dm.integrate(targets, 1.0 / recording.rate, model.material.alpha, model.material.beta, tolerance)
+    if scheme == "reference":
+        result = dm.integrate(targets, 1.0 / recording.rate, model.material.alpha, model.material.beta, tolerance)
+        energy = None
+    else:
+        result, energy = dm.integrate_fast(targets, 1.0 / recording.rate, model.material.alpha,
+                                           model.material.beta, max(tolerance, FAST_TOLERANCE),
+                                           linearised=scheme == "linearised")
     loop_s = time.perf_counter() - t0
     report(progress, 2, 3, "measuring the frames")
     figures = frame_figures(dmodel, result.q, False, backend)
@@ -608,12 +829,14 @@ def simulate_domains(recording, model=None, landmarks: str = "speaker", rest=Non
                dm.n_dofs, landmarks, sensor_stiffness, k_ref, None)
     run.fit = fit
     motion = run.motion(result, figures, len(targets))
-    motion.energy = dm.energies(motion.q)
+    motion.energy = dm.energies(motion.q) if energy is None else energy
     motion.metadata["method"] = "domains"
     motion.metadata["domains"] = {
         "seeds": dm.domains.seeds.tolist(), "dofs": int(dm.n_dofs), "domains": int(len(dm.domains.seeds)),
         "weights": "material-aware (seed 001 §7; domain boundary not held, see tonguevis.sim.domains)",
         "integrator": "backward Euler, reduced StVK " + ("by cubature" if cubature else "over every tet"),
+        "scheme": scheme, "force": "cubature" if cubature else ("compiled" if dm.backend == "warp" else "numpy"),
+        "force_calls": int(result.iterations.sum()),
         "cubature": cub_info,
         "build_s": build_s, "loop_s": loop_s, "frames_per_s": len(targets) / loop_s if loop_s > 0 else float("inf"),
         "unconverged_frames": int(np.sum(~result.converged)),
