@@ -284,17 +284,14 @@ def first_passes(demo):
 
 def guessed(first_passes, stale):
     """_guessed_passes on every frame of ``first_passes`` at once, each starting from the active set
-    ``stale`` (F, k) bool: (done (F,), q (F, m), λ per frame, support (F, k))."""
+    ``stale`` (F, k) bool: (done (F,), q (F, m), λ per frame (its positive ones), support (F, k))."""
     from tonguevis.sim.contact import MARGIN, _guessed_passes
 
     k_mat, phi_nodes, q0, gap, normal, ok = first_passes[:6]
     n = len(q0)
-    q, support = q0.copy(), stale.copy()
-    lams: list = [None] * n
-    rows: list = [None] * n
-    done = _guessed_passes([k_mat] * n, np.arange(n), phi_nodes, phi_nodes.reshape(-1, q0.shape[1]), q, q0, gap,
-                           normal, ok, MARGIN, support, lams, rows)
-    return done, q, lams, support
+    q, forces, external = q0.copy(), stale.astype(np.float64), np.zeros_like(q0)
+    done = _guessed_passes([k_mat] * n, np.arange(n), phi_nodes, q, q0, gap, normal, ok, MARGIN, forces, external)
+    return done, q, [f[f > 0] for f in forces], forces > 0
 
 
 def true_sets(first_passes) -> np.ndarray:

@@ -253,15 +253,15 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
     the same result to rounding (tests/sim/test_contact_fast.py).  Each pass's QP: from a guessed
     active set for every frame at once (:func:`_guessed_passes`), by NNLS
     (:func:`_contact_pass_fast`) where no guess holds; guess=False: by NNLS everywhere.
-    Returns a list of (q, λ, A) or (q0, None, None), one per frame.
+    Returns (q (n, m), the modal contact force -Aᵀλ (n, m), the number of contact forces (n,)):
+    q0, 0 and 0 where the frame keeps its contact-free shape.
     """
-    n = len(q0)
-    if n == 0:
-        return []
+    n, m = q0.shape
     q = np.array(q0, copy=True)
-    lams: list = [None] * n
-    rows: list = [None] * n
-    support = np.zeros(allowed.shape, dtype=bool)  # (n, k) each frame's active set after its last pass
+    if n == 0:
+        return q, np.zeros((0, m)), np.zeros(0, dtype=np.int64)
+    forces = np.zeros(allowed.shape)  # (n, k) each frame's λ over the candidates, after its last pass
+    external = np.zeros((n, m))  # -Aᵀλ of each frame's last pass
     going = np.arange(n)
     for n_pass in range(MAX_PASSES):
         if len(going) == 0:
@@ -275,31 +275,27 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
         js = np.flatnonzero(inside)
         ok = allowed[going[js]] & np.isfinite(gap[js])
         if guess:  # the frames whose QP a guessed active set solves exactly (see _guessed_passes)
-            done = _guessed_passes(solves, going[js], phi_nodes, phi_flat, q, q0, gap[js], normal[js], ok, margin,
-                                   support, lams, rows)
+            done = _guessed_passes(solves, going[js], phi_nodes, q, q0, gap[js], normal[js], ok, margin, forces,
+                                   external, first=n_pass == 0)
         else:
             done = np.zeros(len(js), dtype=bool)
         for j in np.flatnonzero(~done):  # the others: the QP by NNLS, as the reference
             i = going[js[j]]
-            lams[i], rows[i], q[i] = _contact_pass_fast(lam, solves[i], phi_nodes, q[i], q0[i], gap[js[j]],
-                                                        normal[js[j]], ok[j], margin)
+            lam_a, rows, q[i] = _contact_pass_fast(lam, solves[i], phi_nodes, q[i], q0[i], gap[js[j]],
+                                                   normal[js[j]], ok[j], margin)
             near = np.flatnonzero(ok[j] & (gap[js[j]] < margin + BAND))
-            support[i] = False
-            support[i, near[lams[i] > 0]] = True
+            used = lam_a > 0
+            forces[i] = 0.0
+            forces[i, near[used]] = lam_a[used]
+            external[i] = -(rows[used].T @ lam_a[used])
         going = going[inside]
     # the guard, every frame at once: a push much further than the surface was inside has failed
     depth = np.maximum(0.0, -np.fmin.reduce(np.where(allowed, gap0, np.nan), axis=1, initial=np.inf))
     moved = np.abs((q - q0) @ phi_flat.T).reshape(n, -1, 3)
     moved = np.where(allowed[:, :, None], moved, 0.0).reshape(n, -1).max(axis=1, initial=0.0)
-    out = []
-    for i in range(n):
-        lam_a = lams[i]
-        if lam_a is None or not np.any(lam_a > 0) or not np.isfinite(moved[i]) or moved[i] > 2 * depth[i] + 2e-3:
-            out.append((q0[i], None, None))
-            continue
-        used = lam_a > 0
-        out.append((q[i], lam_a[used], rows[i][used]))
-    return out
+    count = np.count_nonzero(forces > 0, axis=1)
+    kept = (count > 0) & np.isfinite(moved) & (moved <= 2 * depth + 2e-3)
+    return np.where(kept[:, None], q, q0), np.where(kept[:, None], external, 0.0), np.where(kept, count, 0)
 
 
 #: A guessed active set is taken only with this much to spare: each of its contact forces above
@@ -312,12 +308,13 @@ GUESS_ROUNDS = 6  # guesses a frame tries (each corrected from the last) before 
 GUESS_MAX = 24  # largest active set guessed; more goes to the NNLS
 
 
-def _guessed_passes(solves, frames, phi_nodes, phi_flat, q, q0, gap, normal, ok, margin, support, lams, rows):
+def _guessed_passes(solves, frames, phi_nodes, q, q0, gap, normal, ok, margin, forces, external, first=False):
     """One pass of :func:`_active_sets` for the frames whose QP a guessed active set solves; the rest untouched.
 
-    frames : (F,) the frames (rows of q, q0 (n, m), support (n, k) and the lists lams, rows) taking a
-    pass; gap (F, k) m, normal (F, k, 3), ok (F, k) their clearances at q and the candidates that may
-    get a constraint.  The QP of a pass (:func:`_contact_pass_fast`'s, min ½λᵀMλ + rᵀλ over λ >= 0, a
+    frames : (F,) the frames (rows of q, q0 (n, m), forces (n, k), external (n, m)) taking a pass;
+    gap (F, k) m, normal (F, k, 3), ok (F, k) their clearances at q and the candidates that may
+    get a constraint; forces: each frame's λ over the candidates after its last pass (its active set
+    the positive ones); first: the frames' first pass (q = q0).  The QP of a pass (:func:`_contact_pass_fast`'s, min ½λᵀMλ + rᵀλ over λ >= 0, a
     strictly convex problem with one solution) is solved by NNLS there; here a guess S of its active
     set (the frame's after its last pass, else its deepest candidate) is solved as equalities,
     M_SS λ_S = -r_S, every frame at once, and taken when it satisfies the optimality conditions with
@@ -326,7 +323,7 @@ def _guessed_passes(solves, frames, phi_nodes, phi_flat, q, q0, gap, normal, ok,
     so the same result to rounding; a wrong set never passes (tests/sim/test_contact_fast.py).
     A guess that fails is corrected (the forces that came out negative leave, the candidate furthest
     inside joins; a singular block starts again from the deepest) up to GUESS_ROUNDS times.  The frames taken
-    have q, lams, rows and support filled; returns (F,) bool, which.  Vectorised over the frames:
+    have q, forces and external (-Aᵀλ) filled; returns (F,) bool, which.  Vectorised over the frames:
     one pass's Python costs a few microseconds a frame instead of some 90 (most frames'
     first guess holds: consecutive frames press on the same few nodes).
     """
@@ -343,10 +340,12 @@ def _guessed_passes(solves, frames, phi_nodes, phi_flat, q, q0, gap, normal, ok,
     phi_nodes = phi_nodes[cols]
     phi_flat = phi_nodes.reshape(3 * k, m)
     # r = gap - margin + A(q - q0) at every candidate, A's row i being -n_iᵀΦ_i
-    shift = ((q[frames] - q0[frames]) @ phi_flat.T).reshape(n_f, k, 3)
-    r_all = gap - margin - np.einsum("fkc,fkc->fk", normal, shift)
+    r_all = gap - margin
+    if not first:
+        shift = ((q[frames] - q0[frames]) @ phi_flat.T).reshape(n_f, k, 3)
+        r_all = r_all - np.einsum("fkc,fkc->fk", normal, shift)
     # the first guess: the frame's active set after its last pass, else its deepest candidate
-    guess = near & support[frames][:, cols]
+    guess = near & (forces[frames][:, cols] > 0)
     deepest = np.zeros_like(guess)
     deepest[np.arange(n_f), np.argmin(np.where(near, r_all, np.inf), axis=1)] = True
     fresh = ~guess.any(axis=1)
@@ -394,11 +393,10 @@ def _guessed_passes(solves, frames, phi_nodes, phi_flat, q, q0, gap, normal, ok,
         taken = well & positive & feasible & np.all(np.isfinite(lam_s), axis=1)
         got = frames[pending[taken]]
         q[got] = q0[got] + dq[taken]
-        support[got] = False
-        support[got[:, None], cols[None, :]] = g[taken]
+        forces[got] = 0.0
+        forces[got[:, None], cols[idx[taken]]] = np.where(valid[taken], lam_s[taken], 0.0)
+        external[got] = -np.einsum("ps,psm->pm", np.where(valid[taken], lam_s[taken], 0.0), a[taken])
         done[pending[taken]] = True
-        for j, i in zip(np.flatnonzero(taken), got):
-            lams[i], rows[i] = lam_s[j, valid[j]], a[j, valid[j]]
         # the next guess: the forces that came out negative leave, the candidate furthest inside joins
         lam_full = np.zeros((n_p, k))
         np.put_along_axis(lam_full, idx, np.where(valid, lam_s, 0.0), axis=1)
@@ -454,14 +452,13 @@ def _solve_frames_fast(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset, c_
             inverses[key] = _sensor_operator(lam, P[np.flatnonzero(acting[f])],
                                              _sensor_inverse(gram, comp3[f], acting[f]))
         solves.append(inverses[key])
-    solved = _active_sets(lam, solves, phi_nodes, phi_flat, query, jaw_offset[frames], q_all[frames], allowed, margin,
-                          gap[frames], normals)
-    for f, (q, lam_f, rows) in zip(frames, solved):
-        if rows is None:
-            continue
-        external[f] = -(rows.T @ lam_f)
-        active_count[f] = len(lam_f)
-        out_targets[f] = (P @ q).reshape(-1, 3)
+    q, pushed, count = _active_sets(lam, solves, phi_nodes, phi_flat, query, jaw_offset[frames], q_all[frames],
+                                    allowed, margin, gap[frames], normals)
+    kept = count > 0
+    frames = frames[kept]
+    external[frames] = pushed[kept]
+    active_count[frames] = count[kept]
+    out_targets[frames] = (q[kept] @ P.T).reshape(len(frames), *out_targets.shape[1:])
 
 
 def _cholesky(matrix: np.ndarray) -> np.ndarray:
@@ -542,9 +539,8 @@ def _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offse
     solve_g = _sensor_inverse(gram, np.full(len(P), compliance), ones)
     _, normals = query(u[frames], jaw_offset[frames], normals=True)
     ok = np.ones((len(frames), k), bool) if allowed is None else allowed[frames]
-    solved = _active_sets(lam, [_sensor_operator(lam, P, solve_g)] * len(frames), phi_nodes, phi_flat, query, jaw_offset[frames], q[frames],
-                          ok, margin, gap[frames], normals)
-    out[frames] = [q_f for q_f, _, _ in solved]
+    out[frames] = _active_sets(lam, [_sensor_operator(lam, P, solve_g)] * len(frames), phi_nodes, phi_flat, query,
+                               jaw_offset[frames], q[frames], ok, margin, gap[frames], normals)[0]
     return out, frames
 
 

@@ -136,12 +136,24 @@ class Clearance:
         if workers <= 1:
             launch(slice(None))
         else:  # a launch runs on one core and releases the GIL: the frames in a few blocks, side by side
+            edges = np.linspace(0, n_frames, workers + 1).astype(int)
+            list(_pool().map(launch, [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]))
+        return gap, normal
+
+
+_executor = None
+
+
+def _pool():
+    """The threads the large queries are split over, started once: a new pool a query cost its thread
+    starts, up to 5 ms each on two busy cores (a simulation with a palate makes a dozen such queries)."""
+    global _executor
+    with _lock:
+        if _executor is None:
             from concurrent.futures import ThreadPoolExecutor
 
-            edges = np.linspace(0, n_frames, workers + 1).astype(int)
-            with ThreadPoolExecutor(workers) as pool:
-                list(pool.map(launch, [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]))
-        return gap, normal
+            _executor = ThreadPoolExecutor(PARALLEL_WORKERS, thread_name_prefix="tonguevis-clearance")
+        return _executor
 
 
 def clearances(palate, base: np.ndarray, disp: np.ndarray, offset: np.ndarray,
