@@ -9,7 +9,7 @@ area, the frames where a sensor is within 1 mm of the palate and how many of the
 touching it), and the leave-one-sensor-out validation per held-out sensor beside the kinematic
 baseline (the interpolation of the other sensors).
 
-    python scripts/report_picture.py [--no-validate] [--tongue-size X] [--no-sensor-patches]
+    python scripts/report_picture.py [--no-validate] [--tongue-size X] [--no-sensor-patches] [--fit-rest]
 
 Summary figures only: never commit per-sample output of the third-party recordings.
 Measured 2026-12-03 (default settings: speaker frame, sensors on the surface, compliant springs):
@@ -41,6 +41,7 @@ def main(argv=None) -> int:
     parser.add_argument("--no-validate", action="store_true")
     parser.add_argument("--tongue-size", type=float, default=None)
     parser.add_argument("--no-sensor-patches", action="store_true")
+    parser.add_argument("--fit-rest", action="store_true", help="the rest shape fitted to the rest sensors")
     args = parser.parse_args(argv)
     if not OPTI.exists():
         print(f"the shared recordings are not at {SHARED}: nothing to measure")
@@ -56,7 +57,7 @@ def main(argv=None) -> int:
     set_log_level("ERROR")
     palate = palate_from_traces(sorted(OPTI.glob("00[234]_*.tsv")))
     patches = None if args.no_sensor_patches else "default"
-    settings = RunSettings(sensor_patches=patches, tongue_size=args.tongue_size)
+    settings = RunSettings(sensor_patches=patches, tongue_size=args.tongue_size, rest_fit=args.fit_rest)
     model = build_model(settings)
     lost, runs = 0, 0
     for name, path, sensor_map, with_palate in RECORDINGS:
@@ -70,7 +71,11 @@ def main(argv=None) -> int:
         fit, p = motion.metadata["fit"], motion.metadata["plausibility"]
         print(f"## {name} ({time.perf_counter() - started:.1f} s)")
         print(f"fit: the model at {1 / fit['scale']:.2f} x its size ({fit['model_volume_cm3']:.0f} cm³), rest "
-              f"residual {fit['residual_rms_mm']:.2f} mm RMS")
+              f"residual {fit['residual_rms_mm']:.2f} mm RMS"
+              + (f"; rest shape fitted: sensors were {fit['rest_fit']['sensors_before_rms_mm']:.2f} mm RMS off, "
+                 f"nodes moved up to {fit['rest_fit']['moved_max_mm']:.1f} mm, tets kept "
+                 f"{100 * fit['rest_fit']['tet_volume_ratio_min']:.0f}-{100 * fit['rest_fit']['tet_volume_ratio_max']:.0f} "
+                 f"% of their volume" if fit.get("rest_fit") else ""))
         print(f"misfit max {p['sensor_misfit_max_mm']:.2f} mm, amplification {p['amplification']:.2f}, "
               f"volume change max {p['volume_change_max_percent']:.2f} %")
         if with_palate:
@@ -88,7 +93,7 @@ def main(argv=None) -> int:
                   f"above): " + ", ".join(f"{n} {v:.1f}" for n, v in closest.items()))
         if args.no_validate:
             continue
-        result = validate(rec, model, sensor_patches=patches, tongue_size=args.tongue_size)
+        result = validate(rec, model, sensor_patches=patches, tongue_size=args.tongue_size, rest_fit=args.fit_rest)
         cells = []
         for sensor, s in result.sensors.items():
             runs += 1

@@ -204,11 +204,12 @@ def test_a_silent_video_says_it_is_silent_and_why(monkeypatch, tmp_path, capsys)
 
 SIMULATING = ("simulate", "segment", "energy", "morph", "batch")
 PHYSICS_OPTIONS = [
-    ([], {"sensor_patches": "default", "method": None, "keep_volume": False}),
+    ([], {"sensor_patches": "default", "method": None, "keep_volume": False, "rest_fit": False}),
     (["--no-sensor-patches"], {"sensor_patches": None}),
     (["--sensor-patches", "4"], {"sensor_patches": 0.004}),
     (["--method", "linear", "--keep-volume"], {"method": "linear", "keep_volume": True}),
     (["--sensor-stiffness", "hard"], {"sensor_stiffness": None}),
+    (["--fit-rest"], {"rest_fit": True}),
 ]
 
 

@@ -44,7 +44,7 @@ def test_live_frames_equal_the_replay(demo):
         live[i], sensors[i], q[i] = step.surface, step.sensor_points, step.q
         assert set(step.timings) == {"correct", "drive", "integrate", "reconstruct"}
     rest = RestChoice((float(sim.rest_times[0]), float(sim.rest_times[-1])), "given")
-    motion = simulate(streamed, **{**settings.simulate_options(), "rest": rest})
+    motion = simulate(streamed, **{**sim.settings.simulate_options(), "rest": rest})  # live has no patches
     assert motion.metadata["dropouts"]["bridged_gaps"] == 0 and not motion.metadata["recovered_frames"]
     replay = motion.model.mesh.points[sim.surface_nodes][None] + motion.model.displacements(
         motion.q, nodes=sim.surface_nodes)

@@ -103,6 +103,7 @@ def validate(
     frame: str = "speaker",
     tongue_size: float | None = None,
     keep_volume: bool = False,
+    rest_fit: bool = False,
 ) -> ValidationResult:
     """Leave-one-sensor-out validation of ``model`` (default: the shipped tongue) on ``recording``.
 
@@ -120,6 +121,8 @@ def validate(
     (:func:`tonguevis.sim.volume.volume_subspace`, the driving sensors' nodes held, the held-out
     node free), scored as ``{method}_kept`` (``model_kept``, ``linear_kept``; the projection is applied
     after the dynamics, so the runs are shared); the summary is of the run without it.
+    ``rest_fit`` as :func:`tonguevis.sim.simulate`: the tongue bent onto every rest sensor (the held-out
+    one's rest position too, as the interpolation baseline uses it; its motion is what is predicted).
     """
     from tonguevis.sim import TongueModel
     from tonguevis.io.sensor_map import how_to_map
@@ -145,8 +148,8 @@ def validate(
             f"{candidates or 'none'} (recording sensors: {', '.join(recording.sensor_names)}); "
             + how_to_map(recording), file)
     given = model
-    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest,
-                                        tongue_size=tongue_size)  # the model in the frame
+    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest, tongue_size=tongue_size,
+                                        rest_fit=rest_fit)  # the model in the frame (its rest shape fitted)
     if sensor_patches == "default":  # 3 mm on the generic tongue, as simulate() takes it
         from tonguevis.sim.patches import PATCH_RADIUS
 
@@ -159,7 +162,7 @@ def validate(
         sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
     motion = simulate(recording, given, modes=modes, warping=True, landmarks=landmarks,
                       rest=prep.rest, tolerance=tolerance, sensor_stiffness=sensor_stiffness,
-                      sensor_patches=patch_option, frame=frame, tongue_size=tongue_size)
+                      sensor_patches=patch_option, frame=frame, tongue_size=tongue_size, rest_fit=rest_fit)
     centres = prep.aligned_rest
     s = len(names)
     dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
@@ -236,6 +239,8 @@ def validate(
     settings = _settings(model, basis, modes, landmarks, quasi_static, tolerance, frame)
     settings["sensor_stiffness"] = sensor_stiffness
     settings["sensor_stiffness_n_per_m"] = motion.metadata.get("sensor_stiffness_n_per_m")
+    if rest_fit:
+        settings["rest_fit"] = fit.get("rest_fit")
     return ValidationResult(scores, settings, summary, held_out)
 
 

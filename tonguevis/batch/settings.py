@@ -108,6 +108,8 @@ class BatchSettings(RunSettings):
             sim["method"] = self.method
         if self.frame != "speaker" or self.tongue_size is not None:  # likewise
             sim.update(frame=self.frame, tongue_size=self.tongue_size)
+        if self.rest_fit:  # likewise
+            sim["rest_fit"] = True
         if step == "simulate":
             return sim
         if step == "energy":
@@ -117,7 +119,8 @@ class BatchSettings(RunSettings):
                     "mode": "constraint", "seeds": "auto", "threshold": 0.05, "adjust": False}
         if step == "validate":
             return {"modes": self.modes, "landmarks": self.landmarks, "sensor_stiffness": self.sensor_stiffness,
-                    "rest": self.rest, "quasi_static": self.quasi_static, **read}
+                    "rest": self.rest, "quasi_static": self.quasi_static, **read,
+                    **({"rest_fit": True} if self.rest_fit else {})}
         raise BatchError(f"unknown step {step!r}")
 
     def as_dict(self) -> dict:

@@ -132,6 +132,15 @@ def add_physics_arguments(parser: argparse.ArgumentParser) -> None:
                              "pressure projection, the sensor nodes held; any --method)")
     add_sensor_stiffness_argument(parser)
     add_sensor_patches_argument(parser)
+    add_rest_fit_argument(parser)
+
+
+def add_rest_fit_argument(parser: argparse.ArgumentParser) -> None:
+    """``--fit-rest``: bend the placed tongue onto the rest sensors first (tonguevis.sim.rest_fit)."""
+    parser.add_argument("--fit-rest", dest="rest_fit", action="store_true",
+                        help="bend the tongue so every sensor node sits on its rest sensor before simulating "
+                             "(the tongue's own static response, jaw and hyoid held; its modes solved anew, "
+                             "about 2 s): the rest shape the speaker's, not the generic one's")
 
 
 def add_mesh_axes_argument(parser: argparse.ArgumentParser) -> None:
@@ -290,7 +299,8 @@ def run_settings_of(args, modes: int | None = None):
         sensor_stiffness=getattr(args, "sensor_stiffness", defaults.sensor_stiffness),
         sensor_patches=sensor_patches_option(args), rest=rest_arg(args), palate=palate,
         method=getattr(args, "method", None) or ("linear" if getattr(args, "linear", False) else None),
-        keep_volume=bool(getattr(args, "keep_volume", False)), **frame_options(args))
+        keep_volume=bool(getattr(args, "keep_volume", False)), rest_fit=bool(getattr(args, "rest_fit", False)),
+        **frame_options(args))
 
 
 def load_model_args(args):

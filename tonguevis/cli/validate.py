@@ -14,7 +14,7 @@ import argparse
 from pathlib import Path
 
 from tonguevis.cli._common import (
-    add_frame_arguments, add_mesh_axes_argument, add_recording_arguments, add_rest_argument, add_sensor_patches_argument,
+    add_frame_arguments, add_mesh_axes_argument, add_recording_arguments, add_rest_argument, add_sensor_patches_argument, add_rest_fit_argument,
     add_sensor_stiffness_argument, frame_options, load_model_args, read_recording_args, rest_arg,
 )
 
@@ -29,6 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sensor nodes: snapped to the speaker's layout (default) or the paper's placement rule")
     add_sensor_stiffness_argument(parser)
     add_sensor_patches_argument(parser)
+    add_rest_fit_argument(parser)
     add_frame_arguments(parser)
     add_rest_argument(parser)
     parser.add_argument("--no-static", action="store_true", help="skip the quasi-static baseline")
@@ -75,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         result = validate(recording, model, modes=args.modes, landmarks=args.landmarks,
                           rest=rest, sensor_stiffness=args.sensor_stiffness,
                           quasi_static=not args.no_static, progress=progress, sensor_patches=args.sensor_patches,
-                          **frame_options(args))
+                          rest_fit=args.rest_fit, **frame_options(args))
     print(plausibility_line(result.recording))
     doc = result.as_dict()
     result.write_json(args.json)

@@ -10,7 +10,7 @@ COLOR_CHOICES = ("displacement", "energy", "contact", "plain", "difference")
 
 def add_arguments(parser) -> None:
     from tonguevis.cli._common import (add_companion_arguments, add_reader_options_argument, add_rest_argument,
-                                       add_sensor_patches_argument)
+                                       add_sensor_patches_argument, add_rest_fit_argument)
 
     parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the demo /ta/ train, spk1_ta)")
     parser.add_argument("--sensors", metavar="MAP",
@@ -42,6 +42,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--compare-sensors", metavar="MAP", help="sensor map of B (as --sensors)")
     add_rest_argument(parser)
     add_sensor_patches_argument(parser)
+    add_rest_fit_argument(parser)
     add_reader_options_argument(parser, " of FILE")
     add_companion_arguments(parser)
 
@@ -61,7 +62,7 @@ def run(args) -> int:
     return run_view(args.file, args.sensors, args.mesh, args.modes, args.screenshot, args.frame, rest=rest,
                     audio=args.audio, labels=args.label_file, palate=palate, reference=args.reference,
                     color=args.color, compare=_compare_options(args), options=options,
-                    sensor_patches=args.sensor_patches)
+                    sensor_patches=args.sensor_patches, rest_fit=args.rest_fit)
 
 
 def _compare_options(args) -> dict | None:

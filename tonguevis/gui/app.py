@@ -39,12 +39,13 @@ def install_error_hook(window) -> None:
 
 def create_window(file=None, sensor_map=None, mesh=None, modes: int = 100, settings=None, feature_tabs: bool = True,
                   rest=None, audio=None, labels=None, palate=None, frame: str | None = None,
-                  options: dict | None = None, sensor_patches="default"):
+                  options: dict | None = None, sensor_patches="default", rest_fit: bool = False):
     """A shown MainWindow that opens ``file`` (default: the demo), with ``rest`` (start_s, end_s) if given,
     and the sound ``audio`` and TextGrid ``labels`` if given (else those found beside the file);
     simulated against ``palate`` (a PalateSurface, a file or "generic"; None: no contact), shown in
     ``frame`` ("head" or "jaw"; default head); ``options``: the reader options (``-O``) of ``file``;
-    ``sensor_patches``: as :func:`tonguevis.simulate` (Simulation ▸ Sensors on the surface)."""
+    ``sensor_patches``: as :func:`tonguevis.simulate` (Simulation ▸ Sensors on the surface); ``rest_fit``:
+    the tongue bent onto the rest sensors (Simulation ▸ Fit the tongue to the rest sensors)."""
     from tonguevis.gui.window import MainWindow
 
     application()
@@ -54,6 +55,11 @@ def create_window(file=None, sensor_map=None, mesh=None, modes: int = 100, setti
         window.patches_action.blockSignals(True)
         window.patches_action.setChecked(sensor_patches is not None)
         window.patches_action.blockSignals(False)
+    if rest_fit:
+        window.rest_fit_action.blockSignals(True)
+        window.rest_fit_action.setChecked(True)
+        window.rest_fit_action.blockSignals(False)
+        window.state.change_run_settings(window, rest_fit=True)
     if frame is not None:
         window.state.set_reference(frame)
     if feature_tabs:
@@ -96,7 +102,7 @@ def opening_problem(window, file):
 def run_view(file=None, sensor_map=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None,
              rest=None, audio=None, labels=None, palate=None, reference: str | None = None,
              color: str | None = None, compare: dict | None = None, options: dict | None = None,
-             sensor_patches="default") -> int:
+             sensor_patches="default", rest_fit: bool = False) -> int:
     """``tonguevis view``: run the app; with ``screenshot``, save the window at ``frame``, print the
     rest line and exit.  ``rest``: (start_s, end_s) of the rest interval, None to find it; ``audio``,
     ``labels``: a WAV and a TextGrid, None for those beside the file; ``palate``: simulate against it
@@ -106,7 +112,7 @@ def run_view(file=None, sensor_map=None, mesh=None, modes: int = 100, screenshot
     options (``-O``) of ``file``."""
     app = application()
     window = create_window(file, sensor_map, mesh, modes, rest=rest, audio=audio, labels=labels, palate=palate,
-                           frame=reference, options=options, sensor_patches=sensor_patches)
+                           frame=reference, options=options, sensor_patches=sensor_patches, rest_fit=rest_fit)
     if compare is not None and window.session is not None:
         if not window.open_compare(**compare) and screenshot is not None:
             window.close()

@@ -70,6 +70,13 @@ class MenusMixin:
         self.patches_action.setChecked(self.state.run_settings.sensor_patches is not None)
         self.patches_action.toggled.connect(self.set_sensor_patches)
         simulation.addAction(self.patches_action)
+        self.rest_fit_action = QAction("&Fit the tongue to the rest sensors", self)
+        self.rest_fit_action.setCheckable(True)
+        self.rest_fit_action.setToolTip("bend the tongue so that every sensor node sits on its rest sensor before "
+                                        "simulating (tonguevis simulate --fit-rest): the speaker's rest shape")
+        self.rest_fit_action.setChecked(bool(self.state.run_settings.rest_fit))
+        self.rest_fit_action.toggled.connect(self.set_rest_fit)
+        simulation.addAction(self.rest_fit_action)
         method_menu = simulation.addMenu("&Method")
         methods = QActionGroup(self)
         self.method_actions = {}
@@ -109,6 +116,14 @@ class MenusMixin:
         self.sensor_patches = "default" if on else None
         if self.patches_action.isChecked() != on:
             self.patches_action.setChecked(on)
+        if self.session is not None:
+            self._simulate(self.session)
+
+    def set_rest_fit(self, on: bool) -> None:
+        """Simulate with (or without) the rest shape fitted to the rest sensors, and the open recording again."""
+        self.state.change_run_settings(self, rest_fit=bool(on))
+        if self.rest_fit_action.isChecked() != on:
+            self.rest_fit_action.setChecked(on)
         if self.session is not None:
             self._simulate(self.session)
 

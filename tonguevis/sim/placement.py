@@ -162,7 +162,7 @@ def in_model_frame(surface, model: Any):
 
 def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", landmarks: str = "speaker",
                      rest=None, smooth_window: int | None = None, keep_frequencies: bool = True,
-                     tongue_size: float | None = None):
+                     tongue_size: float | None = None, rest_fit: bool = False):
     """The model and the sensor targets in ``frame``: (model, :class:`~tonguevis.preprocess.PreparedTargets`, fit).
 
     Both frames start alike: :func:`~tonguevis.preprocess.prepare_targets` fits the similarity T
@@ -181,6 +181,9 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
         the speaker's rest sensors lie on its upper surface (:func:`surface_fit`), each sensor's node
         the nearest there; not the same simulation as the model frame's (the sensors sit on other parts
         of the tongue): on the shared recordings its held-out RMSE differs by -0.12 to +0.19 mm.
+
+    rest_fit : the placed tongue then bent so that every sensor node sits on its rest sensor
+        (:mod:`tonguevis.sim.rest_fit`; the fit's figures in ``fit["rest_fit"]``).
 
     fit : what ``motion.metadata["fit"]`` says: the frame, T (scale, rotation, translation in
     metres of the model frame, its 4x4 matrix) and the residual of the rest sensors from their
@@ -227,9 +230,16 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
             prep, displacement=prep.displacement @ linear.T, aligned_rest=placement.apply(prep.aligned_rest),
             jaw_offset=None if prep.jaw_offset is None else prep.jaw_offset @ linear.T,
             transform=SimilarityTransform(1.0, np.eye(3), np.zeros(3)), alignment_rms=placement.scale * prep.alignment_rms)
-    # The residual: each rest sensor from the node it is fitted to (the rule nodes, or the surface nodes).
-    fitted = model.mesh.points[[int(model.landmarks.sensors[n]) for n in prep.names]] if how == "rule nodes" \
-        else model.mesh.points[prep.nodes]
+    bent = None
+    if rest_fit:
+        from tonguevis.sim.rest_fit import rest_fitted
+
+        model = rest_fitted(model, prep.nodes, prep.aligned_rest, recording.metadata.get("file"))
+        bent = model.rest_fit
+    # The residual: each rest sensor from the node it is fitted to (the rule nodes, or the surface nodes;
+    # once the rest shape is fitted, the sensor nodes it was bent to meet).
+    fitted = model.mesh.points[[int(model.landmarks.sensors[n]) for n in prep.names]] \
+        if how == "rule nodes" and bent is None else model.mesh.points[prep.nodes]
     residual = 1e3 * np.linalg.norm(prep.aligned_rest - fitted, axis=1)
     info = {
         "frame": frame, "fitted_to": how, "tongue_size": None if frame == "model" else 1.0 / fit.scale,
@@ -239,7 +249,10 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
         "residual_rms_mm": float(np.sqrt(np.mean(residual ** 2))), "residual_max_mm": float(residual.max()),
         "residual_by_sensor_mm": {n: float(r) for n, r in zip(prep.names, residual)},
         "model_volume_cm3": float(1e6 * model.rest_volume),
-        **({"density_factor": model.density_factor} if frame == "speaker" else {}),
+        **({"density_factor": getattr(model, "density_factor", getattr(getattr(model, "unfitted", None),
+                                                                      "density_factor", 1.0))}
+           if frame == "speaker" else {}),
+        **({"rest_fit": bent} if bent is not None else {}),
     }
     return model, prep, info
 
@@ -254,6 +267,10 @@ def describe_fit(fit: dict) -> str:
         size = (f"at {1 / scale:.2f} x its size ({fit['model_volume_cm3']:.0f} cm³)"
                 + (", the rest sensors fitted onto its upper surface" if fit.get("fitted_to") == "upper surface"
                    else ", as the rest alignment scales it"))
+        if fit.get("rest_fit"):
+            bent = fit["rest_fit"]
+            residual = (f"on their nodes, the rest shape bent onto them (nodes moved up to {bent['moved_max_mm']:.1f} mm; "
+                        f"they were {bent['sensors_before_rms_mm']:.2f} mm RMS off)")
         return f"frame: the speaker's (head-corrected, mm as recorded): the model placed in the speaker {size}; rest sensors {residual}"
     return (f"frame: the model's (the speaker scaled by {scale:.3f} onto the generic tongue: mm are the model's, "
             f"not the speaker's); rest sensors {residual}")

@@ -50,8 +50,13 @@ def simulate(
     method: str | None = None,
     rest_interval: RestChoice | tuple[float, float] | None = None,
     keep_volume: bool = False,
+    rest_fit: bool = False,
 ) -> Motion:
     """Drive ``model`` (default: our shipped tongue) with ``recording``.
+
+    rest_fit : the placed tongue bent so that every sensor node sits on its rest sensor before the
+        simulation (:mod:`tonguevis.sim.rest_fit`: the model's own static response, the anchors held;
+        ``metadata["fit"]["rest_fit"]`` gives how far it moved).  Not with ``method="domains"`` yet.
 
     keep_volume : the volume kept (seed 001 §8): each frame's displacement projected onto the volume-preserving
         shapes of a pressure subspace with the sensor nodes held (:func:`tonguevis.sim.volume.keep_volume`;
@@ -132,6 +137,9 @@ def simulate(
     if method == "domains":  # seed 001's StVK on quadratic domains (tonguevis.sim.domains)
         from tonguevis.sim.domains import simulate_domains
 
+        if rest_fit:
+            raise SimulationError("the domains method cannot fit the rest shape yet: simulate it without "
+                                  "rest_fit (--fit-rest), or with method 'warped'", recording.metadata.get("file"))
         motion = simulate_domains(recording, model, landmarks, rest, smooth_window,
                                   sensor_stiffness=sensor_stiffness, backend=backend, palate=palate,
                                   progress=progress, frame=frame, tongue_size=tongue_size)
@@ -148,7 +156,7 @@ def simulate(
     from tonguevis.sim.placement import targets_in_frame
 
     model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest, smooth_window,
-                                        tongue_size=tongue_size)
+                                        tongue_size=tongue_size, rest_fit=rest_fit)
     basis = model.basis(modes, progress=_stage(progress, 0, 3))
     w_full = model.rotation_matrix(basis)
     dofs = (3 * prep.nodes[:, None] + np.arange(3)).ravel()

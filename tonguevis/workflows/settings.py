@@ -64,6 +64,8 @@ class RunSettings:
     method: str | None = None
     #: the volume kept: each frame projected onto volume-preserving shapes (:mod:`tonguevis.sim.volume`)
     keep_volume: bool = False
+    #: the placed tongue bent onto the rest sensors before simulating (:mod:`tonguevis.sim.rest_fit`)
+    rest_fit: bool = False
 
     def __post_init__(self) -> None:
         from tonguevis.sensor_stiffness import sensor_stiffness_value
@@ -101,7 +103,7 @@ class RunSettings:
         return dict(modes=self.modes, warping=self.warping, landmarks=self.landmarks, rest=self.rest,
                     sensor_stiffness=self.sensor_stiffness, sensor_patches=self.sensor_patches, backend=self.backend,
                     frame=self.frame, tongue_size=self.tongue_size, method=self.method,
-                    keep_volume=bool(self.keep_volume))
+                    keep_volume=bool(self.keep_volume), rest_fit=bool(self.rest_fit))
 
     def palate_surface(self):
         """The :class:`~tonguevis.palate.PalateSurface` of ``palate`` (None: no contact)."""

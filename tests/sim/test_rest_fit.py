@@ -1,0 +1,98 @@
+"""The rest shape fitted to the rest sensors (tonguevis.sim.rest_fit): the sensor nodes on them, the anchors
+held, the rest of the tongue in equilibrium; through simulate, validate, the CLI and a saved motion."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tonguevis.errors import SimulationError
+from tonguevis.sim import TongueModel
+from tonguevis.sim.rest_fit import RestFittedModel, fit_rest_shape, rest_fitted, tet_volumes
+
+REPO = Path(__file__).resolve().parents[2]
+DEMO = REPO / "data" / "spk1_ta.tsv"
+OPTI = REPO.parent / "shared" / "data" / "ema" / "optispeech"
+
+
+@pytest.fixture(scope="module")
+def model():
+    return TongueModel.default()
+
+
+def test_the_sensor_nodes_reach_their_targets_the_anchors_stay_and_the_rest_is_in_equilibrium(model):
+    nodes = np.array([model.landmarks.sensors[n] for n in ("TT", "TB", "TD", "TL", "TR")])
+    rng = np.random.default_rng(1)
+    moves = rng.normal(0.0, 1.5e-3, (len(nodes), 3))
+    target = model.mesh.points[nodes] + moves
+    u = fit_rest_shape(model, nodes, target)
+    np.testing.assert_allclose(model.mesh.points[nodes] + u[nodes], target, atol=1e-12)
+    np.testing.assert_array_equal(u[np.asarray(model.anchors)], 0.0)
+    force = (model.stiffness @ u.ravel()).reshape(-1, 3)
+    held = np.zeros(len(u), dtype=bool)
+    held[nodes] = True
+    held[np.asarray(model.anchors)] = True
+    # no force where nothing is prescribed: the tissue's own static shape (relative to the pulling forces)
+    assert np.abs(force[~held]).max() < 1e-8 * np.abs(force[held]).max()
+    # a smooth bend, not a translation: nothing moves much further than the sensors were pulled
+    assert np.linalg.norm(u, axis=1).max() <= 1.5 * np.linalg.norm(moves, axis=1).max()
+
+
+def test_a_rest_fitted_model_has_its_own_modes_and_keeps_the_anatomy(model):
+    nodes = np.array([model.landmarks.sensors["TT"], model.landmarks.sensors["TD"]])
+    fitted = rest_fitted(model, nodes, model.mesh.points[nodes] + [[0, 0, 1e-3], [0, 0, -1e-3]])
+    assert isinstance(fitted, RestFittedModel)
+    np.testing.assert_array_equal(fitted.dorsal_nodes, model.dorsal_nodes)
+    assert fitted.basis_key(10) != model.basis_key(10)
+    assert 1.0 <= fitted.rest_fit["moved_max_mm"] < 1.5  # elasticity may bulge a little past the pull
+    assert fitted.rest_fit["tet_volume_ratio_min"] > 0.5
+
+
+def test_a_fit_that_would_crush_the_mesh_is_refused_naming_the_file(model):
+    tt, tb = model.landmarks.sensors["TT"], model.landmarks.sensors["TB"]
+    nodes = np.array([tt, tb])
+    crossing = model.mesh.points[[tb, tt]]  # the tip sent where the blade is and back: tets turned inside out
+    with pytest.raises(SimulationError, match="cannot be bent onto the rest sensors") as info:
+        rest_fitted(model, nodes, crossing, file="speaker.tsv")
+    assert "speaker.tsv" in str(info.value)
+
+
+def test_simulate_with_the_rest_fitted_puts_the_sensor_nodes_on_the_rest_sensors(model, tmp_path):
+    from tonguevis.sim.motion import Motion
+    from tonguevis.sim.simulate import simulate
+    from tonguevis.workflows import open_recording
+
+    rec = open_recording(DEMO)
+    plain = simulate(rec, model, modes=30)
+    motion = simulate(rec, model, modes=30, rest_fit=True)
+    fit = motion.metadata["fit"]
+    assert fit["rest_fit"]["sensors_before_rms_mm"] == pytest.approx(plain.metadata["fit"]["residual_rms_mm"],
+                                                                     rel=0.5)
+    assert fit["residual_rms_mm"] < 1e-9 < plain.metadata["fit"]["residual_rms_mm"]
+    assert isinstance(motion.model, RestFittedModel) or isinstance(getattr(motion.model, "base_model", None),
+                                                                   RestFittedModel)
+    volume = tet_volumes(motion.model.mesh.points, motion.model.mesh.tets)
+    assert volume.min() > 0
+    path = tmp_path / "fitted.npz"
+    motion.save(path)
+    loaded = Motion.load(path)
+    np.testing.assert_allclose(loaded.model.mesh.points, motion.model.mesh.points)
+    np.testing.assert_allclose(loaded.displacements(np.arange(0, motion.n_frames, 50)),
+                               motion.displacements(np.arange(0, motion.n_frames, 50)), atol=1e-9)
+    with pytest.raises(SimulationError, match="cannot fit the rest shape"):
+        simulate(rec, model, method="domains", rest_fit=True)
+
+
+@pytest.mark.skipif(not OPTI.exists(), reason=f"the shared Opti-Speech recordings are not at {OPTI}")
+def test_on_a_real_ka_the_fitted_rest_predicts_an_unseen_sensor_better(model):
+    from tonguevis.analysis.validation import validate
+    from tonguevis.workflows import open_recording
+
+    rec = open_recording(OPTI / "007_OSN12_Kah_withFb_natural_HR.tsv")
+    plain = validate(rec, model, sensor_patches="default", quasi_static=False)
+    fitted = validate(rec, model, sensor_patches="default", quasi_static=False, rest_fit=True)
+    mean = [np.mean([s["model_rmse_mm"] for s in r.sensors.values()]) for r in (plain, fitted)]
+    assert mean[1] < mean[0] - 0.05, mean  # measured 2.15 -> 1.99 mm
+    assert 1.0 < fitted.settings["rest_fit"]["moved_max_mm"] < 8.0  # measured 5.0 mm
