@@ -224,5 +224,7 @@ def test_live_command_parses_and_refuses_bad_input(tmp_path):
 
     args = build_parser().parse_args(["live", "--source", "127.0.0.1:3031", "--sensors", "paper", "--modes", "40"])
     assert (args.address, args.sensors, args.modes, args.profile) == ("127.0.0.1:3031", "paper", 40, None)
+    assert args.sensor_patches == "default"  # the sensors on the surface, as in the replay
+    assert build_parser().parse_args(["live", "--no-sensor-patches"]).sensor_patches is None
     assert main(["live", "--source", "127.0.0.1:http"]) == 2  # a clear one-line error, no window
     assert main(["live", "--profile", str(tmp_path / "nobody.json")]) == 2

@@ -18,13 +18,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--palate", metavar="FILE", help="a palate file (`tonguevis palate`) drawn in the views")
     parser.add_argument("--modes", type=int, default=100, help="vibration modes of the live model (default 100, "
                                                               "the replay's)")
+    from tonguevis.cli._common import add_sensor_patches_argument
+
+    add_sensor_patches_argument(parser)  # the sensors on the surface, frame by frame, as in the replay
 
 
 def run(args) -> int:
     from tonguevis.cli.record import parse_address
     from tonguevis.workflows.settings import RunSettings
 
-    RunSettings(modes=args.modes)  # a bad number of modes is said before Qt starts
+    RunSettings(modes=args.modes, sensor_patches=args.sensor_patches)  # bad settings are said before Qt starts
     address = None
     if args.address:
         host, port = parse_address(args.address)  # a clear error for a bad HOST:PORT, before any window
@@ -41,4 +44,5 @@ def run(args) -> int:
         profile = load_profile(args.profile)
     from tonguevis.gui.live_window import run_live  # the one way into Qt (pyproject's import contracts)
 
-    return run_live(address, sensor_map=sensor_map, profile=profile, palate=args.palate, modes=args.modes)
+    return run_live(address, sensor_map=sensor_map, profile=profile, palate=args.palate, modes=args.modes,
+                    sensor_patches=args.sensor_patches)

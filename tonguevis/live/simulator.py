@@ -148,9 +148,6 @@ class LiveSimulator:
         from tonguevis.workflows.settings import RunSettings, build_model
 
         self.settings = settings if settings is not None else RunSettings()
-        if self.settings.sensor_patches is not None:
-            # The patches close the sensors' gaps after the dynamics from the whole recording's q; not built live.
-            self.settings = self.settings.replace(sensor_patches=None)
         self.sensor_names = [str(n) for n in sensor_names]
         if len(set(self.sensor_names)) != len(self.sensor_names):
             raise LiveSimulationError(f"the stream's slot names repeat: {self.sensor_names}")
@@ -271,6 +268,19 @@ class LiveSimulator:
                                   tolerance=self.tolerance, warping=s.warping)
         self.integrator = CompiledIntegrator(basis.eigenvalues, self.phi_s, self.w_s, newmark, n_sensors=n_s,
                                              rates=False)
+        # Sensors on the surface (the replay's default): each frame's patch coordinates close the gaps the
+        # modes leave, frame by frame as simulate() does after the dynamics (tonguevis.sim.patches).
+        self._patches = None
+        if s.sensor_patches is not None:
+            from tonguevis.sim.patches import PATCH_RADIUS, PATCH_REACH, augmented_basis
+
+            radius = s.sensor_patches
+            if radius == "default":
+                radius = PATCH_RADIUS * (1.0 / fit["scale"] if s.frame == "speaker" else 1.0)
+            basis = augmented_basis(model, basis, prep.nodes, radius, radius * PATCH_REACH / PATCH_RADIUS)
+            w_full = np.array(model.curl_operator @ basis.phi)
+            w_full[:, self.eigenvalues.size:] = 0.0  # the patch shapes ride on the modes' rotation, unwarped
+            self._patches = (basis, w_full)
         # Surface reconstruction: the boundary's nodes only, Φᵀ and Wᵀ of their columns, in the drawing dtype.
         faces = np.asarray(model.surface_faces, dtype=np.int64)
         self.surface_nodes = np.unique(faces)
@@ -341,7 +351,15 @@ class LiveSimulator:
         result = self.integrator.advance(targets[None, None], compliance[None, None])[0]
         q = result.q[0]
         t3 = clock()
-        surface = self.reconstruct(q) if reconstruct else None
+        shape = q
+        if self._patches is not None:
+            from tonguevis.sim.patches import close_sensor_gaps
+
+            basis, w_full = self._patches
+            # a sensor not measured in this frame: its patch at rest (as in the replay)
+            shape = np.concatenate([q, close_sensor_gaps(basis, w_full, self.prep.nodes, q[None], displacement[None],
+                                                         self.settings.warping)[0]])
+        surface = self.reconstruct(shape) if reconstruct else None
         t4 = clock()
         self.frames_done += 1
         self.last_corrected = corrected
@@ -349,7 +367,8 @@ class LiveSimulator:
                         {"correct": t1 - t0, "drive": t2 - t1, "integrate": t3 - t2, "reconstruct": t4 - t3})
 
     def reconstruct(self, q: np.ndarray) -> np.ndarray:
-        """(k, 3) surface node positions (m, ``dtype``) for modal coordinates q (m,): rest + R̃(Wq) Φq,
+        """(k, 3) surface node positions (m, ``dtype``) for modal coordinates q (m,; with sensor patches the
+        modes' then the patches' coordinates): rest + R̃(Wq) Φq,
         written into a buffer kept between frames (the next call overwrites it)."""
         qd = np.asarray(q, dtype=self.dtype)
         np.matmul(qd, self._phi_t, out=self._lin)
