@@ -439,8 +439,8 @@ def _solve_frames_fast(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset, c_
     above_all = (sensor_gap < 0) & np.all(np.isfinite(targets), axis=2)  # (F, S)
     low = np.flatnonzero(np.fmin.reduce(gap, axis=1, initial=np.inf) < margin)  # fmin: NaN (off the palate) ignored
     allowed = ~((above_all[low].astype(np.int64) @ near_sensor.T.astype(np.int64)) > 0)  # (len(low), k)
-    for f in low:
-        conflicts.extend((int(f), int(s)) for s in np.flatnonzero(above_all[f]))
+    at, sensor = np.nonzero(above_all[low])  # frame by frame, each frame's sensors in order: the reference's order
+    conflicts.extend(zip(low[at].tolist(), sensor.tolist()))
     inside = np.any(allowed & np.isfinite(gap[low]) & (gap[low] < margin - 1e-7), axis=1)
     frames, allowed = low[inside], allowed[inside]
     _, normals = query(u[frames], jaw_offset[frames], normals=True)
