@@ -16,8 +16,32 @@ palate's tongue; --contact-recording and --palate for a speaker's, e.g. an
 Opti-Speech /ta/ with the palate ``tonguevis palate`` fitted from its traces),
 ``contact_no_palate_fps`` the same run without it, ``contact_reference_fps``
 the run with the contact on its NumPy reference (integration still compiled),
-and ``contact_frames_solved`` the frames the contact solved (with forces in
-the drive, corrected after the dynamics).
+``contact_frames_solved`` the frames the contact solved (with forces in
+the drive, corrected after the dynamics), ``contact_passes_per_frame_solved``
+the QP passes they took (both stages) and ``contact_nnls_passes`` those left to
+the NNLS (the others: guessed active sets, tonguevis.sim.contact._guessed_passes).
+With ../shared present, the same figures for the Opti-Speech /ta/ 009 and /ka/ 006
+against the palate fitted from the speaker's traces 002-004 (``contact_ta_009_*``,
+``contact_ka_006_*``).
+
+Measured 2026-12-03 on the 2 shared cores, the other core busy most of the time
+(best of 5-7 runs, a run up to 40 % slower), q equal to the reference to 7e-13 and
+3e-12 relative: /ka/ 006 from 3,260-3,330 frames/s (1.42 QP passes a frame solved,
+all 2,601 by NNLS at ~0.1 ms each) to 4,670-5,080 (the same passes, none by NNLS),
+/ta/ 009 from 3,040-3,190 to 4,270-4,780 (1.47 passes a frame, 872 by NNLS -> 0),
+with the palate as fitted before commit df08e52's midline; with today's fit (more
+contact: 2,131 and 723 frames solved, 1.8 passes a frame, 5 and 59 passes left to
+the NNLS: ambiguous sets of near-duplicate rows) 3,990-4,150 and 3,960-4,060
+frames/s (a loaded session: 1,690-1,750 and 1,640-1,730 before, 2,470-2,760 and
+2,420-2,690 after; CPU time 2,500-2,600 -> 3,800-4,000).  The demo no longer
+touches the generic palate at its defaults: 7,470-7,790 frames/s (no palate
+11,400-12,050; the placed model's W no longer assembled per call).
+Still under 5,000 on the real recordings: what bounds them (/ka/ 006, ~430-520 ms)
+is the compiled frame loop (~110-120 ms, as without the palate), the figures with
+the contact probe (~100 ms, 40 more than without), and the contact (~190-280 ms):
+an all-frames clearance scan per stage (u = Φq and the query, ~25 ms each), the later
+passes' queries (~40 ms), the guessed sets' rounds (~50-90 ms: a node added a round,
+up to 6 rounds where 5 nodes press), the push guard (~12 ms).
 
 Domains (issue 26 item 5): ``domains_fps`` is simulate(method="domains") end to end on the
 demo (--recording) and our shipped tongue, default settings, best of 3 after a first call
@@ -125,6 +149,7 @@ def main(argv=None) -> int:
     frame_ms = 1e3 * (t_int / frames + t_warp1)
 
     contact = bench_contact(args.contact_recording or args.recording, args.palate, args.modes)
+    contact.update(bench_contact_speech(args.modes))
     domains = bench_domains(args.recording)
 
     # Kernels against NumPy.
@@ -176,9 +201,10 @@ def main(argv=None) -> int:
     return 0
 
 
-def bench_contact(recording_path: Path, palate: str, modes: int) -> dict:
-    """simulate() end to end on our shipped tongue with and without ``palate`` (best of 3 each), and
-    with the contact's NumPy reference (once): frames per second, and the frames the contact solved."""
+def bench_contact(recording_path: Path, palate, modes: int, palate_name: str | None = None) -> dict:
+    """simulate() end to end on our shipped tongue with and without ``palate`` (best of 5 each), and
+    with the contact's NumPy reference (once): frames per second, the frames the contact solved,
+    the QP passes per frame solved and how many of them the NNLS took (the rest: guessed sets)."""
     import logging
 
     from tonguevis.io import read_recording
@@ -190,21 +216,26 @@ def bench_contact(recording_path: Path, palate: str, modes: int) -> dict:
     model = TongueModel.default()
     logging.getLogger("tonguevis").setLevel(logging.ERROR)  # a raised palate or a rest stand-in, said once is enough
     simulate(rec, model, modes=modes, palate=palate)  # caches, compiled kernels
-    t_free, _ = best_of(lambda: simulate(rec, model, modes=modes))
-    t_contact, motion = best_of(lambda: simulate(rec, model, modes=modes, palate=palate))
+    t_free, _ = best_of(lambda: simulate(rec, model, modes=modes), repeat=5)
+    t_contact, motion = best_of(lambda: simulate(rec, model, modes=modes, palate=palate), repeat=5)
+    with _counted_passes() as passes:
+        simulate(rec, model, modes=modes, palate=palate)
     reference = _contact_on_numpy()
     with reference:
         t_ref, ref = best_of(lambda: simulate(rec, model, modes=modes, palate=palate), repeat=1)
     logging.getLogger("tonguevis").setLevel(logging.NOTSET)
     frames = motion.n_frames
     c, r = motion.metadata["contact"], ref.metadata["contact"]
+    solved = int(c["frames_with_contact_forces"] + c["frames_corrected_after_the_dynamics"])
     return {
         "contact_recording": recording_path.name,
-        "contact_palate": str(palate),
+        "contact_palate": palate_name or str(palate),
         "contact_fps": frames / t_contact,
         "contact_no_palate_fps": frames / t_free,
         "contact_reference_fps": frames / t_ref,
-        "contact_frames_solved": int(c["frames_with_contact_forces"] + c["frames_corrected_after_the_dynamics"]),
+        "contact_frames_solved": solved,
+        "contact_passes_per_frame_solved": passes["all"] / max(solved, 1),
+        "contact_nnls_passes": passes["nnls"],
         "contact_max_rel_diff": float(np.abs(motion.q - ref.q).max() / np.abs(ref.q).max()),
         "contact_figures_as_reference": all(c[k] == r[k] for k in (
             "frames_in_contact", "frames_with_contact_forces", "frames_corrected_after_the_dynamics")),
@@ -234,6 +265,56 @@ def bench_domains(recording_path: Path) -> dict:
         "domains_forces_per_frame": d["force_calls"] / motion.n_frames,
         "domains_dofs": d["dofs"],
     }
+
+
+#: The real recordings of the contact figures (issue 26 item 5), with the speaker's palate fitted
+#: from the same session's traces, when ../shared is present.
+OPTISPEECH = REPO.parent / "shared" / "data" / "ema" / "optispeech"
+SPEECH = {"ta_009": "009_OSN12_Tah_withFb_natural_HR.tsv", "ka_006": "006_OSN12_Kah_nofb_natural_take2_HR.tsv"}
+TRACES = ("002_OSN12_Palate_MidSagital_HR.tsv", "003_OSN12_Palate_Coronal_HR.tsv", "004_OSN12_Palate_Scribble_HR.tsv")
+
+
+def bench_contact_speech(modes: int) -> dict:
+    """:func:`bench_contact` on Opti-Speech /ta/ 009 and /ka/ 006 with the palate fitted from the speaker's
+    traces (``tonguevis palate`` 002-004), keys ``contact_<ta_009|ka_006>_...``; {} without ../shared."""
+    if not all((OPTISPEECH / f).exists() for f in (*SPEECH.values(), *TRACES)):
+        return {}
+    from tonguevis.workflows.palate import palate_from_traces
+
+    palate = palate_from_traces([OPTISPEECH / f for f in TRACES])
+    out = {}
+    for name, file in SPEECH.items():
+        figures = bench_contact(OPTISPEECH / file, palate, modes, "speaker (traces 002-004)")
+        out.update({f"contact_{name}_{key.removeprefix('contact_')}": value for key, value in figures.items()})
+    return out
+
+
+class _counted_passes:
+    """Within it, the contact's QP passes are counted: {"all": every frame's passes, "nnls": those by NNLS}."""
+
+    def __enter__(self):
+        from tonguevis.sim import contact
+
+        self.counts = {"all": 0, "nnls": 0}
+        self.saved = contact._guessed_passes, contact._contact_pass_fast
+        guessed, nnls = self.saved
+
+        def count_guessed(solves, frames, *a, **k):
+            self.counts["all"] += len(frames)  # each frame given takes one pass, guessed or by NNLS
+            return guessed(solves, frames, *a, **k)
+
+        def count_nnls(*a, **k):
+            self.counts["nnls"] += 1
+            return nnls(*a, **k)
+
+        contact._guessed_passes, contact._contact_pass_fast = count_guessed, count_nnls
+        return self.counts
+
+    def __exit__(self, *exc):
+        from tonguevis.sim import contact
+
+        contact._guessed_passes, contact._contact_pass_fast = self.saved
+        return False
 
 
 class _contact_on_numpy:
