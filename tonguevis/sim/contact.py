@@ -276,7 +276,7 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
         ok = allowed[going[js]] & np.isfinite(gap[js])
         if guess:  # the frames whose QP a guessed active set solves exactly (see _guessed_passes)
             done = _guessed_passes(solves, going[js], phi_nodes, q, q0, gap[js], normal[js], ok, margin, forces,
-                                   external, first=n_pass == 0)
+                                   external, first=n_pass == 0, points=query.base)
         else:
             done = np.zeros(len(js), dtype=bool)
         for j in np.flatnonzero(~done):  # the others: the QP by NNLS, as the reference
@@ -306,15 +306,18 @@ GUESS_MARGIN = 1e-5
 GUESS_CONDITION = 1e4
 GUESS_ROUNDS = 6  # guesses a frame tries (each corrected from the last) before the NNLS takes it
 GUESS_MAX = 24  # largest active set guessed; more goes to the NNLS
+GUESS_SPREAD = 8e-3  # m: candidates this far apart at rest press on the palate in different places
 
 
-def _guessed_passes(solves, frames, phi_nodes, q, q0, gap, normal, ok, margin, forces, external, first=False):
+def _guessed_passes(solves, frames, phi_nodes, q, q0, gap, normal, ok, margin, forces, external, first=False,
+                    points=None):
     """One pass of :func:`_active_sets` for the frames whose QP a guessed active set solves; the rest untouched.
 
     frames : (F,) the frames (rows of q, q0 (n, m), forces (n, k), external (n, m)) taking a pass;
     gap (F, k) m, normal (F, k, 3), ok (F, k) their clearances at q and the candidates that may
     get a constraint; forces: each frame's λ over the candidates after its last pass (its active set
-    the positive ones); first: the frames' first pass (q = q0).  The QP of a pass (:func:`_contact_pass_fast`'s, min ½λᵀMλ + rᵀλ over λ >= 0, a
+    the positive ones); first: the frames' first pass (q = q0); points (k, 3): the candidates' rest
+    positions, m (with them a guess grows in several places at once, see below).  The QP of a pass (:func:`_contact_pass_fast`'s, min ½λᵀMλ + rᵀλ over λ >= 0, a
     strictly convex problem with one solution) is solved by NNLS there; here a guess S of its active
     set (the frame's after its last pass, else its deepest candidate) is solved as equalities,
     M_SS λ_S = -r_S, every frame at once, and taken when it satisfies the optimality conditions with
@@ -322,7 +325,9 @@ def _guessed_passes(solves, frames, phi_nodes, q, q0, gap, normal, ok, margin, f
     is that one solution, the set NNLS finds and the λ its polish computes (M_SS λ_S = -r_S again),
     so the same result to rounding; a wrong set never passes (tests/sim/test_contact_fast.py).
     A guess that fails is corrected (the forces that came out negative leave, the candidate furthest
-    inside joins; a singular block starts again from the deepest) up to GUESS_ROUNDS times.  The frames taken
+    inside joins, and so do the furthest inside of up to two other places GUESS_SPREAD from every
+    member: the tip and the sides press at once; a singular block starts again from the deepest) up to
+    GUESS_ROUNDS times.  The frames taken
     have q, forces and external (-Aᵀλ) filled; returns (F,) bool, which.  Vectorised over the frames:
     one pass's Python costs a few microseconds a frame instead of some 90 (most frames'
     first guess holds: consecutive frames press on the same few nodes).
@@ -350,6 +355,11 @@ def _guessed_passes(solves, frames, phi_nodes, q, q0, gap, normal, ok, margin, f
     deepest[np.arange(n_f), np.argmin(np.where(near, r_all, np.inf), axis=1)] = True
     fresh = ~guess.any(axis=1)
     guess[fresh] = deepest[fresh]
+    apart = None
+    if points is not None:  # pairs of candidates in different places: never near-duplicate rows
+        at = points[cols]
+        apart = np.linalg.norm(at[:, None] - at[None], axis=2) >= GUESS_SPREAD
+        guess[fresh] = _spread(guess[fresh], near[fresh] & (r_all[fresh] < 0), r_all[fresh], apart)
     pending = np.arange(n_f)
     for _ in range(GUESS_ROUNDS):
         counts = guess[pending].sum(axis=1)
@@ -405,6 +415,8 @@ def _guessed_passes(solves, frames, phi_nodes, q, q0, gap, normal, ok, margin, f
         worst = np.argmin(w_off, axis=1)
         join = np.flatnonzero(w_off[np.arange(n_p), worst] < 0)
         fixed[join, worst[join]] = True
+        if apart is not None and len(join):
+            fixed[join] = _spread(fixed[join], off[join] & (w[join] < 0), w[join], apart)
         # a singular block (rows of near-duplicate nodes): start again from the deepest node, once
         restart = ~solvable & np.any(g != deepest[pending], axis=1)
         fixed[restart] = deepest[pending[restart]]
@@ -412,6 +424,21 @@ def _guessed_passes(solves, frames, phi_nodes, q, q0, gap, normal, ok, margin, f
         guess[pending] = fixed
         pending = pending[moved]
     return done
+
+
+def _spread(guess: np.ndarray, inside: np.ndarray, score: np.ndarray, apart: np.ndarray, places: int = 2) -> np.ndarray:
+    """``guess`` (P, k) bool with, up to ``places`` times, the lowest-``score`` candidate of ``inside`` (P, k)
+    that is ``apart`` (k, k) bool from every member added to it."""
+    close = (~apart).astype(np.float64)
+    for _ in range(places):
+        free = inside & ~guess & ((guess.astype(np.float64) @ close) == 0)
+        pick = np.where(free, score, np.inf)
+        best = np.argmin(pick, axis=1)
+        rows = np.flatnonzero(np.isfinite(pick[np.arange(len(pick)), best]))
+        if len(rows) == 0:
+            break
+        guess[rows, best[rows]] = True
+    return guess
 
 
 def _sensor_inverse(gram, comp, acting):

@@ -101,6 +101,7 @@ class Clearance:
         wp = _wp
         self.k = len(base)
         self._base_np = np.ascontiguousarray(base, dtype=np.float64).reshape(-1, 3)
+        self.base = self._base_np  # (k, 3) m, the points' rest positions
         self._z_np = np.ascontiguousarray(palate.z, dtype=np.float64)
         x, y = np.asarray(palate.x, dtype=np.float64), np.asarray(palate.y, dtype=np.float64)
         self._base = wp.array(self._base_np, dtype=wp.vec3d, device="cpu", copy=False)
