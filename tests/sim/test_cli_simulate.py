@@ -21,7 +21,10 @@ def test_simulate_prints_the_figures_and_writes_motion_and_vtk(tmp_path, capsys)
     residual_mm = float(out.split("max sensor residual: ")[1].split(" mm")[0])
     assert residual_mm < 0.01
     motion = Motion.load(tmp_path / "motion.npz")
-    assert motion.q.shape[1] == 100 and np.isfinite(motion.q).all()
+    # 100 modes, then the sensor patches' shapes (three per sensor: the sensors on the surface by default)
+    patches = motion.metadata["sensor_patches"]
+    assert patches["global_modes"] == 100 and motion.q.shape[1] == 100 + patches["shapes"]
+    assert patches["shapes"] == 3 * len(motion.sensor_nodes) and np.isfinite(motion.q).all()
     assert (tmp_path / "vtk" / "motion.pvd").exists()
 
 
@@ -36,12 +39,16 @@ def test_simulate_reports_bad_input_in_one_line(tmp_path, capsys):
 
 
 def test_default_sensor_springs_follow_the_sensors_closely_and_say_so(capsys):
-    assert main(["simulate", str(DATA_DIR / "spk2_ka.tsv"), "--quiet"]) == 0
+    assert main(["simulate", str(DATA_DIR / "spk2_ka.tsv"), "--quiet", "--no-sensor-patches"]) == 0
     out = capsys.readouterr().out
     assert "sensor springs 20x" in out
     misfit_rms = float(out.split("sensor misfit ")[1].split(" mm RMS")[0])
     amplification = float(out.split("far-field amplification ")[1].split(" ")[0])
     assert 0.0 < misfit_rms < 1.0 and amplification < 2.0
+    # the default: the sensor patches close the springs' gap, every sensor on the surface
+    assert main(["simulate", str(DATA_DIR / "spk2_ka.tsv"), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert float(out.split("sensor misfit ")[1].split(" mm RMS")[0]) < 1e-6
 
 
 def test_bad_sensor_stiffness_is_a_one_line_error(capsys):

@@ -356,9 +356,9 @@ class LiveSimulator:
             from tonguevis.sim.patches import close_sensor_gaps
 
             basis, w_full = self._patches
-            # a sensor not measured in this frame: its patch at rest (as in the replay)
-            shape = np.concatenate([q, close_sensor_gaps(basis, w_full, self.prep.nodes, q[None], displacement[None],
-                                                         self.settings.warping)[0]])
+            # a lost sensor's patch eases out with its spring, from its last measurement (as in the replay)
+            shape = np.concatenate([q, close_sensor_gaps(basis, w_full, self.prep.nodes, q[None], anchored[None],
+                                                         self.settings.warping, weight=weight[None])[0]])
         surface = self.reconstruct(shape) if reconstruct else None
         t4 = clock()
         self.frames_done += 1

@@ -133,7 +133,7 @@ def accumulated_rotations(w: np.ndarray) -> np.ndarray:
 
 
 def close_sensor_gaps(basis: ModalBasis, rotation: np.ndarray, nodes: np.ndarray, q: np.ndarray,
-                      measured: np.ndarray, warping: bool = True) -> np.ndarray:
+                      measured: np.ndarray, warping: bool = True, weight: np.ndarray | None = None) -> np.ndarray:
     """(F, 3S) patch coordinates that put each measured sensor on its node, frame by frame.
 
     basis : the augmented basis (:func:`augmented_basis`) of the sensor ``nodes`` (S,);
@@ -142,7 +142,9 @@ def close_sensor_gaps(basis: ModalBasis, rotation: np.ndarray, nodes: np.ndarray
     sensor's patch stays at rest).  With warping, node s moves by R̃_s(Φ_s q + P_s c) with R̃_s
     from the modes alone, so P_s c = R̃_s⁻¹ measured_s - Φ_s q: 3S equations in the 3S patch
     coordinates, solved exactly (a patch reaches other sensors only when they are closer than
-    its reach).
+    its reach).  ``weight`` (F, S) in [0, 1]: each sensor's engagement (:func:`tonguevis.sim.dropouts.engagement`:
+    a sensor back from a dropout is taken up over 0.1 s): its gap is closed by that share, so its patch
+    eases in with its spring instead of jumping in one frame.
     """
     m = basis.info["global_modes"]
     nodes = np.asarray(nodes, dtype=np.int64)
@@ -157,6 +159,8 @@ def close_sensor_gaps(basis: ModalBasis, rotation: np.ndarray, nodes: np.ndarray
         wanted = np.linalg.solve(accumulated_rotations(w), wanted[..., None])[..., 0]
     acting = np.repeat(np.all(np.isfinite(measured), axis=2), 3, axis=1)  # (F, 3S)
     gap = np.where(acting, (wanted - linear).reshape(len(q), 3 * s), 0.0)
+    if weight is not None:
+        gap = gap * np.repeat(np.clip(np.asarray(weight, dtype=np.float64), 0.0, 1.0), 3, axis=1)
     # A sensor not measured: its patch at rest (its row and column replaced by the identity).
     mats = np.where(acting[:, :, None] & acting[:, None, :], patch_s[None], 0.0)
     idx = np.arange(3 * s)

@@ -303,7 +303,17 @@ class _Run:
         modal coordinates (from the frame loop) are ``q`` (end - start, m)."""
         from tonguevis.sim.patches import close_sensor_gaps
 
-        return close_sensor_gaps(self.basis, self.rotation, self.prep.nodes, q, self.drive[start:end], self.warping)
+        return close_sensor_gaps(self.basis, self.rotation, self.prep.nodes, q, self._patch_targets(start, end),
+                                 self.warping, weight=self.schedule["weight"][start:end])
+
+    def _patch_targets(self, start: int, end: int) -> np.ndarray:
+        """(end - start, S, 3) m: where the patches put the sensor nodes: the sensors followed (``drive``), a
+        sensor lost for good held at its last measurement while its spring lets go (the springs' anchors)."""
+        drive = self.drive[start:end]
+        anchored = self.schedule.get("anchored")
+        if anchored is None:
+            return drive
+        return np.where(np.isnan(drive), anchored[start:end], drive)
 
     def motion(self, result, figures, n: int) -> Motion:
         """The :class:`Motion` of frames 0..n-1 (``n`` = all: the simulation's result, made from ``result``
@@ -333,8 +343,9 @@ class _Run:
             if self.patches:  # the modes' static shape, then the patches on it
                 modes, rows = self.global_rows
                 fixed = compliant_shapes(modes.eigenvalues, rows, self.targets[absurd], self.compliance[absurd])
-                fixed = np.hstack([fixed, close_sensor_gaps(basis, self.rotation, prep.nodes, fixed,
-                                                            self.drive[absurd], warping)])
+                held = np.stack([self._patch_targets(f, f + 1)[0] for f in absurd])
+                fixed = np.hstack([fixed, close_sensor_gaps(basis, self.rotation, prep.nodes, fixed, held, warping,
+                                                            weight=self.schedule["weight"][absurd])])
             else:
                 fixed = compliant_shapes(basis.eigenvalues, phi_s, self.targets[absurd], self.compliance[absurd])
             sub = frame_figures(model, fixed, warping, backend)
@@ -462,7 +473,7 @@ def drive_schedule(displacement: np.ndarray, rate: float, eigenvalues: np.ndarra
     weight, source = engagement(present, rate)
     anchored = filled[source, np.arange(filled.shape[1])[None, :]]  # a released sensor: its last measurement
     springs = spring_compliance(weight, base, RAMP_STIFFNESS * k_ref)
-    info = {"bridged": bridged, "released": ~present}
+    info = {"bridged": bridged, "released": ~present, "weight": weight, "anchored": anchored}
     if contact is None:
         projected = compliant_targets(eigenvalues, phi_s, anchored, springs)
     else:
