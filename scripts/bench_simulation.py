@@ -30,7 +30,7 @@ Measured 2026-12-03 on the 2 shared cores, the other core busy most of the time
 all 2,601 by NNLS at ~0.1 ms each) to 4,670-5,080 (the same passes, none by NNLS),
 /ta/ 009 from 3,040-3,190 to 4,270-4,780 (1.47 passes a frame, 872 by NNLS -> 0),
 with the palate as fitted before commit df08e52's midline; with today's fit (more
-contact: 2,131 and 723 frames solved, 1.8 passes a frame, 5 and 59 passes left to
+contact: 2,131 and 723 frames solved, 1.8 passes a frame, 5 and 7 passes left to
 the NNLS: ambiguous sets of near-duplicate rows) 3,990-4,150 and 3,960-4,060
 frames/s (a loaded session: 1,690-1,750 and 1,640-1,730 before, 2,470-2,760 and
 2,420-2,690 after; CPU time 2,500-2,600 -> 3,800-4,000).  The demo no longer
@@ -40,7 +40,7 @@ Still under 5,000 on the real recordings: what bounds them (/ka/ 006, ~430-520 m
 is the compiled frame loop (~110-120 ms, as without the palate), the figures with
 the contact probe (~100 ms, 40 more than without), and the contact (~190-280 ms):
 an all-frames clearance scan per stage (u = Φq and the query, ~25 ms each), the later
-passes' queries (~40 ms), the guessed sets' rounds (~50-90 ms: a node added a round,
+passes' queries (~40 ms), the guessed sets' rounds (~50-90 ms: a node a place added a round,
 up to 6 rounds where 5 nodes press), the push guard (~12 ms).
 
 Domains (issue 26 item 5): ``domains_fps`` is simulate(method="domains") end to end on the
