@@ -151,8 +151,12 @@ class Motion:
             "version": 1,
         }
         from tonguevis.sim.placement import placed_model_of
+        from tonguevis.sim.rest_fit import rest_fitted_model_of
 
-        placed = placed_model_of(model)
+        fitted = rest_fitted_model_of(model)  # the rest shape fitted on a placement: that placement, then the fit
+        placed = placed_model_of(fitted.unfitted if fitted is not None else model)
+        if fitted is not None:
+            meta["rest_fit"] = fitted.rest_fit
         if placed is not None:  # placed in a speaker: the source mesh and the move, so load derives the modes
             move = placed.placement  # its parts as they are: the loaded mesh then equals this one bit for bit
             meta["placement"] = {"matrix": move.matrix.tolist(), "scale": move.scale, "rotation": move.rotation.tolist(),
@@ -218,6 +222,10 @@ class Motion:
             source = TongueModel(TetMesh(arrays["source_points"], arrays["tets"], metadata={"file": str(path)}),
                                  landmarks, Material(**placement["source_material"]))
             model = source.placed(move, keep_frequencies=placement["keep_frequencies"])
+            if meta.get("rest_fit") is not None:  # bent onto the rest sensors: the saved rest shape on that placement
+                from tonguevis.sim.rest_fit import RestFittedModel
+
+                model = RestFittedModel(model, None, meta["rest_fit"], points=arrays["points"])
         else:
             mesh = TetMesh(arrays["points"], arrays["tets"], metadata={"file": str(path)})
             model = TongueModel(mesh, landmarks, Material(**meta["material"]))

@@ -75,13 +75,16 @@ class RestFittedModel(TongueModel):
     (compare) or is refused (morph), not through shared modes.
     """
 
-    def __init__(self, unfitted: TongueModel, displacement: np.ndarray, info: dict[str, Any] | None = None):
+    def __init__(self, unfitted: TongueModel, displacement: np.ndarray | None, info: dict[str, Any] | None = None,
+                 points: np.ndarray | None = None):
         self.unfitted = unfitted
         self.placement = getattr(unfitted, "placement", None)
         self.rest_fit = dict(info or {})
         meta = {**unfitted.mesh.metadata, "rest_fit": self.rest_fit}
-        mesh = TetMesh(unfitted.mesh.points + np.asarray(displacement, dtype=np.float64), unfitted.mesh.tets,
-                       metadata=meta)
+        # ``points`` (n, 3) given: the fitted rest shape as saved, bit for bit (its modes' cache key is the same)
+        fitted = np.asarray(points, dtype=np.float64) if points is not None else \
+            unfitted.mesh.points + np.asarray(displacement, dtype=np.float64)
+        mesh = TetMesh(fitted, unfitted.mesh.tets, metadata=meta)
         super().__init__(mesh, unfitted.landmarks, unfitted.material)
         self._dorsal = np.asarray(unfitted.dorsal_nodes)
 
@@ -92,6 +95,14 @@ class RestFittedModel(TongueModel):
 
     def __repr__(self) -> str:
         return f"RestFittedModel(moved up to {self.rest_fit.get('moved_max_mm', float('nan')):.2f} mm, {self.unfitted!r})"
+
+
+def rest_fitted_model_of(model: Any) -> "RestFittedModel | None":
+    """The :class:`RestFittedModel` ``model`` is (or, a sensor-patch or volume copy, is built on), else None."""
+    for candidate in (model, getattr(model, "base_model", None)):
+        if isinstance(candidate, RestFittedModel):
+            return candidate
+    return None
 
 
 def rest_fitted(model: TongueModel, nodes: np.ndarray, rest: np.ndarray, file=None) -> RestFittedModel:
