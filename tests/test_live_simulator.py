@@ -26,11 +26,12 @@ def demo():
     return rec.sensor_names, positions, times, streamed
 
 
-def test_live_frames_equal_the_replay(demo):
+@pytest.mark.parametrize("rest_fit", [False, True], ids=["placed", "rest-shape-fitted"])
+def test_live_frames_equal_the_replay(demo, rest_fit):
     from tonguevis.sim.simulate import simulate
 
     names, positions, times, streamed = demo
-    settings = RunSettings(modes=100)
+    settings = RunSettings(modes=100, rest_fit=rest_fit)
     sim = LiveSimulator(names, settings, rate=streamed.rate, dtype=np.float64)
     for i in range(300):  # the first 3 s seen: the rest is their stillest half second
         sim.observe(times[i], positions[i])
@@ -49,6 +50,7 @@ def test_live_frames_equal_the_replay(demo):
     replay = motion.model.mesh.points[sim.surface_nodes][None] + motion.model.displacements(
         motion.q, nodes=sim.surface_nodes)
     assert sim.driving_names == motion.sensor_names
+    assert ("rest_fit" in sim.fit) == rest_fit and ("rest_fit" in motion.metadata["fit"]) == rest_fit
     np.testing.assert_array_equal(sim.prep.nodes, motion.sensor_nodes)
     # The tongue moves by centimetres; the two agree to rounding.
     assert np.abs(replay - replay[:1]).max() > 5e-3

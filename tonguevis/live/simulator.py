@@ -217,7 +217,7 @@ class LiveSimulator:
         rest = RestChoice((float(times[0]), float(times[-1])), "given")
         try:
             model, prep, fit = targets_in_frame(snippet, self.source_model, s.frame, s.landmarks, rest, None,
-                                                tongue_size=s.tongue_size)
+                                                tongue_size=s.tongue_size, rest_fit=s.rest_fit)
         except TonguevisError as exc:
             raise LiveSimulationError(f"cannot take this rest: {exc}") from exc
         self.model, self.prep, self.fit = model, prep, fit
