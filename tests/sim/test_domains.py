@@ -187,6 +187,21 @@ def test_weights_cache_round_trip(tmp_path, bar):
     assert load_weights(path, dm.domains.key) is None
 
 
+def test_basis_cache_round_trip_and_a_broken_file_is_computed_again(tmp_path, monkeypatch):
+    from tonguevis.sim.domains import _basis_path, _load_basis, _save_basis
+
+    monkeypatch.setenv("TONGUEVIS_CACHE", str(tmp_path))
+    rng = np.random.default_rng(0)
+    eigenvalues, dofs, basis = rng.random(5), np.arange(12), rng.random((12, 5))
+    _save_basis("k1", eigenvalues, dofs, basis)
+    back = _load_basis("k1")
+    for got, want in zip(back, (eigenvalues, dofs, basis)):
+        np.testing.assert_array_equal(got, want)
+    assert _load_basis("k2") is None  # another key: nothing cached for it
+    _basis_path("k1").write_bytes(b"truncated")
+    assert _load_basis("k1") is None
+
+
 def _first_seconds(recording, seconds):
     n = int(seconds * recording.rate)
     cut = {k: v[:n] for k, v in recording.sensors.items()}

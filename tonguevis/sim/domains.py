@@ -216,8 +216,9 @@ def save_weights(dw: DomainWeights, path: Path) -> None:
     atomic_write(path, write)
 
 
-def load_weights(path: Path, key: str) -> DomainWeights | None:
-    """The cached domains, or None if absent, stale or unreadable (then they are computed again)."""
+def _cached_arrays(path: Path, key: str, what: str) -> dict | None:
+    """The arrays of the cache file ``path`` when it is this version's and ``key``'s; None when absent, stale
+    or unreadable (the last said: ``what`` is then computed again)."""
     path = Path(path)
     if not path.exists():
         return None
@@ -225,11 +226,19 @@ def load_weights(path: Path, key: str) -> DomainWeights | None:
         with np.load(path, allow_pickle=False) as data:
             if int(data["version"]) != CACHE_VERSION or str(data["key"]) != key:
                 return None
-            return DomainWeights(np.array(data["seeds"]), np.array(data["weights"]), np.array(data["directions"]),
-                                 np.array(data["partition"]), key, {"loaded_from": str(path)})
+            return {name: np.array(data[name]) for name in data.files}
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
-        logger.warning("ignoring unreadable domain cache %s (%s): the weights are computed again", path, exc)
+        logger.warning("ignoring unreadable %s cache %s (%s): computed again", what, path, exc)
         return None
+
+
+def load_weights(path: Path, key: str) -> DomainWeights | None:
+    """The cached domains, or None if absent, stale or unreadable (then they are computed again)."""
+    arrays = _cached_arrays(path, key, "domain weights")
+    if arrays is None:
+        return None
+    return DomainWeights(arrays["seeds"], arrays["weights"], arrays["directions"], arrays["partition"], key,
+                         {"loaded_from": str(path)})
 
 
 def _basis_path(key: str) -> Path:
@@ -241,17 +250,10 @@ def _basis_path(key: str) -> Path:
 def _load_basis(key: str):
     """(eigenvalues, domain_dofs, basis) cached for the domains ``key`` (which covers the mesh, the material,
     the anchors and the seeds), or None."""
-    path = _basis_path(key)
-    if not path.exists():
+    arrays = _cached_arrays(_basis_path(key), key, "domain basis")
+    if arrays is None:
         return None
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            if int(data["version"]) != CACHE_VERSION or str(data["key"]) != key:
-                return None
-            return np.array(data["eigenvalues"]), np.array(data["domain_dofs"]), np.array(data["basis"])
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
-        logger.warning("ignoring unreadable domain basis cache %s (%s): it is computed again", path, exc)
-        return None
+    return arrays["eigenvalues"], arrays["domain_dofs"], arrays["basis"]
 
 
 def _save_basis(key: str, eigenvalues, domain_dofs, basis) -> None:
