@@ -121,8 +121,8 @@ def add_model_arguments(parser: argparse.ArgumentParser, modes: int = 100) -> No
 
 def add_physics_arguments(parser: argparse.ArgumentParser) -> None:
     """How the tongue follows the sensors: ``--linear``, ``--method``, ``--keep-volume``,
-    ``--sensor-stiffness``, ``--sensor-patches``/``--no-sensor-patches`` (every simulating command has them,
-    so two commands given the same options simulate the same motion)."""
+    ``--sensor-stiffness``, ``--sensor-patches``/``--no-sensor-patches``, ``--fit-rest`` (every simulating
+    command has them, so two commands given the same options simulate the same motion)."""
     parser.add_argument("--linear", action="store_true", help="linear modal model (no modal warping); --method linear")
     parser.add_argument("--method", choices=("warped", "linear", "domains"), default=None,
                         help="the tongue's physics: modal warping (default), the linear modal model, or 'domains': "
@@ -282,8 +282,8 @@ def read_recording_args(args):
 
 def run_settings_of(args, modes: int | None = None):
     """The :class:`~tonguevis.workflows.settings.RunSettings` of a command's options (--mesh, --mesh-axes,
-    --modes, --linear, --landmarks, --sensor-stiffness, --sensor-patches, --rest, --palate); options a
-    command does not have keep their defaults."""
+    --modes, --linear, --method, --landmarks, --sensor-stiffness, --sensor-patches, --keep-volume, --fit-rest,
+    --rest, --palate, --model-frame, --tongue-size); options a command does not have keep their defaults."""
     from tonguevis.workflows.settings import RunSettings
 
     defaults = RunSettings()
