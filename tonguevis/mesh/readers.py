@@ -16,6 +16,7 @@ unless ``unit=`` says what the file uses.
 from __future__ import annotations
 
 import os
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -134,6 +135,13 @@ def _read_meshio(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(mesh.points, dtype=np.float64)[:, :3], np.concatenate(blocks).astype(np.int64)
 
 
+#: quiet_meshio_read swaps the process's sys.stdout and sys.stderr: one read at a time.  Two reads in two
+#: threads (the app simulates a compared recording beside the open one, each reading the palate) used to
+#: interleave their swaps and leave sys.stdout pointing at one of the captures for good: every later
+#: print was lost (``tonguevis view --compare ... --screenshot`` printed nothing and a GUI test was flaky).
+_QUIET_READ = threading.Lock()
+
+
 def quiet_meshio_read(path):
     """meshio.read, with meshio's stderr chatter captured and its ``sys.exit``
     on unparsable XML turned into :class:`meshio.ReadError`."""
@@ -147,7 +155,7 @@ def quiet_meshio_read(path):
     chatter = io.StringIO()
     try:
         # meshio's STL sniffing overflows on some headers (a harmless RuntimeWarning).
-        with contextlib.redirect_stderr(chatter), contextlib.redirect_stdout(chatter), \
+        with _QUIET_READ, contextlib.redirect_stderr(chatter), contextlib.redirect_stdout(chatter), \
                 warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore", RuntimeWarning)
             return meshio.read(path)
