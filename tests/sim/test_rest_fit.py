@@ -104,3 +104,54 @@ def test_on_a_real_ka_the_fitted_rest_predicts_an_unseen_sensor_better(model):
     mean = [np.mean([s["model_rmse_mm"] for s in r.sensors.values()]) for r in (plain, fitted)]
     assert mean[1] < mean[0] - 0.05, mean  # measured 2.15 -> 1.99 mm
     assert 1.0 < fitted.settings["rest_fit"]["moved_max_mm"] < 8.0  # measured 5.0 mm
+
+
+@pytest.fixture(scope="module")
+def two_speakers(model):
+    """Two demo recordings simulated with their rest shapes fitted, and without."""
+    from tonguevis.sim.simulate import simulate
+    from tonguevis.workflows import open_recording
+
+    a, b = (open_recording(REPO / "data" / name) for name in ("spk1_ta.tsv", "spk2_ka.tsv"))
+    return {fit: (simulate(a, model, modes=40, rest_fit=fit), simulate(b, model, modes=40, rest_fit=fit))
+            for fit in (False, True)}
+
+
+def test_the_modal_transfer_between_two_placements_is_the_exact_carry(two_speakers):
+    """The general carry (modal shapes fitted onto the other's modes) equals the placements' exact one
+    (the same modes moved: the modal scale times the identity) where both apply."""
+    from tonguevis.sim.placement import modal_scale, modal_transfer, placement_between
+
+    a, b = two_speakers[False]
+    move = placement_between(b.model, a.model)
+    transfer, residual = modal_transfer(b.model, a.model, move.scale * move.rotation, 40)
+    ratio = modal_scale(a.model) / modal_scale(b.model)
+    np.testing.assert_allclose(transfer, ratio * np.eye(40), atol=1e-10)
+    assert np.abs(residual).max() < 1e-10
+
+
+def test_two_fitted_tongues_compare_node_by_node_and_morph(two_speakers):
+    """Recording B shown on A's fitted tongue: its deformation carried through its modal shapes onto A's modes,
+    within 2 % of its largest displacement; the compare view then has a per-node distance, and a morph
+    from A to B is made (it was refused: two bodies)."""
+    from tonguevis.analysis.compare import Comparison
+    from tonguevis.analysis.morph import morph_between
+    from tonguevis.sim.placement import carried, placed_model_of, placement_between
+
+    a, b = two_speakers[True]
+    moved = carried(b, a.model)
+    error = moved.metadata["carried_onto"]["modal_fit_error_max_mm"]
+    largest = 1e3 * np.linalg.norm(b.model.displacements(b.q[::10]), axis=2).max()
+    assert 0.0 < error < 0.02 * largest, (error, largest)
+    # the carried shape is B's own (turned and scaled into A's frame), drawn by A's modes: node by node
+    move = placement_between(b.model, a.model)
+    frames = np.arange(0, b.n_frames, 40)
+    own = b.model.displacements(b.q[frames], warping=False) @ (move.scale * move.rotation).T
+    drawn = a.model.displacements(moved.q[frames], warping=False)
+    assert np.linalg.norm(drawn - own, axis=2).max() <= 1e-3 * error + 1e-12  # error: mm, displacements: m
+    assert placed_model_of(a.model) is None  # a fitted body, not a placement: the general carry was needed
+    comparison = Comparison(a, b, mode="absolute")
+    assert comparison.same_mesh
+    assert np.isfinite(comparison.difference(10, 10)).all()
+    morph = morph_between(a, float(a.times[5]), b, float(b.times[50]))
+    assert morph.displacement(1.0).shape == (a.model.mesh.n_nodes, 3)

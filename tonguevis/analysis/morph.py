@@ -201,17 +201,27 @@ def morph_between(source_motion, source_time: float, target_motion, target_time:
 
     # Two speakers (or frames) place the same tongue differently: the target's shape is carried onto the
     # source's placement through the model they share (its strain field, in the source's size).
+    if global_part(source_motion)[1].shape[1] != global_part(target_motion)[1].shape[1]:
+        raise MorphError(f"source motion has {global_part(source_motion)[1].shape[1]} modes, target "
+                         f"{global_part(target_motion)[1].shape[1]}; simulate both with the same number")
     rescale = 1.0
+    transfer = None
     if not same_model(source_motion.model, target_motion.model):
         a, b = global_part(source_motion)[0], global_part(target_motion)[0]
         if not same_model(source_model(a), source_model(b)):
             raise MorphError("source and target motions are on different tongue models (mesh, anchors or "
                              "material differ); morphing needs the same model")
-        rescale = modal_scale(a) / modal_scale(b)
+        from tonguevis.sim.rest_fit import rest_fitted_model_of
 
-    if global_part(source_motion)[1].shape[1] != global_part(target_motion)[1].shape[1]:
-        raise MorphError(f"source motion has {global_part(source_motion)[1].shape[1]} modes, target "
-                         f"{global_part(target_motion)[1].shape[1]}; simulate both with the same number")
+        if rest_fitted_model_of(a) is None and rest_fitted_model_of(b) is None:
+            rescale = modal_scale(a) / modal_scale(b)
+        else:  # rest shapes fitted to two speakers: the target's modal shapes fitted onto the source's modes
+            from tonguevis.sim.placement import modal_transfer, placement_between
+
+            move = placement_between(b, a)
+            n_modes = global_part(target_motion)[1].shape[1]
+            transfer = modal_transfer(b, a, move.scale * move.rotation, n_modes)[0]
+
     if source_motion.warping != target_motion.warping:
         raise MorphError("one motion is warped and the other linear")
     for motion, t, what in ((source_motion, source_time, "source"), (target_motion, target_time, "target")):
@@ -226,6 +236,8 @@ def morph_between(source_motion, source_time: float, target_motion, target_time:
 
     model, q_source = global_part(source_motion)
     q_target = rescale * global_part(target_motion)[1]
+    if transfer is not None:
+        q_target = q_target @ transfer.T
     morph = Morph(model, q_source[i], q_target[j], warping=source_motion.warping, difference=difference)
     morph.source_frame, morph.target_frame = i, j
     return morph

@@ -141,8 +141,34 @@ def placed_model_of(model: Any) -> "PlacedModel | None":
 
 
 def source_model(model: Any) -> Any:
-    """The unplaced model under ``model`` (itself when not placed; through sensor-patch copies too)."""
+    """The unplaced model under ``model`` (itself when not placed; through sensor-patch copies and a rest
+    shape fitted on a placement too)."""
+    from tonguevis.sim.rest_fit import rest_fitted_model_of
+
+    fitted = rest_fitted_model_of(model)
+    if fitted is not None:
+        model = fitted.unfitted
     return getattr(model, "source", None) or getattr(getattr(model, "base_model", None), "source", None) or model
+
+
+def modal_transfer(source: Any, target: Any, linear: np.ndarray, modes: int) -> tuple[np.ndarray, np.ndarray]:
+    """(T (m, m), residual (3n, m)): the coordinates on ``target``'s ``modes`` modes of the shapes of
+    ``source``'s, turned and scaled by ``linear`` (3, 3) node by node: q_target = T q_source with
+    T = Φₜᵀ Mₜ (L Φₛ), the mass-weighted least-squares fit (Φₜ is mass-normalised); ``residual`` (m per
+    unit q) = L Φₛ - Φₜ T, what it misses.
+
+    Two placements of one tongue share their modes up to the placement (T is then the modal scale times
+    the identity, the residual zero to rounding); two tongues bent onto different rests
+    (:mod:`tonguevis.sim.rest_fit`) have nearby but different modes, and T carries one's shapes onto
+    the other's as closely as its modes can draw them.
+    """
+    phi_s = source.basis(modes).phi
+    n3 = phi_s.shape[0]
+    phi_t = target.basis(modes).phi
+    moved = np.einsum("ij,njm->nim", np.asarray(linear, dtype=np.float64), phi_s.reshape(n3 // 3, 3, modes))
+    moved = moved.reshape(n3, modes)
+    transfer = phi_t.T @ (target.mass @ moved)
+    return transfer, moved - phi_t @ transfer
 
 
 def model_placement(model: Any):
@@ -345,21 +371,37 @@ def carried(motion, model: Any):
     own, q = global_part(motion)
     if not same_source(own, model):
         raise ModelError("the two motions are on different tongue models: one cannot be carried onto the other")
-    ratio = modal_scale(model) / modal_scale(own)
-    to_source = (model_placement(own) or _identity()).inverse()
-    onto = model_placement(model) or _identity()
-    move = onto @ to_source
+    move = placement_between(own, model)
     linear = move.scale * move.rotation
     metadata = dict(motion.metadata)
     metadata["carried_onto"] = {"scale": move.scale, "matrix": move.matrix.tolist(),
                                 "note": "this motion's deformation shown on another placement of the same tongue"}
+    from tonguevis.sim.rest_fit import rest_fitted_model_of
+
+    if rest_fitted_model_of(own) is None and rest_fitted_model_of(model) is None:
+        carried_q = modal_scale(model) / modal_scale(own) * q  # the same modes, moved: exact
+    else:
+        # A rest shape fitted to a speaker: a body of its own, whose modes are near the other's but not its
+        # own moved. The deformation is carried by its modal shapes, fitted onto this model's modes.
+        transfer, residual = modal_transfer(own, model, linear, q.shape[1])
+        carried_q = q @ transfer.T
+        missed = np.linalg.norm((q @ residual.T).reshape(len(q), -1, 3), axis=2).max() if len(q) else 0.0
+        metadata["carried_onto"].update(
+            note="this motion's deformation carried onto another tongue (a rest shape fitted to another "
+                 "speaker) through its modes", modal_fit_error_max_mm=float(1e3 * missed))
     metadata.pop("sensor_patches", None)
     return replaced(
-        motion, q=ratio * q, model=model,
+        motion, q=carried_q, model=model,
         targets=move.apply(motion.targets), energy=motion.energy * move.scale ** 3,
         sensor_residual=motion.sensor_residual * move.scale,
         jaw_offset=None if motion.jaw_offset is None else motion.jaw_offset @ linear.T,
         metadata=metadata, palate=None)
+
+
+def placement_between(source: Any, target: Any):
+    """The similarity from ``source``'s frame to ``target``'s, two placements of one tongue (either may be
+    unplaced: the model frame)."""
+    return (model_placement(target) or _identity()) @ (model_placement(source) or _identity()).inverse()
 
 
 def _identity():
