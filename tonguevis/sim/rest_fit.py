@@ -71,8 +71,9 @@ class RestFittedModel(TongueModel):
 
     ``placement`` is the unfitted model's (so the generic palate is carried into its frame as before);
     ``rest_fit`` holds the fit's figures (mm).  Not a placement of the shipped tongue: two recordings'
-    rest-fitted tongues are different bodies, so comparing or morphing across them goes node by node
-    (compare) or is refused (morph), not through shared modes.
+    rest-fitted tongues are different bodies with different modes, so comparing or morphing across them
+    carries one's deformation through its modal shapes fitted onto the other's modes
+    (:func:`tonguevis.sim.placement.modal_transfer`), not by sharing modal coordinates.
     """
 
     def __init__(self, unfitted: TongueModel, displacement: np.ndarray | None, info: dict[str, Any] | None = None,
