@@ -10,7 +10,8 @@ import pytest
 
 from tonguevis.errors import SimulationError
 from tonguevis.sim import TongueModel
-from tonguevis.sim.rest_fit import RestFittedModel, fit_rest_shape, rest_fitted, tet_volumes
+from tonguevis.sim.rest_fit import (MIN_VOLUME_RATIO, RestFittedModel, bend_fraction, fit_rest_shape,
+                                     rest_fitted, tet_volumes)
 
 REPO = Path(__file__).resolve().parents[2]
 DEMO = REPO / "data" / "spk1_ta.tsv"
@@ -50,13 +51,35 @@ def test_a_rest_fitted_model_has_its_own_modes_and_keeps_the_anatomy(model):
     assert fitted.rest_fit["tet_volume_ratio_min"] > 0.5
 
 
-def test_a_fit_that_would_crush_the_mesh_is_refused_naming_the_file(model):
+def test_a_fit_that_would_crush_the_mesh_goes_part_of_the_way_and_says_so(model, caplog):
     tt, tb = model.landmarks.sensors["TT"], model.landmarks.sensors["TB"]
     nodes = np.array([tt, tb])
     crossing = model.mesh.points[[tb, tt]]  # the tip sent where the blade is and back: tets turned inside out
-    with pytest.raises(SimulationError, match="cannot be bent onto the rest sensors") as info:
-        rest_fitted(model, nodes, crossing, file="speaker.tsv")
-    assert "speaker.tsv" in str(info.value)
+    full = fit_rest_shape(model, nodes, crossing)
+    assert np.min(tet_volumes(model.mesh.points + full, model.mesh.tets)) < 0  # all the way would invert tets
+    with caplog.at_level("WARNING", logger="tonguevis"):
+        fitted = rest_fitted(model, nodes, crossing, file="speaker.tsv")
+    fit = fitted.rest_fit
+    assert 0.0 < fit["fraction"] < 1.0
+    assert fit["tet_volume_ratio_min"] >= MIN_VOLUME_RATIO - 1e-6
+    assert fit["sensors_after_rms_mm"] == pytest.approx((1 - fit["fraction"]) * fit["sensors_before_rms_mm"])
+    np.testing.assert_allclose(fitted.mesh.points, model.mesh.points + fit["fraction"] * full, atol=1e-15)
+    assert any("speaker.tsv" in r.getMessage() and "of the way" in r.getMessage() for r in caplog.records)
+
+
+def test_the_bend_fraction_is_the_first_crossing_a_fine_scan_finds(model):
+    tt, tb = model.landmarks.sensors["TT"], model.landmarks.sensors["TB"]
+    nodes = np.array([tt, tb])
+    u = fit_rest_shape(model, nodes, model.mesh.points[[tb, tt]])
+    rest = tet_volumes(model.mesh.points, model.mesh.tets)
+    for bound in (0.5, 0.8):
+        fraction = bend_fraction(model.mesh.points, model.mesh.tets, u, min_ratio=bound)
+        scan = np.linspace(0.0, 1.0, 4001)  # the reference: every tet's volume on a fine scan of the bend
+        worst = np.array([np.min(tet_volumes(model.mesh.points + a * u, model.mesh.tets) / rest) for a in scan])
+        first = scan[np.argmax(worst < bound)]
+        assert first - 1 / 4000 <= fraction <= first + 1e-6
+    small = 1e-3 * u / np.abs(u).max()  # a gentle bend goes all the way
+    assert bend_fraction(model.mesh.points, model.mesh.tets, small) == 1.0
 
 
 def test_simulate_with_the_rest_fitted_puts_the_sensor_nodes_on_the_rest_sensors(model, tmp_path):

@@ -295,8 +295,14 @@ def describe_fit(fit: dict) -> str:
                    else ", as the rest alignment scales it"))
         if fit.get("rest_fit"):
             bent = fit["rest_fit"]
-            residual = (f"on their nodes, the rest shape bent onto them (nodes moved up to {bent['moved_max_mm']:.1f} mm; "
-                        f"they were {bent['sensors_before_rms_mm']:.2f} mm RMS off)")
+            if bent.get("fraction", 1.0) < 1.0:
+                residual = (f"{bent['sensors_after_rms_mm']:.2f} mm RMS off their nodes, the rest shape bent "
+                            f"{100 * bent['fraction']:.0f} % of the way onto them (all the way would crush tets; nodes "
+                            f"moved up to {bent['moved_max_mm']:.1f} mm; they were {bent['sensors_before_rms_mm']:.2f} mm "
+                            "RMS off)")
+            else:
+                residual = (f"on their nodes, the rest shape bent onto them (nodes moved up to "
+                            f"{bent['moved_max_mm']:.1f} mm; they were {bent['sensors_before_rms_mm']:.2f} mm RMS off)")
         return f"frame: the speaker's (head-corrected, mm as recorded): the model placed in the speaker {size}; rest sensors {residual}"
     return (f"frame: the model's (the speaker scaled by {scale:.3f} onto the generic tongue: mm are the model's, "
             f"not the speaker's); rest sensors {residual}")
