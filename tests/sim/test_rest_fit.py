@@ -178,3 +178,18 @@ def test_two_fitted_tongues_compare_node_by_node_and_morph(two_speakers):
     assert np.isfinite(comparison.difference(10, 10)).all()
     morph = morph_between(a, float(a.times[5]), b, float(b.times[50]))
     assert morph.displacement(1.0).shape == (a.model.mesh.n_nodes, 3)
+
+
+def test_a_fitted_tongue_that_runs_away_says_the_fit_may_be_why():
+    """The coarse test block, fitted onto spk1 /ta/'s rest with 20 modes, runs away (1,248 of 1,762 frames
+    recovered; unfitted it does not): the refusal names the fit as something to try without."""
+    from tests.analysis.energy_support import box_tongue
+    from tonguevis.sim.simulate import simulate
+    from tonguevis.workflows import open_recording
+
+    rec = open_recording(DEMO)
+    simulate(rec, box_tongue(), modes=20, landmarks="rule")  # unfitted: followed
+    with pytest.raises(SimulationError, match="could not follow") as info:
+        simulate(rec, box_tongue(), modes=20, landmarks="rule", rest_fit=True)
+    assert "without the rest shape fitted (no --fit-rest)" in str(info.value)
+    assert "spk1_ta.tsv" in str(info.value)

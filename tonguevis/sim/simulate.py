@@ -17,6 +17,7 @@ from tonguevis.sim.constrained import RUNAWAY_ROTATION
 from tonguevis.sim.figures import frame_figures
 from tonguevis.sim.newmark import NewmarkSettings, integrate
 from tonguevis.sim.plausibility import ABSURD_AMPLIFICATION, ABSURD_VOLUME, plausibility_from_largest
+from tonguevis.sim.rest_fit import rest_fitted_model_of
 
 from tonguevis._logging import logger, verbose
 
@@ -370,7 +371,9 @@ class _Run:
                 f"the model could not follow this recording plausibly: {len(absurd)} of {len(times)} frames change "
                 f"the volume by over {100 * ABSURD_VOLUME:.0f} % or move a node over {ABSURD_AMPLIFICATION:g}x as far "
                 f"as any sensor, {n_recovered} had to be recovered (first at t = {times[bad_frames[0]]:.2f} s); try "
-                f"more modes (--modes, now {self.modes}) or the speaker's sensor layout (--landmarks speaker)", file)
+                f"more modes (--modes, now {self.modes}) or the speaker's sensor layout (--landmarks speaker)"
+                + (", or without the rest shape fitted (no --fit-rest): its new modes may be the ones that ran away"
+                   if rest_fitted_model_of(model) is not None else ""), file)
         bad = np.flatnonzero(~converged)
         recovered_frames = np.flatnonzero(recovered)
         if whole:
