@@ -263,3 +263,28 @@ def test_batch_simulates_with_the_command_line_method(monkeypatch, tmp_path):
     default = batch.BatchSettings()
     assert settings.step_settings("simulate") != default.step_settings("simulate")  # a different cache key
     assert default.step_settings("simulate")["sensor_patches"] == "default"
+
+
+@pytest.mark.parametrize("command", ["simulate", "segment", "energy", "validate", "morph", "batch", "view"])
+def test_the_tongue_size_is_the_adult_one_unless_told(command, tmp_path):
+    """Every command that places the tongue in the speaker takes --tongue-size X|adult|alignment, "adult" by
+    default (the alignment's size when an adult's, else the generic one); the app's --frame N (the
+    screenshot's frame) and --model-frame do not collide."""
+    from tonguevis.cli import build_parser
+    from tonguevis.cli._common import frame_options
+
+    given = {"segment": [DEMO, "--out", str(tmp_path / "s.vtu")], "batch": [DEMO, "--out", str(tmp_path)],
+             "energy": [DEMO, "--csv", str(tmp_path / "e.csv")], "validate": [DEMO, "--json", str(tmp_path / "v.json")],
+             "morph": [f"{DEMO}@1.0", f"{DEMO}@2.0", "--out", str(tmp_path / "m.png")]}.get(command, [DEMO])
+    parse = lambda *extra: build_parser().parse_args([command, *given, *extra])  # noqa: E731
+    assert parse().tongue_size == "adult"
+    assert parse("--tongue-size", "alignment").tongue_size is None
+    assert parse("--tongue-size", "1.2").tongue_size == pytest.approx(1.2)
+    with pytest.raises(SystemExit):
+        parse("--tongue-size", "large")
+    if command == "view":
+        args = parse("--frame", "7", "--model-frame", "--tongue-size", "1")
+        assert args.frame == 7 and args.model_frame == "model" and args.tongue_size == 1.0
+    else:
+        assert frame_options(parse("--tongue-size", "alignment")) == {"frame": "speaker", "tongue_size": None}
+        assert frame_options(parse())["tongue_size"] == "adult"

@@ -237,3 +237,36 @@ def test_an_implausible_placed_size_is_warned_about(model, caplog):
         motion = simulate(wide, model, modes=20, backend="numpy")
     assert "8.0 times the generic one's volume" in caplog.text and "--tongue-size 1" in caplog.text and "tongue_size=1" in caplog.text
     assert motion.metadata["fit"]["model_volume_cm3"] == pytest.approx(8 * 1e6 * model.rest_volume, rel=1e-6)
+
+
+def test_the_adult_size_keeps_an_adult_alignment_and_replaces_one_no_adult_has(model, caplog):
+    """tongue_size="adult" (the front ends' default): the synthetic speaker's alignment (1.15x smaller, within
+    half to twice the volume) is kept, the very motion tongue_size=None makes; a speaker whose rest sensors
+    lie 2.3 times as far apart (an 8x tongue) gets the generic size, the sensors fitted onto its surface,
+    said once with the option that keeps the alignment's size."""
+    import logging
+
+    from tests.sim.test_simulate import Recording
+    from tonguevis.sim.placement import describe_fit
+
+    recording = _recording(model)
+    kept = simulate(recording, model, modes=20, backend="numpy", tongue_size="adult")
+    aligned = simulate(recording, model, modes=20, backend="numpy", tongue_size=None)
+    assert kept.metadata["fit"]["size_from"] == "alignment"
+    np.testing.assert_array_equal(kept.q, aligned.q)
+    np.testing.assert_array_equal(kept.model.mesh.points, aligned.model.mesh.points)
+    wide = Recording(rate=recording.rate, times=recording.times,
+                     sensors={k: 2.3 * v for k, v in recording.sensors.items()}, metadata=dict(recording.metadata))
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="tonguevis"):
+        adult = simulate(wide, model, modes=20, backend="numpy", tongue_size="adult")
+    fit = adult.metadata["fit"]
+    assert fit["size_from"] == "adult norm" and fit["fitted_to"] == "upper surface" and fit["tongue_size"] == 1.0
+    assert adult.model.rest_volume == pytest.approx(model.rest_volume, rel=1e-9)
+    assert "8.0 times the generic one's volume" in caplog.text and "--tongue-size alignment" in caplog.text
+    assert "the generic adult size" in describe_fit(fit)
+    generic = simulate(wide, model, modes=20, backend="numpy", tongue_size=1.0)  # the same as asking for 1
+    np.testing.assert_array_equal(adult.q, generic.q)
+    assert generic.metadata["fit"]["size_from"] == "given"
+    with pytest.raises(Exception, match="tongue size"):
+        simulate(recording, model, modes=20, backend="numpy", tongue_size="large")

@@ -37,3 +37,34 @@ def test_fit_the_tongue_to_the_rest_sensors_resimulates_with_the_rest_shape_fitt
     with qtbot.waitSignal(window.simulation_finished, timeout=120000):
         window.rest_fit_action.setChecked(False)
     assert "rest_fit" not in window.session.motion.metadata["fit"]
+
+
+def test_the_tongue_size_menu_resimulates_at_the_chosen_size(qtbot, window):
+    from tests.gui.conftest import demo_session, show_and_simulate
+
+    assert window.size_actions["adult"].isChecked() and window.state.run_settings.tongue_size == "adult"
+    show_and_simulate(qtbot, window, demo_session(3.5, 4.5))
+    assert window.session.motion.metadata["fit"]["size_from"] in ("alignment", "adult norm")
+    with qtbot.waitSignal(window.simulation_finished, timeout=120000) as blocker:
+        window.size_actions["generic"].trigger()
+    assert blocker.args == [True] and window.state.run_settings.tongue_size == 1.0
+    fit = window.session.motion.metadata["fit"]
+    assert fit["size_from"] == "given" and fit["fitted_to"] == "upper surface" and fit["tongue_size"] == 1.0
+    assert window.session.motion.model.rest_volume == pytest.approx(window.model.rest_volume, rel=1e-9)
+    with qtbot.waitSignal(window.simulation_finished, timeout=120000):
+        window.size_actions["alignment"].trigger()
+    assert window.state.run_settings.tongue_size is None
+    assert window.session.motion.metadata["fit"]["fitted_to"] == "rule nodes"
+    assert window.size_actions["alignment"].isChecked() and not window.size_actions["generic"].isChecked()
+
+
+def test_the_app_opens_at_the_size_the_command_line_gives(qtbot, settings):
+    """``tonguevis view --tongue-size 1``: the run settings and the Tongue size menu say so before anything runs."""
+    from tonguevis.gui.app import create_window
+
+    window = create_window(settings=settings, modes=20, feature_tabs=False, tongue_size=1.0)
+    qtbot.addWidget(window)
+    assert window.state.run_settings.tongue_size == 1.0 and window.size_actions["generic"].isChecked()
+    qtbot.waitUntil(lambda: window.session is not None and window.session.motion is not None, timeout=120000)
+    assert window.session.motion.metadata["fit"]["tongue_size"] == 1.0
+    window.close()

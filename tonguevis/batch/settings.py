@@ -106,8 +106,9 @@ class BatchSettings(RunSettings):
             sim["keep_volume"] = True
         if self.method not in (None, "warped" if self.warping else "linear"):  # likewise: only when it changes
             sim["method"] = self.method
-        if self.frame != "speaker" or self.tongue_size is not None:  # likewise
-            sim.update(frame=self.frame, tongue_size=self.tongue_size)
+        frame = {"frame": self.frame, "tongue_size": self.tongue_size} \
+            if self.frame != "speaker" or self.tongue_size is not None else {}  # likewise
+        sim.update(frame)
         if self.rest_fit:  # likewise
             sim["rest_fit"] = True
         if step == "simulate":
@@ -119,7 +120,7 @@ class BatchSettings(RunSettings):
                     "mode": "constraint", "seeds": "auto", "threshold": 0.05, "adjust": False}
         if step == "validate":
             return {"modes": self.modes, "landmarks": self.landmarks, "sensor_stiffness": self.sensor_stiffness,
-                    "rest": self.rest, "quasi_static": self.quasi_static, **read,
+                    "rest": self.rest, "quasi_static": self.quasi_static, **read, **frame,
                     **({"rest_fit": True} if self.rest_fit else {})}
         raise BatchError(f"unknown step {step!r}")
 

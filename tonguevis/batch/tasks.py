@@ -237,7 +237,7 @@ def _validate(task, entry, rec, model, motion, seconds):
     s = task.settings
     result = validate(rec, model, modes=s.modes, landmarks=s.landmarks, rest=s.rest,
                       sensor_stiffness=s.sensor_stiffness, quasi_static=s.quasi_static,
-                      sensor_patches=s.sensor_patches, rest_fit=s.rest_fit)
+                      sensor_patches=s.sensor_patches, rest_fit=s.rest_fit, frame=s.frame, tongue_size=s.tongue_size)
     result.write_json(task.folder / "validation.json")
     rows = tables.validation_rows(entry, task.file, result.as_dict())
     written = tables.write(tables.to_arrow("validation", rows), task.folder / "validation.parquet", s.csv)

@@ -172,27 +172,30 @@ def add_sensor_patches_argument(parser: argparse.ArgumentParser) -> None:
                              "sensors may float millimetres off the surface)")
 
 
-def add_frame_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--model-frame`` and ``--tongue-size``: in whose millimetres the tongue is simulated (tonguevis.sim.placement)."""
-    parser.add_argument("--model-frame", dest="frame", action="store_const", const="model", default="speaker",
+def add_frame_arguments(parser: argparse.ArgumentParser, frame_dest: str = "frame") -> None:
+    """``--model-frame`` and ``--tongue-size``: in whose millimetres the tongue is simulated (tonguevis.sim.placement).
+    ``frame_dest``: the attribute ``--model-frame`` sets (``tonguevis view`` has its own ``--frame N``)."""
+    parser.add_argument("--model-frame", dest=frame_dest, action="store_const", const="model", default="speaker",
                         help="simulate in the generic tongue's frame and millimetres, the speaker scaled onto it "
                              "(the paper's way); default: the model placed in the speaker, every figure in the "
                              "speaker's millimetres")
-    parser.add_argument("--tongue-size", type=_tongue_size_arg, default=None, metavar="X|alignment",
+    parser.add_argument("--tongue-size", type=_tongue_size_arg, default="adult", metavar="X|adult|alignment",
                         help="the speaker's tongue as a multiple of the model's (1: the generic adult tongue, "
-                             "turned and moved so the rest sensors lie on its surface); default 'alignment': the "
-                             "size the rest sensors' fit onto the model's nodes implies (the same motion as "
-                             "--model-frame in the speaker's units; far too large when the coils sit further apart "
-                             "than the model's placement rule, which is warned about)")
+                             "turned and moved so the rest sensors lie on its surface); 'alignment': the size the "
+                             "rest sensors' fit onto the model's nodes implies (the same motion as --model-frame in "
+                             "the speaker's units); default 'adult': the alignment's size when it is an adult "
+                             "tongue's (half to twice the model's volume), else the generic size (said when so)")
 
 
 def _tongue_size_arg(text: str):
     if text == "alignment":
         return None
+    if text == "adult":
+        return text
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"a multiple of the model's size or 'alignment', not {text!r}") from None
+        raise argparse.ArgumentTypeError(f"a multiple of the model's size, 'adult' or 'alignment', not {text!r}") from None
     if not (0.3 <= value <= 3.0):
         raise argparse.ArgumentTypeError(f"the tongue size must be between 0.3 and 3 times the model's, got {text}")
     return value
@@ -200,7 +203,9 @@ def _tongue_size_arg(text: str):
 
 def frame_options(args) -> dict:
     """``frame`` and ``tongue_size`` of :func:`tonguevis.sim.simulate` from ``--model-frame``/``--tongue-size``."""
-    return {"frame": getattr(args, "frame", "speaker"), "tongue_size": getattr(args, "tongue_size", None)}
+    from tonguevis.workflows.settings import RunSettings
+
+    return {"frame": getattr(args, "frame", "speaker"), "tongue_size": getattr(args, "tongue_size", RunSettings.tongue_size)}
 
 
 def _patch_radius_arg(text: str):

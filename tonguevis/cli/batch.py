@@ -22,7 +22,7 @@ from pathlib import Path
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from tonguevis.batch.settings import DEFAULT_STEPS, STEPS
-    from tonguevis.cli._common import (add_model_arguments, add_productions_from_argument,
+    from tonguevis.cli._common import (add_frame_arguments, add_model_arguments, add_productions_from_argument,
                                        add_reader_options_argument, add_rest_argument)
 
     parser.add_argument("paths", nargs="+", type=Path, metavar="CORPUS",
@@ -53,6 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="redo every step, even those up to date")
     add_reader_options_argument(parser, " of every recording")
     add_model_arguments(parser)
+    add_frame_arguments(parser)  # the tongue's size and frame, as simulate's
     add_rest_argument(parser, every=True)
 
 

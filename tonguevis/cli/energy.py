@@ -23,7 +23,7 @@ from pathlib import Path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import (add_companion_arguments, add_model_arguments, add_productions_from_argument,
+    from tonguevis.cli._common import (add_frame_arguments, add_companion_arguments, add_model_arguments, add_productions_from_argument,
                                        add_reader_options_argument, add_rest_argument)
 
     parser.add_argument("paths", nargs="+", type=Path, metavar="PATH", help="recordings or folders of recordings")
@@ -51,6 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_reader_options_argument(parser, " of every recording")
     add_companion_arguments(parser, labels=False)
     add_model_arguments(parser)
+    add_frame_arguments(parser)  # the tongue's size and frame, as simulate's
     add_rest_argument(parser, every=True)
 
 

@@ -28,7 +28,7 @@ def _frame_spec(text: str) -> tuple[Path, float]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import add_model_arguments, add_reader_options_argument, add_rest_argument
+    from tonguevis.cli._common import add_frame_arguments, add_model_arguments, add_reader_options_argument, add_rest_argument
 
     parser.add_argument("source", type=_frame_spec, metavar="SOURCE@TIME", help="source shape (t = 0)")
     parser.add_argument("target", type=_frame_spec, metavar="TARGET@TIME", help="target shape (t = 1)")
@@ -42,6 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sensors", metavar="MAP", help="sensor map for recordings (default: sensor_map.json beside)")
     add_reader_options_argument(parser, " of both recordings")
     add_model_arguments(parser)
+    add_frame_arguments(parser)  # the tongue's size and frame, as simulate's
     add_rest_argument(parser, every=True)
 
 

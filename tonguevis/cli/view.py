@@ -9,8 +9,8 @@ COLOR_CHOICES = ("displacement", "energy", "contact", "plain", "difference")
 
 
 def add_arguments(parser) -> None:
-    from tonguevis.cli._common import (add_companion_arguments, add_reader_options_argument, add_rest_argument,
-                                       add_sensor_patches_argument, add_rest_fit_argument)
+    from tonguevis.cli._common import (add_companion_arguments, add_frame_arguments, add_reader_options_argument,
+                                       add_rest_argument, add_rest_fit_argument, add_sensor_patches_argument)
 
     parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the demo /ta/ train, spk1_ta)")
     parser.add_argument("--sensors", metavar="MAP",
@@ -43,6 +43,7 @@ def add_arguments(parser) -> None:
     add_rest_argument(parser)
     add_sensor_patches_argument(parser)
     add_rest_fit_argument(parser)
+    add_frame_arguments(parser, frame_dest="model_frame")  # --frame N is the screenshot's frame
     add_reader_options_argument(parser, " of FILE")
     add_companion_arguments(parser)
 
@@ -62,7 +63,8 @@ def run(args) -> int:
     return run_view(args.file, args.sensors, args.mesh, args.modes, args.screenshot, args.frame, rest=rest,
                     audio=args.audio, labels=args.label_file, palate=palate, reference=args.reference,
                     color=args.color, compare=_compare_options(args), options=options,
-                    sensor_patches=args.sensor_patches, rest_fit=args.rest_fit)
+                    sensor_patches=args.sensor_patches, rest_fit=args.rest_fit, model_frame=args.model_frame,
+                    tongue_size=args.tongue_size)
 
 
 def _compare_options(args) -> dict | None:

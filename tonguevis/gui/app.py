@@ -39,13 +39,16 @@ def install_error_hook(window) -> None:
 
 def create_window(file=None, sensor_map=None, mesh=None, modes: int = 100, settings=None, feature_tabs: bool = True,
                   rest=None, audio=None, labels=None, palate=None, frame: str | None = None,
-                  options: dict | None = None, sensor_patches="default", rest_fit: bool = False):
+                  options: dict | None = None, sensor_patches="default", rest_fit: bool = False,
+                  model_frame: str = "speaker", tongue_size: float | str | None = "adult"):
     """A shown MainWindow that opens ``file`` (default: the demo), with ``rest`` (start_s, end_s) if given,
     and the sound ``audio`` and TextGrid ``labels`` if given (else those found beside the file);
     simulated against ``palate`` (a PalateSurface, a file or "generic"; None: no contact), shown in
     ``frame`` ("head" or "jaw"; default head); ``options``: the reader options (``-O``) of ``file``;
     ``sensor_patches``: as :func:`tonguevis.simulate` (Simulation ▸ Sensors on the surface); ``rest_fit``:
-    the tongue bent onto the rest sensors (Simulation ▸ Fit the tongue to the rest sensors)."""
+    the tongue bent onto the rest sensors (Simulation ▸ Fit the tongue to the rest sensors); ``model_frame``
+    and ``tongue_size``: in whose millimetres and at what size the tongue is simulated (as
+    :class:`~tonguevis.workflows.settings.RunSettings` ``frame`` and ``tongue_size``)."""
     from tonguevis.gui.window import MainWindow
 
     application()
@@ -60,6 +63,11 @@ def create_window(file=None, sensor_map=None, mesh=None, modes: int = 100, setti
         window.rest_fit_action.setChecked(True)
         window.rest_fit_action.blockSignals(False)
         window.state.change_run_settings(window, rest_fit=True)
+    if model_frame != window.state.run_settings.frame or tongue_size != window.state.run_settings.tongue_size:
+        window.state.change_run_settings(window, frame=model_frame, tongue_size=tongue_size)
+        key = window._tongue_size()
+        if key is not None:
+            window.size_actions[key].setChecked(True)
     if frame is not None:
         window.state.set_reference(frame)
     if feature_tabs:
@@ -102,17 +110,19 @@ def opening_problem(window, file):
 def run_view(file=None, sensor_map=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None,
              rest=None, audio=None, labels=None, palate=None, reference: str | None = None,
              color: str | None = None, compare: dict | None = None, options: dict | None = None,
-             sensor_patches="default", rest_fit: bool = False) -> int:
+             sensor_patches="default", rest_fit: bool = False, model_frame: str = "speaker",
+             tongue_size: float | str | None = "adult") -> int:
     """``tonguevis view``: run the app; with ``screenshot``, save the window at ``frame``, print the
     rest line and exit.  ``rest``: (start_s, end_s) of the rest interval, None to find it; ``audio``,
     ``labels``: a WAV and a TextGrid, None for those beside the file; ``palate``: simulate against it
     (None: no contact); ``reference``: "head" or "jaw" frame; ``color``: the surface colouring;
     ``compare``: the keyword arguments of :meth:`MainWindow.open_compare` (``path`` ...) for a
     second recording shown with the first (a screenshot waits for both simulations); ``options``: reader
-    options (``-O``) of ``file``."""
+    options (``-O``) of ``file``; ``model_frame``, ``tongue_size``: as :func:`create_window`'s."""
     app = application()
     window = create_window(file, sensor_map, mesh, modes, rest=rest, audio=audio, labels=labels, palate=palate,
-                           frame=reference, options=options, sensor_patches=sensor_patches, rest_fit=rest_fit)
+                           frame=reference, options=options, sensor_patches=sensor_patches, rest_fit=rest_fit,
+                           model_frame=model_frame, tongue_size=tongue_size)
     if compare is not None and window.session is not None:
         if not window.open_compare(**compare) and screenshot is not None:
             window.close()

@@ -77,28 +77,46 @@ class MenusMixin:
         self.rest_fit_action.setChecked(bool(self.state.run_settings.rest_fit))
         self.rest_fit_action.toggled.connect(self.set_rest_fit)
         simulation.addAction(self.rest_fit_action)
-        method_menu = simulation.addMenu("&Method")
-        methods = QActionGroup(self)
-        self.method_actions = {}
-        for key, text, tip in (
-                ("warped", "&Modal warping (the paper)", "linear FEM modes made nonlinear by modal warping (Yang 2013)"),
-                ("linear", "&Linear modes", "the linear modal model, no warping"),
-                ("domains", "&Quadratic domains (StVK, seed 001; slow)",
-                 "the successor's nonlinear StVK tongue on quadratic domains: tens of frames per second")):
-            action = QAction(text, self)
-            action.setCheckable(True)
-            action.setToolTip(tip)
-            action.setChecked(key == self._method())
-            action.triggered.connect(lambda _checked=False, key=key: self.set_method(key))
-            methods.addAction(action)
-            method_menu.addAction(action)
-            self.method_actions[key] = action
-        method_menu.setToolTipsVisible(True)
+        self.method_actions = self._choice_menu(simulation, "&Method", (
+            ("warped", "&Modal warping (the paper)", "linear FEM modes made nonlinear by modal warping (Yang 2013)"),
+            ("linear", "&Linear modes", "the linear modal model, no warping"),
+            ("domains", "&Quadratic domains (StVK, seed 001; slow)",
+             "the successor's nonlinear StVK tongue on quadratic domains: tens of frames per second")),
+            self._method(), self.set_method)
+        self.size_actions = self._choice_menu(simulation, "Tongue &size", (
+            ("adult", "&Adult (the alignment's size when an adult's, else the generic one)",
+             "the size the rest sensors' alignment implies when it is an adult tongue's (half to twice the "
+             "model's volume), else the generic adult size with the sensors fitted onto its surface"),
+            ("alignment", "As the rest a&lignment scales it",
+             "the size the rest sensors' fit onto the model's placement rule implies, whatever it is "
+             "(tonguevis simulate --tongue-size alignment)"),
+            ("generic", "&Generic adult tongue (about 100 cm³)",
+             "the model's own size, turned and moved so the rest sensors lie on its upper surface "
+             "(tonguevis simulate --tongue-size 1)")),
+            self._tongue_size(), self.set_tongue_size)
         play = bar.addMenu("&Playback")
         self._action(play, "&Play / pause", lambda: self.state.toggle_playing(self), "Space")
         self._action(play, "Step &forward", lambda: self.state.step(1, self), "Right")
         self._action(play, "Step &back", lambda: self.state.step(-1, self), "Left")
         self._action(play, "&Loop current production", self.transport.loop.toggle, "L")
+
+    def _choice_menu(self, parent, title: str, items, current, choose) -> dict:
+        """A submenu ``title`` of ``parent`` with one checkable item per (key, text, tip) of ``items``, one
+        checked at a time (``current``'s); triggering one calls ``choose(key)``.  Returns {key: action}."""
+        menu = parent.addMenu(title)
+        group = QActionGroup(self)
+        actions = {}
+        for key, text, tip in items:
+            action = QAction(text, self)
+            action.setCheckable(True)
+            action.setToolTip(tip)
+            action.setChecked(key == current)
+            action.triggered.connect(lambda _checked=False, key=key: choose(key))
+            group.addAction(action)
+            menu.addAction(action)
+            actions[key] = action
+        menu.setToolTipsVisible(True)
+        return actions
 
     def _method(self) -> str:
         settings = self.state.run_settings
@@ -108,6 +126,22 @@ class MenusMixin:
         """Simulate with ``method`` ("warped", "linear" or "domains") from now on, and the open recording again."""
         self.state.change_run_settings(self, method=method, warping=method != "linear")
         self.method_actions[method].setChecked(True)
+        if self.session is not None:
+            self._simulate(self.session)
+
+    #: Simulation ▸ Tongue size: the menu's keys and the run settings' ``tongue_size``.
+    TONGUE_SIZES = {"adult": "adult", "alignment": None, "generic": 1.0}
+
+    def _tongue_size(self) -> str | None:
+        """The Tongue size menu's key of the run settings' size (None: a size no item names, e.g. 1.2)."""
+        size = self.state.run_settings.tongue_size
+        return next((key for key, value in self.TONGUE_SIZES.items() if value == size), None)
+
+    def set_tongue_size(self, key: str) -> None:
+        """Simulate at the tongue size ``key`` ("adult", "alignment" or "generic") from now on, and the open
+        recording again."""
+        self.state.change_run_settings(self, tongue_size=self.TONGUE_SIZES[key])
+        self.size_actions[key].setChecked(True)
         if self.session is not None:
             self._simulate(self.session)
 

@@ -41,6 +41,13 @@ from tonguevis.sim.modal import ModalBasis
 from tonguevis.sim.model import TongueModel
 
 FRAMES = ("speaker", "model")
+#: ``tongue_size=ADULT``: the size the rest alignment implies when it is an adult tongue's, else the generic
+#: adult size (the front ends' default, :class:`~tonguevis.workflows.settings.RunSettings`).
+ADULT = "adult"
+#: Tongue volumes, as multiples of the shipped model's (about 100 cm³, an adult's), taken for an adult's.
+#: The alignment's size falls well outside on the shared Opti-Speech speaker (4.4-6.6 times: coils
+#: spread wider than the paper's placement rule) and inside on the demo speakers and Haskins (0.9-1.4).
+ADULT_VOLUMES = (0.5, 2.0)
 
 
 def placement_key(transform, density_factor: float) -> str:
@@ -199,7 +206,10 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
     displacements are then the speaker's own (head- and jaw-corrected, metres), the transform
     the identity, and a speaker's palate needs no moving.
 
-    tongue_size : in the speaker frame, None (default): the model placed by T⁻¹ exactly, 1/s times its
+    tongue_size : in the speaker frame, ``"adult"`` (:data:`ADULT`): as None when the alignment's size is an
+        adult's (volume within :data:`ADULT_VOLUMES` of the model's), else as 1 (said in a warning;
+        ``fit["size_from"]`` says which: "alignment", "adult norm" or "given").
+        None (default): the model placed by T⁻¹ exactly, 1/s times its
         size (the model-frame motion exactly, seen in the speaker's units); on the Opti-Speech speaker
         that is a tongue of 430-650 cm³ (:func:`surface_fit` says why), and a placed tongue outside
         half to twice the model's volume is warned about.  A number: the speaker's tongue as that
@@ -225,6 +235,26 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
     prep = prepare_targets(recording, model, landmarks, rest, smooth_window)
     fit = prep.transform
     how, rule_scale = "rule nodes", fit.scale
+    size_from = "alignment"
+    if frame == "speaker" and isinstance(tongue_size, str):
+        if tongue_size != ADULT:
+            raise SimulationError(f"the tongue size must be a positive multiple of the model's, None or "
+                                  f"{ADULT!r}, got {tongue_size!r}", recording.metadata.get("file"))
+        volume = fit.scale ** -3
+        if ADULT_VOLUMES[0] <= volume <= ADULT_VOLUMES[1]:
+            tongue_size = None  # the alignment's size is an adult's: kept
+        else:
+            from tonguevis._logging import logger
+
+            logger.warning(
+                "%s: the rest alignment would make the tongue %.1f times the generic one's volume (the rest sensors "
+                "sit %s than the model's placement rule), which no adult tongue is: placed at the generic adult "
+                "size instead, the rest sensors fitted onto its upper surface (--tongue-size alignment keeps the "
+                "alignment's size)", recording.metadata.get("file", "recording"), volume,
+                "further apart" if volume > 1 else "closer together")
+            tongue_size, size_from = 1.0, "adult norm"
+    elif frame == "speaker" and tongue_size is not None:
+        size_from = "given"
     if frame == "speaker" and tongue_size is not None:
         if not (np.isfinite(tongue_size) and tongue_size > 0):
             raise SimulationError(f"the tongue size must be a positive multiple of the model's or None, got "
@@ -241,7 +271,7 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
     elif frame == "speaker":
         placement = fit.inverse()
         volume = placement.scale ** 3
-        if not 0.5 <= volume <= 2.0:
+        if not ADULT_VOLUMES[0] <= volume <= ADULT_VOLUMES[1]:
             from tonguevis._logging import logger
 
             logger.warning(
@@ -269,6 +299,7 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
     residual = 1e3 * np.linalg.norm(prep.aligned_rest - fitted, axis=1)
     info = {
         "frame": frame, "fitted_to": how, "tongue_size": None if frame == "model" else 1.0 / fit.scale,
+        **({"size_from": size_from} if frame == "speaker" else {}),
         "scale": fit.scale, "rotation": fit.rotation.tolist(), "translation_m": fit.translation.tolist(),
         "rule_node_scale": rule_scale,  # what the rest sensors' fit onto the rule nodes says
         "matrix": fit.matrix.tolist(), "midsagittal": bool(prep.midsagittal),
@@ -291,7 +322,9 @@ def describe_fit(fit: dict) -> str:
                    else "their nodes on its upper surface"))
     if fit["frame"] == "speaker":
         size = (f"at {1 / scale:.2f} x its size ({fit['model_volume_cm3']:.0f} cm³)"
-                + (", the rest sensors fitted onto its upper surface" if fit.get("fitted_to") == "upper surface"
+                + (", the generic adult size (the rest alignment's is no adult's), the rest sensors fitted onto "
+                   "its upper surface" if fit.get("size_from") == "adult norm"
+                   else ", the rest sensors fitted onto its upper surface" if fit.get("fitted_to") == "upper surface"
                    else ", as the rest alignment scales it"))
         if fit.get("rest_fit"):
             bent = fit["rest_fit"]

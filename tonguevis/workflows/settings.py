@@ -43,9 +43,10 @@ class RunSettings:
     backend : "warp" (compiled frame loop) or "numpy" (the reference).
     frame : "speaker" (the model placed in the speaker: every figure in the speaker's mm) or "model"
         (the speaker scaled onto the generic tongue, the paper's way); :mod:`tonguevis.sim.placement`.
-    tongue_size : in the speaker frame, None: the size the rest alignment implies (the model-frame
-        motion seen in the speaker's units); a multiple of the model's (1: the generic adult tongue,
-        the rest sensors fitted onto it).
+    tongue_size : in the speaker frame, "adult" (default): the size the rest alignment implies when it
+        is an adult tongue's, else the generic adult size (:data:`tonguevis.sim.placement.ADULT`);
+        None: the alignment's size whatever it is (the model-frame motion seen in the speaker's
+        units); a multiple of the model's (1: the generic adult tongue, the rest sensors fitted onto it).
     """
 
     mesh: str | None = None
@@ -59,7 +60,7 @@ class RunSettings:
     palate: str | None = None
     backend: str = "warp"
     frame: str = "speaker"
-    tongue_size: float | None = None
+    tongue_size: float | str | None = "adult"
     #: "warped", "linear" or "domains" (seed 001's StVK on quadratic domains); None: ``warping`` decides.
     method: str | None = None
     #: the volume kept: each frame projected onto volume-preserving shapes (:mod:`tonguevis.sim.volume`)
@@ -84,8 +85,12 @@ class RunSettings:
 
         if self.frame not in FRAMES:
             raise SimulationError(f"frame must be one of {', '.join(FRAMES)}, got {self.frame!r}")
-        if self.tongue_size is not None and not float(self.tongue_size) > 0:
-            raise SimulationError(f"the tongue size must be a positive multiple of the model's, got {self.tongue_size!r}")
+        from tonguevis.sim.placement import ADULT
+
+        if self.tongue_size is not None and self.tongue_size != ADULT and not (
+                isinstance(self.tongue_size, (int, float)) and float(self.tongue_size) > 0):
+            raise SimulationError(f"the tongue size must be a positive multiple of the model's, None or {ADULT!r}, "
+                                  f"got {self.tongue_size!r}")
         from tonguevis.sim.simulate import METHODS
 
         if self.method is not None and self.method not in METHODS:

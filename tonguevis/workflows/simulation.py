@@ -185,5 +185,6 @@ def shown_palate(recording, motion, model, palate):
         fit = motion.metadata.get("fit", {})  # none: saved before the speaker frame, in the model's
         placed, raised = placed_palate(recording, surface, model, landmarks=motion.metadata.get("landmarks", "speaker"),
                                        rest=rest_of(motion), frame=fit.get("frame", "model"),
-                                       tongue_size=fit.get("tongue_size"))
+                                       tongue_size=fit.get("tongue_size") if fit.get("fitted_to") == "upper surface"
+                                       else None)  # placed by the alignment: its size is recorded, not asked for
     return speaker_palate(placed, palate_label(surface), simulated=True, raised_mm=1e3 * raised)
