@@ -270,3 +270,30 @@ def test_the_adult_size_keeps_an_adult_alignment_and_replaces_one_no_adult_has(m
     assert generic.metadata["fit"]["size_from"] == "given"
     with pytest.raises(Exception, match="tongue size"):
         simulate(recording, model, modes=20, backend="numpy", tongue_size="large")
+
+
+def test_a_loaded_motion_draws_the_palate_where_its_simulation_placed_it(tmp_path):
+    """A motion saved and loaded has no palate of its own: the views place the speaker's palate again, and the
+    generic roof joined behind it follows the tongue.  Placed by the alignment, the motion records the size
+    the alignment implied; placing it again must not take that for a size asked for (a surface fit: another
+    placement, the roof joined elsewhere)."""
+    from tonguevis.palate import PalateSurface
+    from tonguevis.sim import TongueModel
+    from tonguevis.workflows import open_recording
+    from tonguevis.workflows.simulation import shown_palate
+
+    rec = open_recording("data/spk1_ta.tsv")
+    tongue = np.concatenate([v for k, v in rec.sensors.items() if k in ("TT", "TB", "TD", "TL", "TR")])
+    tongue = tongue[np.all(np.isfinite(tongue), axis=1)]
+    x = np.arange(tongue[:, 0].min() - 0.01, tongue[:, 0].max() + 0.01, 1e-3)
+    y = np.arange(tongue[:, 1].min() - 0.01, tongue[:, 1].max() + 0.01, 1e-3)
+    roof = PalateSurface(x, y, np.full((len(y), len(x)), tongue[:, 2].max() + 2e-3), metadata={"source": "flat roof"})
+    model = TongueModel.default()
+    motion = simulate(rec, model, modes=20, palate=roof, tongue_size=None)
+    assert motion.metadata["fit"]["fitted_to"] == "rule nodes"
+    motion.save(tmp_path / "m.npz")
+    loaded = Motion.load(tmp_path / "m.npz")
+    assert getattr(loaded, "palate", None) is None
+    simulated, again = (shown_palate(rec, m, model, roof) for m in (motion, loaded))
+    assert len(again.points) == len(simulated.points)
+    np.testing.assert_allclose(again.points, simulated.points, atol=1e-9)
