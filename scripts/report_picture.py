@@ -9,7 +9,7 @@ area, the frames where a sensor is within 1 mm of the palate and how many of the
 touching it), and the leave-one-sensor-out validation per held-out sensor beside the kinematic
 baseline (the interpolation of the other sensors).
 
-    python scripts/report_picture.py [--no-validate] [--tongue-size X] [--no-sensor-patches] [--fit-rest]
+    python scripts/report_picture.py [--no-validate] [--tongue-size X|adult|alignment] [--no-sensor-patches] [--fit-rest]
 
 Summary figures only: never commit per-sample output of the third-party recordings.
 Measured 2026-12-03 (default settings: speaker frame, sensors on the surface, compliant springs):
@@ -39,7 +39,7 @@ RECORDINGS = [
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--no-validate", action="store_true")
-    parser.add_argument("--tongue-size", type=float, default=None)
+    parser.add_argument("--tongue-size", default="adult", help="X, adult (the default) or alignment")
     parser.add_argument("--no-sensor-patches", action="store_true")
     parser.add_argument("--fit-rest", action="store_true", help="the rest shape fitted to the rest sensors")
     args = parser.parse_args(argv)
@@ -57,7 +57,9 @@ def main(argv=None) -> int:
     set_log_level("ERROR")
     palate = palate_from_traces(sorted(OPTI.glob("00[234]_*.tsv")))
     patches = None if args.no_sensor_patches else "default"
-    settings = RunSettings(sensor_patches=patches, tongue_size=args.tongue_size, rest_fit=args.fit_rest)
+    size = {"adult": "adult", "alignment": None}.get(args.tongue_size) if args.tongue_size in ("adult", "alignment") \
+        else float(args.tongue_size)
+    settings = RunSettings(sensor_patches=patches, tongue_size=size, rest_fit=args.fit_rest)
     model = build_model(settings)
     lost, runs = 0, 0
     for name, path, sensor_map, with_palate in RECORDINGS:
