@@ -118,18 +118,19 @@ def figures(motion, gap: tuple[float, float]) -> dict:
 
 
 def measure(path, sensors=SENSORS, seconds: float = 1.0, model=None, modes: int = 100,
-            sensor_patches: str | float | None = None) -> dict:
+            sensor_patches: str | float | None = None, tongue_size="adult") -> dict:
     """All runs of one recording: {"rest", "gap", "runs": {(sensor or None, "new"|"old"): figures or {"refused": msg}}}.
 
     ``sensor_patches`` None (default): the dynamics' own dropout handling, as docs/dropouts.md measured it
-    (the patches, the app's default, act after the dynamics and are measured apart)."""
+    (the patches, the app's default, act after the dynamics and are measured apart).  ``tongue_size`` as
+    :class:`~tonguevis.workflows.settings.RunSettings` (default: the adult size, every front end's)."""
     from tonguevis.errors import TonguevisError
     from tonguevis.sim import TongueModel
     from tonguevis.workflows import open_recording, simulate_recording
 
     model = model or TongueModel.default()
     recording = open_recording(path)
-    full = simulate_recording(recording, model, modes=modes, sensor_patches=sensor_patches)
+    full = simulate_recording(recording, model, modes=modes, sensor_patches=sensor_patches, tongue_size=tongue_size)
     rest = tuple(float(t) for t in full.metadata["rest"]["interval"])
     *gap, moved = gap_in_the_speech(recording, rest, seconds)
     runs = {(None, "new"): figures(full, gap)}
@@ -139,7 +140,8 @@ def measure(path, sensors=SENSORS, seconds: float = 1.0, model=None, modes: int 
             patch = released_at_once() if behaviour == "old" else contextlib.nullcontext()
             try:
                 with patch:
-                    motion = simulate_recording(lost, model, modes=modes, rest=rest, sensor_patches=sensor_patches)
+                    motion = simulate_recording(lost, model, modes=modes, rest=rest, sensor_patches=sensor_patches,
+                                                tongue_size=tongue_size)
             except TonguevisError as exc:
                 runs[(sensor, behaviour)] = {"refused": str(exc)}
                 continue

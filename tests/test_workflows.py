@@ -106,3 +106,17 @@ def test_the_app_finds_productions_as_the_workflow_does():
     expected = find_recording_productions(nodding, keep=None)  # the app marks every production
     assert [p.release for p in session.production_table] == [p.release for p in expected]
     assert len(expected) > len(find_recording_productions(nodding))  # more than the paper's 2nd-4th
+
+
+def test_simulate_recording_takes_every_run_setting_as_a_keyword():
+    """frame=, tongue_size=, rest_fit= ... change the run settings as modes= does (they went to simulate()
+    beside the settings' own and raised 'got multiple values')."""
+    from tonguevis.sim import TongueModel
+    from tonguevis.workflows import open_recording, simulate_recording
+
+    rec = open_recording(DEMO)
+    model = TongueModel.default()
+    in_model = simulate_recording(rec, model, modes=20, frame="model")
+    assert in_model.metadata["fit"]["frame"] == "model"
+    generic = simulate_recording(rec, model, modes=20, tongue_size=1.0, sensor_patches=None)
+    assert generic.metadata["fit"]["size_from"] == "given" and generic.metadata["fit"]["tongue_size"] == 1.0

@@ -59,12 +59,13 @@ def test_volume_and_peak_energy_stay_close_to_the_run_without_the_dropout(measur
 
 def test_with_the_sensors_on_the_surface_a_dropout_keeps_the_volume_and_flags_nothing():
     """The app's default (sensor patches): a 1 s TB dropout on the real /ka/ keeps the volume change far
-    under 1 % (measured 0.118 % against 0.078 % without the dropout: while TB is lost the other sensors'
-    patches close wider gaps) and no frame is flagged; the patch eases out and back in with its spring."""
+    under 1 % and no frame is flagged; the patch eases out and back in with its spring.  At the alignment's
+    size, where the dropout shows (measured 0.118 % against 0.078 % without it: while TB is lost the other
+    sensors' patches close wider gaps); at the default adult size the largest change (0.46 %) is elsewhere."""
     from tonguevis.sim import TongueModel
 
     result = _script().measure(shared_file(*RECORDINGS["ka-006"]), sensors=("TB",), model=TongueModel.default(),
-                               sensor_patches="default")
+                               sensor_patches="default", tongue_size=None)
     none, lost = result["runs"][(None, "new")], result["runs"][("TB", "new")]
     assert lost["released_frames"] == 100
     assert lost["volume_change_max_percent"] < 0.3 and lost["volume_change_max_percent"] <= 2 * none["volume_change_max_percent"]

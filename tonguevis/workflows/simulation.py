@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,7 +27,9 @@ from tonguevis.workflows.settings import RunSettings, build_model
 #: Frames sampled for the colour ranges of a preview (the whole motion samples up to frames.COLOUR_FRAMES).
 PREVIEW_COLOUR_FRAMES = 200
 #: simulate_recording's keywords that are settings of the run (the others go to tonguevis.sim.simulate as they are).
-_SETTING_NAMES = ("modes", "warping", "landmarks", "rest", "sensor_stiffness", "sensor_patches", "palate", "backend")
+#: Keywords of :func:`simulate_recording` that change its RunSettings (every field: given as keywords, the
+#: others went to ``simulate()`` beside the settings' own and clashed, e.g. ``tongue_size=`` or ``frame=``).
+_SETTING_NAMES = tuple(f.name for f in dataclasses.fields(RunSettings))
 
 
 def run_settings(settings: RunSettings | None = None, **changes: Any) -> RunSettings:
@@ -43,7 +46,8 @@ def simulate_recording(recording: Recording, model=None, settings: RunSettings |
 
     settings : a :class:`RunSettings` (default: ``tonguevis simulate``'s); any of its fields given
         as a keyword (``modes=``, ``warping=``, ``landmarks=``, ``rest=``, ``sensor_stiffness=``,
-        ``sensor_patches=``, ``palate=``, ``backend=``) overrides it.
+        ``sensor_patches=``, ``palate=``, ``backend=``, ``frame=``, ``tongue_size=``, ``method=``,
+        ``rest_fit=`` ...) overrides it.
     rest : None (the longest still interval, else the stillest window, with a warning), a
         (start_s, end_s) the user gave (checked: a bad one raises RecordingError naming the file
         and the problem), or a :class:`RestChoice` (used as is).
