@@ -79,3 +79,31 @@ def test_on_a_real_ka_every_frame_with_a_sensor_at_the_palate_has_the_tongue_tou
     assert held["frames"] and held["largest_move_mm"] <= 1e3 * TOUCH_REACH
     # the sensors are drawn where measured: the misfit says the hold, at most the reach
     assert motion.metadata["plausibility"]["sensor_misfit_max_mm"] <= 1e3 * TOUCH_REACH + 1e-9
+
+
+def test_the_raise_says_what_each_sensor_alone_would_call_for():
+    """A flat roof at z = 0; the front sensor never above it, the back one up to 5 mm above in half the
+    frames: raised 5 mm, and the summary says the sensors disagree (the roof left too high at the front)."""
+    from types import SimpleNamespace
+
+    from tonguevis.sim.plausibility import contact_line, raise_spread
+    from tonguevis.sim.simulate import _register_palate
+
+    x = y = np.linspace(-0.05, 0.05, 101)
+    roof = PalateSurface(x, y, np.zeros((101, 101)))
+    frames = 200
+    displacement = np.zeros((frames, 2, 3))
+    displacement[::2, 1, 2] = 0.006  # the back sensor 5 mm above the roof in every other frame
+    prep = SimpleNamespace(names=["TT", "TD"], aligned_rest=np.array([[0.02, 0.0, -0.001], [-0.02, 0.0, -0.001]]),
+                           displacement=displacement, jaw_offset=np.zeros((frames, 3)))
+    raised, shift = _register_palate(roof, prep, quiet=True)
+    assert shift == pytest.approx(0.005)
+    assert raised.metadata["raise_by_sensor_mm"] == {"TT": 0.0, "TD": pytest.approx(5.0)}
+    words = raise_spread(raised.metadata["raise_by_sensor_mm"])
+    assert "TD alone calls for 5.0 mm, TT for 0.0 mm" in words and "too high where TT is" in words
+    assert raise_spread({"TT": 1.0, "TD": 3.5}) == ""  # within 3 mm: nothing to say
+    summary = contact_line({"contact": {"penetration_max_mm": 0.0, "frames_in_contact": 0,
+                                           "contact_area_max_mm2": 0.0, "sensors_above_palate": {},
+                                           "palate_raised_mm": 5.0, "palate": {"raise_by_sensor_mm":
+                                                                               raised.metadata["raise_by_sensor_mm"]}}})
+    assert "palate raised 5.0 mm" in summary and "TD alone calls for 5.0 mm" in summary

@@ -113,4 +113,15 @@ def contact_line(metadata: dict) -> str:
         why = ("after the head references' registration" if registered else
                "no head references relate the traces to the speech: traced in another sitting?")
         text += f"; palate raised {c['palate_raised_mm']:.1f} mm to sit above where the sensors went ({why})"
+        text += raise_spread((c.get("palate") or {}).get("raise_by_sensor_mm") or {})
     return text
+
+
+def raise_spread(needs: dict) -> str:
+    """"; each sensor alone would call for ..." when the sensors disagree by over 3 mm, else ""."""
+    if len(needs) < 2 or max(needs.values()) - min(needs.values()) <= 3.0:
+        return ""
+    most, least = max(needs, key=needs.get), min(needs, key=needs.get)
+    return (f"; the sensors disagree: {most} alone calls for {needs[most]:.1f} mm, {least} for {needs[least]:.1f} mm "
+            "(a tilt between the sittings, or a soft palate the tongue lifts), so the roof is left too high where "
+            f"{least} is")

@@ -16,7 +16,7 @@ from tonguevis.errors import SimulationError
 from tonguevis.sim.constrained import RUNAWAY_ROTATION
 from tonguevis.sim.figures import frame_figures
 from tonguevis.sim.newmark import NewmarkSettings, integrate
-from tonguevis.sim.plausibility import ABSURD_AMPLIFICATION, ABSURD_VOLUME, plausibility_from_largest
+from tonguevis.sim.plausibility import ABSURD_AMPLIFICATION, ABSURD_VOLUME, plausibility_from_largest, raise_spread
 from tonguevis.sim.rest_fit import rest_fitted_model_of
 
 from tonguevis._logging import logger, verbose
@@ -713,7 +713,7 @@ def _contact_report(pen, contact_area, contact, schedule, times, sensor_depth, n
                       "first_s": float(times[schedule["conflicts"][0][0]]) if schedule["conflicts"] else None},
         "palate": {k: v for k, v in contact["palate"].metadata.items()
                    if k in ("rms_m", "source", "frame", "kept", "joined", "min_bend_radius_m", "bend_radius_m",
-                            "head_registration")},
+                            "head_registration", "raise_by_sensor_mm")},
         "palate_raised_mm": float(1e3 * contact.get("registration_shift_m", 0.0)),
         **({"sensors_held_to_palate": contact["held_to_palate"]} if "held_to_palate" in contact else {}),
     }
@@ -729,9 +729,21 @@ def _register_palate(palate, prep, percentile: float = 1.0, quiet: bool = False)
     palate, which no tongue does.  The sensors' positions over the whole
     recording (head frame) are the evidence: the palate is moved up along
     the model's z until all but ``percentile`` % of them are below it.
+
+    What each sensor alone would call for (its own ``percentile``, in mm; sensors with under 5 % of their
+    samples under the palate left out) goes into the palate's ``metadata["raise_by_sensor_mm"]``: a
+    raise set by one sensor while another needs far less (on OSN12: TD 9.6 mm, TT 1.8 mm) is a tilt
+    between the sittings or a soft palate the dorsum lifts, which a rigid raise cannot undo and which
+    leaves the front of the roof too high for the tip.
     """
     head = prep.aligned_rest[None] + prep.displacement + prep.jaw_offset[:, None]
     gap, _ = palate.clearance(head.reshape(-1, 3))
+    gap = gap.reshape(head.shape[:2])
+    needs = {}
+    for k, name in enumerate(prep.names):
+        own = gap[:, k][np.isfinite(gap[:, k])]
+        if len(own) >= 0.05 * len(gap) and len(own):
+            needs[name] = round(1e3 * max(0.0, -float(np.percentile(own, percentile))), 2)
     gap = gap[np.isfinite(gap)]
     if len(gap) == 0:
         return palate, 0.0
@@ -739,8 +751,9 @@ def _register_palate(palate, prep, percentile: float = 1.0, quiet: bool = False)
     if shift > 0:
         if not quiet:
             logger.warning("the palate lies %.1f mm below where the tongue sensors went: raised by that much "
-                           "(traced in another sitting?)", 1e3 * shift)
+                           "(traced in another sitting?)%s", 1e3 * shift, raise_spread(needs))
         palate = palate.transformed(np.eye(3), 1.0, np.array([0.0, 0.0, shift]))
+    palate.metadata["raise_by_sensor_mm"] = needs
     return palate, shift
 
 
