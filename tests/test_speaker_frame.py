@@ -247,7 +247,7 @@ def test_the_adult_size_keeps_an_adult_alignment_and_replaces_one_no_adult_has(m
     import logging
 
     from tests.sim.test_simulate import Recording
-    from tonguevis.sim.placement import describe_fit
+    from tonguevis.sim.placement import describe_fit, size_note
 
     recording = _recording(model)
     kept = simulate(recording, model, modes=20, backend="numpy", tongue_size="adult")
@@ -265,6 +265,8 @@ def test_the_adult_size_keeps_an_adult_alignment_and_replaces_one_no_adult_has(m
     assert adult.model.rest_volume == pytest.approx(model.rest_volume, rel=1e-9)
     assert "8.0 times the generic one's volume" in caplog.text and "--tongue-size alignment" in caplog.text
     assert "the generic adult size" in describe_fit(fit)
+    assert size_note(fit).startswith("tongue at the generic adult size: the rest sensors' spread would make it 8.0 times")
+    assert size_note(kept.metadata["fit"]) == ""
     generic = simulate(wide, model, modes=20, backend="numpy", tongue_size=1.0)  # the same as asking for 1
     np.testing.assert_array_equal(adult.q, generic.q)
     assert generic.metadata["fit"]["size_from"] == "given"

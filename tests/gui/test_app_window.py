@@ -331,6 +331,27 @@ def test_the_status_bar_says_how_believable_the_motion_is(qtbot, window):
     p = window.session.motion.metadata["plausibility"]
     assert "far-field amplification" in message and "sensor misfit" in message
     assert f"{p['amplification']:.2f}" in message and f"{p['volume_change_max_percent']:.2f} %" in message
+    assert window.statusBar().toolTip() == message  # whole there: the notes run past the bar's width
+
+
+def test_a_tongue_placed_at_the_adult_size_says_so_in_the_status(qtbot, window):
+    """The demo's sensors laid out 2.3 times wider apart, their motion unchanged (a tongue 12 times the
+    block's by the alignment): simulated at the generic size, and the status (and its tooltip) says why."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from tonguevis.workflows.session import make_session
+
+    session = demo_session(3.5, 5.8)
+    tongue = {k: v for k, v in session.recording.sensors.items() if k in ("TT", "TB", "TD", "TL", "TR")}
+    means = {k: np.nanmean(v, axis=0) for k, v in tongue.items()}
+    centre = np.mean(list(means.values()), axis=0)
+    spread = {k: v + 1.3 * (means[k] - centre) for k, v in tongue.items()}
+    wide = replace(session.recording, sensors={**session.recording.sensors, **spread})
+    show_and_simulate(qtbot, window, make_session(wide, session.path))
+    assert window.session.motion.metadata["fit"]["size_from"] == "adult norm"
+    assert "tongue at the generic adult size" in window.statusBar().toolTip()
 
 
 def test_the_window_fits_a_laptop_screen_with_every_tab(qtbot, window):

@@ -61,7 +61,7 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         self.export_job: Job | None = None  # the latest export or palate fit
         self.last_dialog = None
         self.feature_tabs: dict[str, QWidget] = {}
-        connected(self.state.events.status, lambda event: self.statusBar().showMessage(event.value))
+        connected(self.state.events.status, self._show_status)
         # The window's own reactions first: the time range is the new motion's before any view redraws.
         connected(self.state.events.session, self._session_opened)
         connected(self.state.events.motion, self._motion_ready)
@@ -360,6 +360,12 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
             f"{int((~motion.converged).sum())} not converged; press Space to play"
             + "".join(f"; {note}" for note in session.notes), self)
         self.simulation_finished.emit(True)
+
+    def _show_status(self, event) -> None:
+        """The status line, whole in its tooltip: the notes after a simulation (plausibility, contact, the
+        tongue's size) run past the bar's width."""
+        self.statusBar().showMessage(event.value)
+        self.statusBar().setToolTip(event.value)
 
     def _cancel_worker(self) -> None:
         if self.worker is not None:

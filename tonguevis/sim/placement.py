@@ -341,6 +341,16 @@ def describe_fit(fit: dict) -> str:
             f"not the speaker's); rest sensors {residual}")
 
 
+def size_note(fit: dict) -> str:
+    """A short line when the tongue is not at the size its rest alignment implies because that is no adult's
+    (``fit``: ``motion.metadata["fit"]``); "" otherwise."""
+    if fit.get("size_from") != "adult norm":
+        return ""
+    implied = float(fit.get("rule_node_scale", float("nan"))) ** -3
+    return (f"tongue at the generic adult size: the rest sensors' spread would make it {implied:.1f} times that "
+            "(Simulation ▸ Tongue size)")
+
+
 def modal_scale(model: Any) -> float:
     """k with q_model = k · q_source for the same shape (strain field): the modal coordinates of a placed
     model relative to its source's (φ' = Q_b φ / √(f c³) and lengths times c give k = c √(f c³)); 1 unplaced."""

@@ -184,6 +184,7 @@ class Session:
         from tonguevis.workflows import rest_of
 
         from tonguevis.io.recording import unstated_axes_note
+        from tonguevis.sim.placement import size_note
         from tonguevis.sim.plausibility import plausibility_status
 
         self.motion, self.frames, self.rest = motion, frames, rest_of(motion)
@@ -192,6 +193,7 @@ class Session:
         if "contact" in motion.metadata:
             self.notes.append(contact_note(motion))
         self.notes += [note] if (note := unstated_axes_note(self.recording, short=True)) else []
+        self.notes += [note] if (note := size_note(motion.metadata.get("fit", {}))) else []
         self._signals.pop("displacement", None)  # displacements are from this rest now
 
     def _rest(self, names: list[str]) -> dict[str, np.ndarray]:
