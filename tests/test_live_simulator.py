@@ -113,3 +113,31 @@ def test_stillest_window_finds_the_still_part():
     window = stillest_window(times, positions, 0.5)
     assert 120 <= window.start and window.stop <= 181
     assert stillest_window(times[:10], positions[:10], 0.5) is None
+
+
+def test_live_on_a_real_speaker_placed_at_the_adult_size_equals_the_replay():
+    """The Opti-Speech speaker's coils would make a tongue 5 times the model's: live mode, like the replay,
+    places the generic adult tongue with the rest sensors on its surface, and draws the same surface."""
+    from tests.conftest import shared_file
+    from tonguevis.sim.simulate import simulate
+
+    rec = open_recording(shared_file("ema", "optispeech", "006_OSN12_Kah_nofb_natural_take2_HR.tsv"))
+    positions, _, times = recording_frames(rec)
+    keep = slice(0, 600)
+    streamed = Recording(rate=rec.rate, times=times[keep],
+                         sensors={n: positions[keep, k] / 1000.0 for k, n in enumerate(rec.sensor_names)},
+                         metadata=dict(rec.metadata))
+    settings = RunSettings(modes=40)
+    sim = LiveSimulator(rec.sensor_names, settings, rate=rec.rate, dtype=np.float64)
+    for i in range(300):
+        sim.observe(times[i], positions[i])
+    sim.take_rest()
+    assert sim.fit["size_from"] == "adult norm" and sim.fit["tongue_size"] == 1.0
+    live = np.array([sim.step(positions[i]).surface.copy() for i in range(600)])  # the buffer is reused
+    rest = RestChoice((float(sim.rest_times[0]), float(sim.rest_times[-1])), "given")
+    motion = simulate(streamed, **{**settings.simulate_options(), "rest": rest})
+    assert motion.metadata["fit"]["size_from"] == "adult norm"
+    replay = motion.model.mesh.points[sim.surface_nodes][None] + motion.model.displacements(
+        motion.q, nodes=sim.surface_nodes)
+    assert np.abs(replay - replay[:1]).max() > 3e-3
+    assert np.abs(live - replay).max() < 1e-9
