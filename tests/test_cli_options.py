@@ -265,7 +265,7 @@ def test_batch_simulates_with_the_command_line_method(monkeypatch, tmp_path):
     assert default.step_settings("simulate")["sensor_patches"] == "default"
 
 
-@pytest.mark.parametrize("command", ["simulate", "segment", "energy", "validate", "morph", "batch", "view"])
+@pytest.mark.parametrize("command", ["simulate", "segment", "energy", "validate", "morph", "batch", "view", "live"])
 def test_the_tongue_size_is_the_adult_one_unless_told(command, tmp_path):
     """Every command that places the tongue in the speaker takes --tongue-size X|adult|alignment, "adult" by
     default (the alignment's size when an adult's, else the generic one); the app's --frame N (the
@@ -275,7 +275,7 @@ def test_the_tongue_size_is_the_adult_one_unless_told(command, tmp_path):
 
     given = {"segment": [DEMO, "--out", str(tmp_path / "s.vtu")], "batch": [DEMO, "--out", str(tmp_path)],
              "energy": [DEMO, "--csv", str(tmp_path / "e.csv")], "validate": [DEMO, "--json", str(tmp_path / "v.json")],
-             "morph": [f"{DEMO}@1.0", f"{DEMO}@2.0", "--out", str(tmp_path / "m.png")]}.get(command, [DEMO])
+             "morph": [f"{DEMO}@1.0", f"{DEMO}@2.0", "--out", str(tmp_path / "m.png")], "live": []}.get(command, [DEMO])
     parse = lambda *extra: build_parser().parse_args([command, *given, *extra])  # noqa: E731
     assert parse().tongue_size == "adult"
     assert parse("--tongue-size", "alignment").tongue_size is None

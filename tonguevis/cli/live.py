@@ -18,17 +18,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--palate", metavar="FILE", help="a palate file (`tonguevis palate`) drawn in the views")
     parser.add_argument("--modes", type=int, default=100, help="vibration modes of the live model (default 100, "
                                                               "the replay's)")
-    from tonguevis.cli._common import add_rest_fit_argument, add_sensor_patches_argument
+    from tonguevis.cli._common import add_frame_arguments, add_rest_fit_argument, add_sensor_patches_argument
 
     add_sensor_patches_argument(parser)  # the sensors on the surface, frame by frame, as in the replay
     add_rest_fit_argument(parser)  # the tongue bent onto the rest the clinician takes (its modes: about 2 s)
+    add_frame_arguments(parser)  # the tongue's size (the adult one by default), as the replay's
 
 
 def run(args) -> int:
     from tonguevis.cli.record import parse_address
     from tonguevis.workflows.settings import RunSettings
 
-    RunSettings(modes=args.modes, sensor_patches=args.sensor_patches, rest_fit=args.rest_fit)  # said before Qt
+    RunSettings(modes=args.modes, sensor_patches=args.sensor_patches, rest_fit=args.rest_fit, frame=args.frame,
+                tongue_size=args.tongue_size)  # said before Qt
     address = None
     if args.address:
         host, port = parse_address(args.address)  # a clear error for a bad HOST:PORT, before any window
@@ -46,4 +48,5 @@ def run(args) -> int:
     from tonguevis.gui.live_window import run_live  # the one way into Qt (pyproject's import contracts)
 
     return run_live(address, sensor_map=sensor_map, profile=profile, palate=args.palate, modes=args.modes,
-                    sensor_patches=args.sensor_patches, rest_fit=args.rest_fit)
+                    sensor_patches=args.sensor_patches, rest_fit=args.rest_fit, frame=args.frame,
+                    tongue_size=args.tongue_size)

@@ -939,16 +939,18 @@ class LiveWindow(QMainWindow):
 
 
 def run_live(address: str | None = None, sensor_map=None, profile=None, palate=None, modes: int = 100,
-             sensor_patches="default", rest_fit: bool = False) -> int:
+             sensor_patches="default", rest_fit: bool = False, frame: str = "speaker",
+             tongue_size="adult") -> int:
     """``tonguevis live``: the live window, connected to ``address`` ("HOST:PORT") at once when given;
     ``sensor_map`` : name -> NDI Id; ``profile`` : a Profile; ``palate`` : a palate file; ``sensor_patches``:
     as :class:`~tonguevis.workflows.settings.RunSettings` (the sensors on the surface); ``rest_fit``: the tongue
-    bent onto each rest taken (``--fit-rest``).  Runs until closed."""
+    bent onto each rest taken (``--fit-rest``); ``frame``, ``tongue_size``: as RunSettings'.  Runs until closed."""
     from tonguevis.gui.app import application, install_error_hook
     from tonguevis.live.source import WaveFrontSource
     from tonguevis.workflows.settings import RunSettings
 
-    settings = RunSettings(modes=modes, sensor_patches=sensor_patches, rest_fit=rest_fit)  # checked before any window
+    settings = RunSettings(modes=modes, sensor_patches=sensor_patches, rest_fit=rest_fit, frame=frame,
+                           tongue_size=tongue_size)  # checked before any window
     source = WaveFrontSource(*parse_source(address)) if address else None
     app = application()
     window = LiveWindow(source, sensor_names=sensor_map, settings=settings, profile=profile, palate=palate)
