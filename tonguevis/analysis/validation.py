@@ -101,7 +101,7 @@ def validate(
     progress: ProgressCallback | None = None,
     sensor_patches: float | None | str = None,
     frame: str = "speaker",
-    tongue_size: float | None = None,
+    tongue_size: float | str | None = None,
     keep_volume: bool = False,
     rest_fit: bool = False,
 ) -> ValidationResult:

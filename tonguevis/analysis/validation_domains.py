@@ -16,7 +16,7 @@ __all__ = ["held_out_domains"]
 
 def held_out_domains(recording, model=None, landmarks: str = "speaker", rest=None,
                      sensor_stiffness: float | None | str = "default", frame: str = "speaker",
-                     tongue_size: float | None = None, tolerance: float = 1e-7, cache: bool = True,
+                     tongue_size: float | str | None = None, tolerance: float = 1e-7, cache: bool = True,
                      keep_volume: bool = False) -> dict:
     """Leave-one-sensor-out with the domains method, as :func:`tonguevis.analysis.validate` does for the modal
     ones (which takes no method): per tongue sensor h, the domains seeded at the *other* sensors (the model

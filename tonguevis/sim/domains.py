@@ -753,7 +753,7 @@ def domains_model(model, domain_model: DomainModel):
 def simulate_domains(recording, model=None, landmarks: str = "speaker", rest=None,
                      smooth_window: int | None = None, tolerance: float = 1e-7,
                      sensor_stiffness: float | None | str = "default", backend: str = "warp", palate=None,
-                     progress=None, frame: str = "speaker", tongue_size: float | None = None, cache: bool = True,
+                     progress=None, frame: str = "speaker", tongue_size: float | str | None = None, cache: bool = True,
                      cubature: bool = False, scheme: str = "newton"):
     """:func:`tonguevis.sim.simulate` with ``method="domains"``: the same preparation (rest, alignment, frame),
     the same sensor constraints (the compliant projection of :func:`~tonguevis.sim.simulate.drive_schedule`

@@ -195,7 +195,7 @@ def in_model_frame(surface, model: Any):
 
 def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", landmarks: str = "speaker",
                      rest=None, smooth_window: int | None = None, keep_frequencies: bool = True,
-                     tongue_size: float | None = None, rest_fit: bool = False):
+                     tongue_size: float | str | None = None, rest_fit: bool = False):
     """The model and the sensor targets in ``frame``: (model, :class:`~tonguevis.preprocess.PreparedTargets`, fit).
 
     Both frames start alike: :func:`~tonguevis.preprocess.prepare_targets` fits the similarity T

@@ -47,7 +47,7 @@ def simulate(
     preview_seconds: float = 20.0,
     sensor_patches: float | None | str = None,
     frame: str = "speaker",
-    tongue_size: float | None = None,
+    tongue_size: float | str | None = None,
     method: str | None = None,
     rest_interval: RestChoice | tuple[float, float] | None = None,
     keep_volume: bool = False,
@@ -115,7 +115,8 @@ def simulate(
         model-frame motion exactly, in the speaker's units; 4.4-6.6 times the generic volume on the
         Opti-Speech speaker, whose coils sit further apart than the paper's rule, which is said);
         a number: the speaker's tongue as that multiple of the model's (1: the generic adult tongue),
-        the rest sensors fitted onto its upper surface (:func:`tonguevis.sim.placement.surface_fit`).
+        the rest sensors fitted onto its upper surface (:func:`tonguevis.sim.placement.surface_fit`);
+        "adult" (the front ends' default): the alignment's size when it is an adult tongue's, else 1.
 
     preview : called once, from the simulating thread, with the :class:`Motion` of the first
         ``preview_seconds`` s (a little more: whole segments) as soon as they are final, before
@@ -584,7 +585,7 @@ def shipped_tongue(model: TongueModel) -> bool:
 
 def placed_palate(recording: Recording, palate, model: TongueModel | None = None, landmarks: str = "speaker",
                   rest: RestChoice | tuple[float, float] | None = None, smooth_window: int | None = None,
-                  frame: str = "speaker", tongue_size: float | None = None):
+                  frame: str = "speaker", tongue_size: float | str | None = None):
     """The palate as :func:`simulate` places it for ``recording`` on ``model`` (unplaced, as given to
     :func:`simulate`): (surface in the motion's ``frame``, raised by m).
 
