@@ -37,9 +37,11 @@ RECORDINGS = [
 
 
 def main(argv=None) -> int:
+    from tonguevis.cli._common import _tongue_size_arg  # the commands' own reading of X|adult|alignment
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--no-validate", action="store_true")
-    parser.add_argument("--tongue-size", default="adult", help="X, adult (the default) or alignment")
+    parser.add_argument("--tongue-size", type=_tongue_size_arg, default="adult", help="X, adult (the default) or alignment")
     parser.add_argument("--no-sensor-patches", action="store_true")
     parser.add_argument("--fit-rest", action="store_true", help="the rest shape fitted to the rest sensors")
     args = parser.parse_args(argv)
@@ -57,9 +59,7 @@ def main(argv=None) -> int:
     set_log_level("ERROR")
     palate = palate_from_traces(sorted(OPTI.glob("00[234]_*.tsv")))
     patches = None if args.no_sensor_patches else "default"
-    size = {"adult": "adult", "alignment": None}.get(args.tongue_size) if args.tongue_size in ("adult", "alignment") \
-        else float(args.tongue_size)
-    settings = RunSettings(sensor_patches=patches, tongue_size=size, rest_fit=args.fit_rest)
+    settings = RunSettings(sensor_patches=patches, tongue_size=args.tongue_size, rest_fit=args.fit_rest)
     model = build_model(settings)
     lost, runs = 0, 0
     for name, path, sensor_map, with_palate in RECORDINGS:
