@@ -72,7 +72,7 @@ def run(name: str, path: Path, validate_too: bool, repeat: int = 3) -> dict:
     model = TongueModel.default()
     out = {"recording": name, "frames": int(rec.on_uniform_grid().n_samples), "rate_hz": float(rec.rate),
            "methods": {}}
-    from tonguevis.sim.domains import simulate_domains
+    from tonguevis.sim.domains_run import simulate_domains
 
     variants = {  # the domains' frame loops (simulate_domains scheme=...), the reference first
         "domains reference": lambda: simulate_domains(rec, model, scheme="reference"),

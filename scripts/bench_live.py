@@ -76,10 +76,13 @@ def main() -> int:
     rec = open_recording(args.file or DEMO_RECORDING, args.sensors, audio=False, labels=False)
     import tempfile
 
+    from tonguevis.sim.settings import RunSettings
+
     profiles = tempfile.mkdtemp(prefix="bench_live_")
     width, height = (int(v) for v in args.size.lower().split("x"))
     with ReplayServer(rec, loop=True) as server:
-        window = LiveWindow(WaveFrontSource("127.0.0.1", server.port), profiles_root=profiles, modes=args.modes)
+        window = LiveWindow(WaveFrontSource("127.0.0.1", server.port), profiles_root=profiles,
+                            settings=RunSettings(modes=args.modes))
         window.quiet = True
         if args.render_scale is not None and hasattr(window.plotter, "set_render_scale"):
             window.plotter.set_render_scale(args.render_scale)

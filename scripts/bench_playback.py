@@ -292,6 +292,7 @@ def main() -> int:
 
     from tonguevis.gui.app import application
     from tonguevis.gui.window import MainWindow
+    from tonguevis.sim.settings import RunSettings
 
     application()  # the QApplication must exist before any widget
     try:
@@ -299,8 +300,8 @@ def main() -> int:
     except Exception as exc:  # e.g. meshes/ not built yet
         print(f"model {args.model} not available ({exc}); using the ArtiSynth mesh")
         model, label, landmarks = load_model("artisynth")
-    window = MainWindow(settings=QSettings(str(Path("/tmp") / "tonguevis-bench.ini"), QSettings.Format.IniFormat),
-                        modes=args.modes)
+    window = MainWindow(preferences=QSettings(str(Path("/tmp") / "tonguevis-bench.ini"), QSettings.Format.IniFormat),
+                        run_settings=RunSettings(modes=args.modes))
     window.model, window.landmarks = model, landmarks
     if not args.no_tabs:
         from tonguevis.gui.tabs import add_feature_tabs

@@ -35,10 +35,11 @@ def main() -> int:
     from tonguevis.gui.app import application
     from tonguevis.gui.tabs import add_feature_tabs
     from tonguevis.gui.window import MainWindow
+    from tonguevis.sim.settings import RunSettings
 
     app = application()
-    window = MainWindow(settings=QSettings("/tmp/tonguevis-screenshots.ini", QSettings.Format.IniFormat),
-                        modes=args.modes)
+    window = MainWindow(preferences=QSettings("/tmp/tonguevis-screenshots.ini", QSettings.Format.IniFormat),
+                        run_settings=RunSettings(modes=args.modes))
     add_feature_tabs(window)
     window.resize(1600, 960)
     window.show()

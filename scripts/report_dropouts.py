@@ -123,7 +123,7 @@ def measure(path, sensors=SENSORS, seconds: float = 1.0, model=None, modes: int 
 
     ``sensor_patches`` None (default): the dynamics' own dropout handling, as docs/dropouts.md measured it
     (the patches, the app's default, act after the dynamics and are measured apart).  ``tongue_size`` as
-    :class:`~tonguevis.workflows.settings.RunSettings` (default: the adult size, every front end's)."""
+    :class:`~tonguevis.sim.settings.RunSettings` (default: the adult size, every front end's)."""
     from tonguevis.errors import TonguevisError
     from tonguevis.sim import TongueModel
     from tonguevis.workflows import open_recording, simulate_recording

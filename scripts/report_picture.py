@@ -53,7 +53,7 @@ def main(argv=None) -> int:
     from tonguevis.sim.simulate import TOUCH_REACH
     from tonguevis.workflows import open_recording
     from tonguevis.workflows.palate import palate_from_traces
-    from tonguevis.workflows.settings import RunSettings, build_model
+    from tonguevis.sim.settings import RunSettings, build_model
     from tonguevis.workflows.simulation import simulate_recording
 
     set_log_level("ERROR")

@@ -74,3 +74,61 @@ def test_export_video_is_in_a_qt_free_package():
 
     source = open(command.__file__).read()
     assert "tonguevis.gui" not in source
+
+
+def _import_cycles(edges: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan, iterative): each holds a cycle."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles = []
+    for root in sorted(edges):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(edges[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(edges.get(child, ())))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == node:
+                        break
+                if len(component) > 1:
+                    cycles.append(sorted(component))
+    return cycles
+
+
+def test_the_cycle_finder_finds_a_cycle_and_only_one():
+    edges = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}, "e": set()}
+    assert _import_cycles(edges) == [["a", "b", "c"]]
+    assert _import_cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_import_cycles_at_any_depth():
+    """No module reaches itself through its imports, counting every import: the module-level ones, those inside
+    functions and those under TYPE_CHECKING (issue 34: there were cycles in mesh/, between preprocess/ and sim/,
+    inside sim/, workflows/ and gui/)."""
+    every = grimp.build_graph("tonguevis", exclude_type_checking_imports=False)
+    modules = {m for m in every.modules if m.startswith("tonguevis")}
+    edges = {m: {i for i in every.find_modules_directly_imported_by(m) if i in modules} for m in modules}
+    assert _import_cycles(edges) == []

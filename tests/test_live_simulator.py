@@ -12,7 +12,7 @@ from tonguevis.paths import DEMO_RECORDING
 from tonguevis.preprocess.rest import RestChoice
 from tonguevis.sim.dropouts import engagement
 from tonguevis.workflows import open_recording
-from tonguevis.workflows.settings import RunSettings
+from tonguevis.sim.settings import RunSettings
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,7 @@ def test_live_frames_equal_the_replay(demo, rest_fit):
         live[i], sensors[i], q[i] = step.surface, step.sensor_points, step.q
         assert set(step.timings) == {"correct", "drive", "integrate", "reconstruct"}
     rest = RestChoice((float(sim.rest_times[0]), float(sim.rest_times[-1])), "given")
-    motion = simulate(streamed, **{**settings.simulate_options(), "rest": rest})  # sensors on the surface too
+    motion = simulate(streamed, settings, rest=rest)  # sensors on the surface too
     assert motion.metadata["dropouts"]["bridged_gaps"] == 0 and not motion.metadata["recovered_frames"]
     replay = motion.model.mesh.points[sim.surface_nodes][None] + motion.model.displacements(
         motion.q, nodes=sim.surface_nodes)
@@ -135,7 +135,7 @@ def test_live_on_a_real_speaker_placed_at_the_adult_size_equals_the_replay():
     assert sim.fit["size_from"] == "adult norm" and sim.fit["tongue_size"] == 1.0
     live = np.array([sim.step(positions[i]).surface.copy() for i in range(600)])  # the buffer is reused
     rest = RestChoice((float(sim.rest_times[0]), float(sim.rest_times[-1])), "given")
-    motion = simulate(streamed, **{**settings.simulate_options(), "rest": rest})
+    motion = simulate(streamed, settings, rest=rest)
     assert motion.metadata["fit"]["size_from"] == "adult norm"
     replay = motion.model.mesh.points[sim.surface_nodes][None] + motion.model.displacements(
         motion.q, nodes=sim.surface_nodes)

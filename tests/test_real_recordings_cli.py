@@ -114,9 +114,10 @@ def simulations(tmp_path_factory):
             path, options = real(name)
             folder = tmp_path_factory.mktemp(name)
             kept = {}
-            from tonguevis import workflows
+            import importlib
 
-            original = workflows.simulate_recording
+            workflows = importlib.import_module("tonguevis.sim.simulate")  # the module, not the function
+            original = workflows.simulate
 
             def spy(*args, **kwargs):
                 kept["motion"] = original(*args, **kwargs)
@@ -126,7 +127,7 @@ def simulations(tmp_path_factory):
             if name == "haskins":  # 262 frames: the VTK series is small enough to write
                 argv += ["--out", str(folder)]
             out = io.StringIO()
-            with contextlib.redirect_stdout(out), mock.patch.object(workflows, "simulate_recording", spy):
+            with contextlib.redirect_stdout(out), mock.patch.object(workflows, "simulate", spy):
                 code = main(argv)
             saved = folder / "motion.npz"
             if name != "haskins":

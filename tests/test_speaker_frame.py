@@ -39,7 +39,7 @@ def _same_modes(derived, solved, vals, mass):
 def test_the_placed_basis_is_the_eigen_solve_of_the_moved_mesh(keep_frequencies):
     model = bar_model(nx=6, sensors=SENSORS)
     m = 12
-    placed = model.placed(MOVE, keep_frequencies=keep_frequencies)
+    placed = PlacedModel(model, MOVE, keep_frequencies)
     derived = placed.basis(m, cache=False)
     phi, vals = _solved(placed, m)  # K and M assembled on the moved mesh, with its density
     np.testing.assert_allclose(derived.eigenvalues, vals, rtol=1e-8)
@@ -140,8 +140,9 @@ def test_morphing_across_frames_carries_the_shape_onto_the_source_tongue(model):
     from tonguevis.analysis.morph import morph_between
 
     recording = _recording(model)
-    in_speaker = simulate(recording, model, modes=20, backend="numpy", tongue_size=None)
-    in_model = simulate(recording, model, modes=20, backend="numpy", frame="model")
+    options = dict(modes=20, backend="numpy", sensor_patches=None)  # the modal shapes alone, in either frame
+    in_speaker = simulate(recording, model, tongue_size=None, **options)
+    in_model = simulate(recording, model, frame="model", **options)
     morph = morph_between(in_speaker, 2.5, in_model, 2.5)
     assert morph.model is in_speaker.model
     # equal to the Newton tolerance (1e-8 m on the sensors), not bit for bit: the two runs stop their iterations apart
@@ -204,8 +205,9 @@ def test_a_motion_carried_onto_another_placement_is_the_same_deformation(model):
     from tonguevis.sim.placement import carried
 
     recording = _recording(model)
-    in_speaker = simulate(recording, model, modes=20, backend="numpy", tongue_size=None)
-    in_model = simulate(recording, model, modes=20, backend="numpy", frame="model")
+    options = dict(modes=20, backend="numpy", sensor_patches=None)  # the modal shapes alone, in either frame
+    in_speaker = simulate(recording, model, tongue_size=None, **options)
+    in_model = simulate(recording, model, frame="model", **options)
     back = carried(in_speaker, model)
     assert back.model is model
     extent = np.ptp(model.mesh.points, axis=0).max()
@@ -213,7 +215,7 @@ def test_a_motion_carried_onto_another_placement_is_the_same_deformation(model):
         np.testing.assert_allclose(back.deformed_points(frame), in_model.deformed_points(frame), atol=1e-7 * extent)
     np.testing.assert_allclose(back.targets, in_model.targets, atol=1e-9)
     np.testing.assert_allclose(back.energy, in_model.energy, rtol=1e-4, atol=1e-4 * in_model.energy.max())
-    other = simulate(_recording(model, raise_m=0.01), model, modes=20, backend="numpy")  # another fit
+    other = simulate(_recording(model, raise_m=0.01), model, tongue_size=None, **options)  # another fit
     assert not np.allclose(other.model.mesh.points, in_speaker.model.mesh.points)
     comparison = Comparison(in_speaker, other, "absolute")
     assert comparison.same_mesh
@@ -229,12 +231,12 @@ def test_an_implausible_placed_size_is_warned_about(model, caplog):
 
     recording = _recording(model)
     with caplog.at_level(logging.WARNING, logger="tonguevis"):
-        simulate(recording, model, modes=20, backend="numpy")
+        simulate(recording, model, modes=20, backend="numpy", tongue_size=None)  # the alignment's size
     assert "times the generic one's volume" not in caplog.text
     wide = Recording(rate=recording.rate, times=recording.times,
                      sensors={k: 2.3 * v for k, v in recording.sensors.items()}, metadata=dict(recording.metadata))
     with caplog.at_level(logging.WARNING, logger="tonguevis"):
-        motion = simulate(wide, model, modes=20, backend="numpy")
+        motion = simulate(wide, model, modes=20, backend="numpy", tongue_size=None)
     assert "8.0 times the generic one's volume" in caplog.text and "--tongue-size 1" in caplog.text and "tongue_size=1" in caplog.text
     assert motion.metadata["fit"]["model_volume_cm3"] == pytest.approx(8 * 1e6 * model.rest_volume, rel=1e-6)
 

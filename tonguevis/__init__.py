@@ -17,6 +17,7 @@ _LAZY = {
     "ModalBasis": "tonguevis.sim",
     "Motion": "tonguevis.sim",
     "simulate": "tonguevis.sim",
+    "RunSettings": "tonguevis.sim",
 }
 
 __all__ = ["__version__", *_LAZY]

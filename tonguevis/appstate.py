@@ -36,7 +36,7 @@ of several slots changed, where there are several):
 ``motions``       the motions the analyses can use changed (value: {name: Motion})
 ``morph_ends``    the morph's ``key`` end (one of :data:`MORPH_ENDS`) is ``(recording name, time_s)``
 ``tongue_model``  the tongue model every simulation uses (value: the model or None: built on need)
-``run_settings``  how the app simulates (value: a :class:`tonguevis.workflows.settings.RunSettings`)
+``run_settings``  how the app simulates (value: a :class:`tonguevis.sim.settings.RunSettings`)
 ``status``        a line for the status bar (str); sent every time, even when the text repeats
 ``frame_drawn``   a 3D view drew the motion's frame ``value`` (int; ``source`` is the view): what
                   another view draws in step with it (the compare panel's B, its difference colours)
@@ -154,7 +154,7 @@ class AppState:
         self._motions: dict[str, Any] = {}
         self._morph_ends: dict[str, tuple[str, float] | None] = {end: None for end in MORPH_ENDS}
         self._tongue_model: Any = None
-        from tonguevis.workflows.settings import RunSettings
+        from tonguevis.sim.settings import RunSettings
 
         self._run_settings = RunSettings()
         self._status = ""
@@ -420,7 +420,7 @@ class AppState:
     # -- how the app simulates ----------------------------------------------------------
     @property
     def run_settings(self):
-        """The :class:`~tonguevis.workflows.settings.RunSettings` every simulation of the app uses."""
+        """The :class:`~tonguevis.sim.settings.RunSettings` every simulation of the app uses."""
         return self._run_settings
 
     def set_run_settings(self, settings, source: Any = None) -> None:

@@ -8,6 +8,8 @@ from pathlib import Path
 PACKAGE_DIR = Path(__file__).resolve().parent
 REPO_DIR = PACKAGE_DIR.parent
 MESH_DIR = REPO_DIR / "meshes"
+#: The shipped tongue (``scripts/build_meshes.py``): :func:`tonguevis.mesh.default.load_default_mesh` reads it.
+SHIPPED_TONGUE = MESH_DIR / "tongue.vtu"
 DATA_DIR = REPO_DIR / "data"
 #: The demo plain ``tonguevis`` opens: speaker 1's synthetic /ta/ train with its sound
 #: (the tongue tip's closure against the ridge is the clearest first look at the model).

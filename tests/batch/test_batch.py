@@ -185,7 +185,7 @@ def test_a_bad_file_among_good_ones(corpus, tmp_path, monkeypatch, capsys):
     for name in ("spk1_ta.tsv", "spk1_ta.wav", "spk2_ka.tsv", "spk2_ka.wav", "sensor_map.json"):
         shutil.copy(corpus / name, folder / name)
     (folder / "spk9_ta.tsv").write_text("this is not an NDI Wave export\n1\t2\n")
-    monkeypatch.setattr(batch_cli, "load_model", lambda args: (box_tongue(), None))
+    monkeypatch.setattr(batch_cli, "load_model", lambda args: box_tongue())
     out = tmp_path / "out"
     code = main(["batch", str(folder), "--out", str(out), "--steps", "simulate,energy", *CLI_MODEL])
     printed = capsys.readouterr().out.splitlines()

@@ -7,6 +7,8 @@ demo in about a second; 20 modes keep it quick.
 
 from __future__ import annotations
 
+from tonguevis.sim.settings import RunSettings
+
 from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
@@ -94,7 +96,7 @@ def settings(tmp_path):
 def window(qtbot, settings, model):
     from tonguevis.gui.window import MainWindow
 
-    win = MainWindow(settings=settings, modes=MODES)
+    win = MainWindow(preferences=settings, run_settings=RunSettings(modes=MODES))
     win.model = model
     win.landmarks = "rule"  # the block's own sensor nodes
     qtbot.addWidget(win)

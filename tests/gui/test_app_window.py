@@ -192,7 +192,7 @@ def test_recent_files_remembered(qtbot, window, tmp_path):
 
     if DEMO.exists():
         window.open_recording(DEMO)
-        window._cancel_worker()
+        window.controller.stop("primary")
         assert window.recent_files()[0] == str(DEMO.resolve())
         assert window.recent_menu.actions()[0].text() == str(DEMO.resolve())
 

@@ -9,6 +9,7 @@ pytest.importorskip("PySide6")
 
 from tonguevis.analysis.energy import EnergyCurve  # noqa: E402
 from tonguevis.appstate import AppState  # noqa: E402
+from tonguevis.sim.settings import RunSettings  # noqa: E402
 
 pytestmark = [pytest.mark.gui, pytest.mark.timeout(120)]
 
@@ -108,7 +109,7 @@ def test_add_recordings_simulates_in_the_background(qtbot):
     from tonguevis.gui.energy_tab import EnergyTab
     from tonguevis.paths import DATA_DIR
 
-    widget = EnergyTab(model_provider=box_tongue, simulate_options={"modes": MODES, "landmarks": "rule"})
+    widget = EnergyTab(model_provider=box_tongue, settings=RunSettings(modes=MODES, landmarks="rule"))
     qtbot.addWidget(widget)
     loaded = []
     widget.motionsLoaded.connect(loaded.append)

@@ -4,6 +4,8 @@ the model only."""
 
 from __future__ import annotations
 
+from tonguevis.sim.settings import RunSettings
+
 import threading
 import time
 
@@ -126,25 +128,29 @@ def test_a_bug_in_a_job_is_a_dialog_too_and_the_window_keeps_it(qtbot, window):
 
 
 class _Threads:
-    """Records which thread assigns the window's attributes and writes the app model."""
+    """Records which thread assigns the window's (and its simulation controller's) attributes and writes the
+    app model."""
 
     def __init__(self, monkeypatch):
         from tonguevis.appstate import AppState
+        from tonguevis.gui.controller import SimulationController
         from tonguevis.gui.window import MainWindow
 
         self.window_sets: list[tuple[str, bool]] = []
         self.events: list[tuple[str, bool]] = []
         set_attribute, emit = MainWindow.__setattr__, AppState._emit
+        set_controller = SimulationController.__setattr__
 
         def recording_setattr(obj, name, value):
             self.window_sets.append((name, threading.current_thread() is threading.main_thread()))
-            set_attribute(obj, name, value)
+            (set_controller if isinstance(obj, SimulationController) else set_attribute)(obj, name, value)
 
         def recording_emit(state, name, value, source, key=None):
             self.events.append((name, threading.current_thread() is threading.main_thread()))
             emit(state, name, value, source, key)
 
         monkeypatch.setattr(MainWindow, "__setattr__", recording_setattr)
+        monkeypatch.setattr(SimulationController, "__setattr__", recording_setattr)
         monkeypatch.setattr(AppState, "_emit", recording_emit)
 
     def off_the_gui_thread(self) -> list:
@@ -160,11 +166,14 @@ def test_models_are_built_in_the_job_and_handed_back_to_the_gui_thread(qtbot, wi
 
     built: list[bool] = []
 
-    def build_model(mesh_path=None):
+    def build_model(settings=None):
         built.append(threading.current_thread() is threading.main_thread())
         return block_model()
 
-    monkeypatch.setattr(simulation, "build_model", build_model)
+    import tonguevis.sim.settings as settings_module
+
+    monkeypatch.setattr(simulation, "build_model", build_model)  # the one way a model is built, where it is used
+    monkeypatch.setattr(settings_module, "build_model", build_model)
     threads = _Threads(monkeypatch)
     window.model = None  # nothing built yet: the job builds it
     models = []
@@ -175,13 +184,12 @@ def test_models_are_built_in_the_job_and_handed_back_to_the_gui_thread(qtbot, wi
 
     # handed back and kept (the motion's own is that model placed in the speaker)
     assert window.model is models[-1] is source_model(window.session.motion.model)
-    names = {name for name, _ in threads.window_sets}
-    assert "worker" in names  # the recorder saw the window's own assignments
+    assert ("motion", True) in threads.events  # the recorder saw the motion announced (on the GUI thread)
     assert threads.off_the_gui_thread() == []
 
     # The Energy tab's corpus: the model it builds is handed back to the app model, the same way.
     window.model = None
-    tab = EnergyTab(window.state, simulate_options={"modes": MODES, "landmarks": "rule"})
+    tab = EnergyTab(window.state, settings=RunSettings(modes=MODES, landmarks="rule"))
     window.register_tab("Energy", tab)
     with qtbot.waitSignal(tab.motionsLoaded, timeout=120000):
         tab.load_paths([DEMO])
@@ -194,7 +202,7 @@ def test_the_energy_tab_cancels_its_corpus(qtbot, window):
     from tests.gui.conftest import DEMO
     from tonguevis.gui.energy_tab import EnergyTab
 
-    tab = EnergyTab(window.state, simulate_options={"modes": MODES, "landmarks": "rule"})
+    tab = EnergyTab(window.state, settings=RunSettings(modes=MODES, landmarks="rule"))
     window.register_tab("Energy", tab)
     tab.load_paths([DEMO])
     assert not tab.cancel_button.isHidden() and not tab.add_button.isEnabled()

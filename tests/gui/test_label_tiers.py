@@ -108,4 +108,4 @@ def test_window_shows_the_recordings_tiers(qtbot, window):
     window.show_session(make_session(rec))
     assert window.audio.n_tiers == 3
     assert "birch" in {t.get_text() for t in window.audio.tiers_ax.texts}
-    window._cancel_worker()
+    window.controller.stop("primary")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from tonguevis.sim.settings import RunSettings
+
 import pytest
 
 pytestmark = [pytest.mark.gui, pytest.mark.timeout(240)]
@@ -30,12 +32,12 @@ def test_fit_the_tongue_to_the_rest_sensors_resimulates_with_the_rest_shape_fitt
     assert "rest_fit" not in window.session.motion.metadata["fit"]
     before = window.session.motion.metadata["fit"]["residual_rms_mm"]
     with qtbot.waitSignal(window.simulation_finished, timeout=120000) as blocker:
-        window.rest_fit_action.setChecked(True)
+        window.rest_fit_action.trigger()
     assert blocker.args == [True] and window.state.run_settings.rest_fit
     fit = window.session.motion.metadata["fit"]
     assert fit["rest_fit"]["sensors_before_rms_mm"] == pytest.approx(before) and fit["residual_rms_mm"] < 1e-9
     with qtbot.waitSignal(window.simulation_finished, timeout=120000):
-        window.rest_fit_action.setChecked(False)
+        window.rest_fit_action.trigger()
     assert "rest_fit" not in window.session.motion.metadata["fit"]
 
 
@@ -62,9 +64,42 @@ def test_the_app_opens_at_the_size_the_command_line_gives(qtbot, settings):
     """``tonguevis view --tongue-size 1``: the run settings and the Tongue size menu say so before anything runs."""
     from tonguevis.gui.app import create_window
 
-    window = create_window(settings=settings, modes=20, feature_tabs=False, tongue_size=1.0)
+    window = create_window(settings=RunSettings(modes=20, tongue_size=1.0), preferences=settings, feature_tabs=False)
     qtbot.addWidget(window)
     assert window.state.run_settings.tongue_size == 1.0 and window.size_actions["generic"].isChecked()
     qtbot.waitUntil(lambda: window.session is not None and window.session.motion is not None, timeout=120000)
     assert window.session.motion.metadata["fit"]["tongue_size"] == 1.0
     window.close()
+
+
+def test_the_app_follows_its_model_whoever_changes_the_settings(qtbot, window):
+    """Issue 34: a run setting changed by a script (not a menu) re-simulates the open recording through the
+    controller, and the menus' check marks follow the same event (no check mark set by hand)."""
+    from tests.gui.conftest import demo_session, show_and_simulate
+
+    show_and_simulate(qtbot, window, demo_session(3.5, 4.5))
+    first = window.session.motion
+    assert window.patches_action.isChecked() and not window.rest_fit_action.isChecked()
+    with qtbot.waitSignal(window.simulation_finished, timeout=120000) as blocker:
+        window.state.change_run_settings(None, sensor_patches=None, method="linear", tongue_size=1.0)
+    assert blocker.args == [True] and window.session.motion is not first
+    assert not window.session.motion.warping and "sensor_patches" not in window.session.motion.metadata
+    assert not window.patches_action.isChecked() and window.method_actions["linear"].isChecked()
+    assert window.size_actions["generic"].isChecked() and not window.size_actions["adult"].isChecked()
+    assert not window.controller.jobs["primary"].isRunning()  # done, nothing left running
+
+
+def test_a_palate_tried_becomes_the_apps_only_when_it_simulates(qtbot, window):
+    """File ▸ Load palate: the controller simulates against it and writes it to the model once that succeeded,
+    without a second simulation."""
+    from tests.gui.conftest import demo_session, show_and_simulate
+
+    show_and_simulate(qtbot, window, demo_session(3.5, 4.5))
+    started = []
+    original = window.controller.simulate
+    window.controller.simulate = lambda *a, **kw: started.append(a) or original(*a, **kw)
+    with qtbot.waitSignal(window.simulation_finished, timeout=120000):
+        window.use_generic_palate()
+    assert window.palate == "generic" and window.session.motion.penetration is not None
+    qtbot.wait(300)
+    assert len(started) == 1  # the settings event the controller wrote itself did not simulate again

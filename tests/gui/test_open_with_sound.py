@@ -63,7 +63,7 @@ def test_open_with_sound_and_labels_from_the_file_menu(qtbot, window, tmp_path):
     assert session.recording.audio.rate == 16000
     assert [lab.text for lab in session.recording.labels] == ["ta", "ta"]
     assert window.audio.n_tiers == 1
-    window._cancel_worker()
+    window.controller.stop("primary")
 
 
 def test_a_missing_sound_file_is_an_error_dialog(qtbot, window, tmp_path):
@@ -79,20 +79,20 @@ def test_view_command_passes_audio_and_labels(monkeypatch, tmp_path):
     seen = {}
     monkeypatch.setattr(app, "run_view", lambda *args, **kw: seen.update(kw) or 0)
     assert main(["view", str(tmp_path / "take.csv"), "--audio", "a.wav", "--labels", "b.TextGrid"]) == 0
-    assert seen["audio"] == Path("a.wav") and seen["labels"] == Path("b.TextGrid")
+    assert seen["reading"]["audio"] == Path("a.wav") and seen["reading"]["labels"] == Path("b.TextGrid")
 
 
 def test_create_window_opens_with_the_given_sound(qtbot, tmp_path, settings):
     from tonguevis.gui.app import create_window
 
     recording, wav, grid = files(tmp_path)
-    window = create_window(recording, settings=settings, feature_tabs=False, audio=wav, labels=grid)
+    window = create_window(recording, preferences=settings, feature_tabs=False, reading={"audio": wav, "labels": grid})
     qtbot.addWidget(window)
     try:
         assert window.session.recording.metadata["audio_file"] == str(wav)
         assert window.session.recording.metadata["labels_file"] == str(grid)
     finally:
-        window._cancel_worker()
+        window.controller.stop("primary")
         window.close()
 
 

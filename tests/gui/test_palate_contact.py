@@ -129,7 +129,7 @@ def test_a_speakers_palate_is_placed_exactly_as_the_simulation_placed_it(qtbot, 
     """A palate in the recording's frame: the views draw the surface simulate() used, from the same core function."""
     import importlib
 
-    simulate_module = importlib.import_module("tonguevis.sim.simulate")  # (tonguevis.sim.simulate is also the function)
+    simulate_module = importlib.import_module("tonguevis.sim.palate_placement")  # where the simulation places it
     session = show_and_simulate(qtbot, window, demo_session())
     rec = session.recording
     tt = rec.sensors["TT"]
@@ -372,12 +372,12 @@ def test_sensors_on_the_surface_from_the_simulation_menu(qtbot, window):
     assert session.motion.metadata["sensor_patches"]["shapes"] == 3 * len(session.motion.sensor_nodes)
     assert np.nanmax(session.motion.sensor_residual) < 1e-9
     with qtbot.waitSignal(window.simulation_finished, timeout=60000) as blocker:
-        window.patches_action.setChecked(False)
+        window.patches_action.trigger()
     assert blocker.args == [True] and window.sensor_patches is None
     assert "sensor_patches" not in window.session.motion.metadata
     assert np.nanmax(window.session.motion.sensor_residual) > 1e-4  # the modes alone leave a gap
     with qtbot.waitSignal(window.simulation_finished, timeout=60000):
-        window.patches_action.setChecked(True)
+        window.patches_action.trigger()
     motion = window.session.motion
     assert motion.metadata["sensor_patches"]["shapes"] == 3 * len(motion.sensor_nodes)
     assert np.nanmax(motion.sensor_residual) < 1e-9

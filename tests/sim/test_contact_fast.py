@@ -54,7 +54,7 @@ def demo():
     from tonguevis.paths import DATA_DIR
     from tonguevis.sim import TongueModel
     from tonguevis.sim.placement import targets_in_frame
-    from tonguevis.sim.simulate import _contact_context
+    from tonguevis.sim.simulate import contact_context
 
     rec = read_recording(DATA_DIR / "spk1_ta.tsv", sensor_map=DATA_DIR / "sensor_map.json").on_uniform_grid()
     model, prep, _ = targets_in_frame(rec, TongueModel.default(), "speaker", "speaker", None, None, tongue_size=1.0)
@@ -63,7 +63,7 @@ def demo():
     s = len(prep.nodes)
     phi_s = basis.phi[dofs].reshape(s, 3, -1)
     w_s = model.rotation_matrix(basis)[dofs].reshape(s, 3, -1)
-    return rec, model, prep, basis, phi_s, w_s, _contact_context("generic", prep, model, basis, rec)
+    return rec, model, prep, basis, phi_s, w_s, contact_context("generic", prep, model, basis, rec)
 
 
 def both_backends(demo, palate, sensor_stiffness):
@@ -71,7 +71,7 @@ def both_backends(demo, palate, sensor_stiffness):
     from tonguevis.sim.constrained import point_stiffness
     from tonguevis.sim.newmark import NewmarkSettings
     from tonguevis.sim.newmark_kernel import integrate_compiled
-    from tonguevis.sim.simulate import _keep_below_palate, drive_schedule
+    from tonguevis.sim.simulate import keep_below_palate, drive_schedule
 
     rec, model, prep, basis, phi_s, w_s, context = demo
     settings = NewmarkSettings(dt=1 / rec.rate, alpha=model.material.alpha, beta=model.material.beta)
@@ -85,7 +85,7 @@ def both_backends(demo, palate, sensor_stiffness):
         if backend == "numpy":  # the same dynamics for both: only the contact differs
             q = integrate_compiled(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance,
                                    external=schedule["external"], rates=False).q
-        corrected, frames = _keep_below_palate(q, contact, schedule, basis, phi_s, base)
+        corrected, frames = keep_below_palate(q, contact, schedule, basis, phi_s, base)
         out[backend] = targets, schedule, corrected, frames
     return out["numpy"], out["warp"]
 

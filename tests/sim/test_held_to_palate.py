@@ -61,7 +61,7 @@ def test_the_jaw_offset_is_where_the_palate_is_asked():
 def test_on_a_real_ka_every_frame_with_a_sensor_at_the_palate_has_the_tongue_touching_it(tmp_path):
     from tonguevis.workflows import open_recording
     from tonguevis.workflows.palate import palate_from_traces
-    from tonguevis.workflows.settings import RunSettings, build_model
+    from tonguevis.sim.settings import RunSettings, build_model
     from tonguevis.workflows.simulation import simulate_recording
 
     traces = sorted(OPTI.glob("00[234]_*.tsv"))

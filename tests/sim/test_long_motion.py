@@ -22,7 +22,8 @@ def demo():
 
     rec = read_recording(DATA_DIR / "spk1_ta.tsv")
     model = TongueModel.default()
-    motion = simulate(rec, model, sensor_stiffness=None, frame="model")  # the checks below rebuild it in this frame
+    # the checks below rebuild it in this frame, from the modes alone
+    motion = simulate(rec, model, sensor_stiffness=None, frame="model", sensor_patches=None)
     return model, motion, prepare_targets(rec, model)
 
 

@@ -50,7 +50,8 @@ def test_segments_beside_the_figures_equal_one_launch_then_the_figures(demo, mon
 
     recording, model = demo
     monkeypatch.setattr(pipeline, "SEGMENT_FRAMES", 250)  # 8 segments, the last one short
-    motion = simulate(recording, model, frame="model")  # one_launch prepares the targets in the model frame
+    # one_launch prepares the targets in the model frame, and runs the modes alone
+    motion = simulate(recording, model, frame="model", sensor_patches=None)
     result, figures = one_launch(recording, model, motion)
     assert motion.n_frames > 7 * 250
     assert not motion.metadata["recovered_frames"]  # so q is the integration's own, frame for frame

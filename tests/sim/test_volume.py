@@ -27,12 +27,12 @@ def demo():
 
 @pytest.fixture(scope="module")
 def linear(model, demo):
-    return simulate(demo, model, modes=40, method="linear")
+    return simulate(demo, model, modes=40, method="linear", sensor_patches=None)  # the modes alone
 
 
 @pytest.fixture(scope="module")
 def kept(model, demo):
-    return simulate(demo, model, modes=40, method="linear", keep_volume=True)
+    return simulate(demo, model, modes=40, method="linear", keep_volume=True, sensor_patches=None)
 
 
 def test_tet_volumes_and_their_gradients():
@@ -107,7 +107,7 @@ def test_volume_before_and_after_on_the_demo(linear, kept):
 
 @pytest.mark.parametrize("method", ["linear", "warped"])
 def test_the_subspace_path_equals_the_full_space_one(model, demo, linear, method):
-    motion = linear if method == "linear" else simulate(demo, model, modes=40, method="warped")
+    motion = linear if method == "linear" else simulate(demo, model, modes=40, method="warped", sensor_patches=None)
     basis = motion.model.basis(40)
     rotation = motion.model.rotation_matrix(basis) if motion.warping else None
     held = held_nodes(motion.model, motion.sensor_nodes)
@@ -156,13 +156,12 @@ def test_every_method_keeps_it_on_a_short_stretch(model, demo, tmp_path):
 def test_the_settings_and_the_command_line_pass_it_on():
     import argparse
 
-    from tonguevis.cli._common import add_model_arguments, run_settings_of
-    from tonguevis.workflows.settings import RunSettings
+    from tonguevis.cli._common import add_run_arguments, run_settings_of
+    from tonguevis.sim.settings import RunSettings
 
-    assert RunSettings(keep_volume=True).simulate_options()["keep_volume"] is True
-    assert RunSettings().simulate_options()["keep_volume"] is False
+    assert RunSettings(keep_volume=True).keep_volume is True and RunSettings().keep_volume is False
     parser = argparse.ArgumentParser()
-    add_model_arguments(parser)
+    add_run_arguments(parser)
     assert run_settings_of(parser.parse_args(["--keep-volume"])).keep_volume is True
     assert run_settings_of(parser.parse_args([])).keep_volume is False
 
@@ -178,7 +177,7 @@ def test_batch_settings_carry_it_into_the_simulation_and_its_cache_key():
     kept = BatchSettings(keep_volume=True)
     assert kept.run_settings().keep_volume is True
     assert kept.step_settings("simulate")["keep_volume"] is True
-    assert "keep_volume" not in BatchSettings().step_settings("simulate")  # old cache keys stay valid
+    assert BatchSettings().step_settings("simulate")["keep_volume"] is False  # every setting is in the key
 
 
 def test_held_out_scores_with_the_volume_kept(model, demo):

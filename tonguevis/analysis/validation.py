@@ -91,52 +91,53 @@ class ValidationResult:
 @verbose
 def validate(
     recording: Recording,
+    settings=None,
     model=None,
-    modes: int = 100,
-    landmarks: str = "speaker",
-    rest=None,
-    quasi_static: bool = True,
-    tolerance: float = 1e-8,
-    sensor_stiffness: float | None | str = "default",
+    *,
     progress: ProgressCallback | None = None,
-    sensor_patches: float | None | str = None,
-    frame: str = "speaker",
-    tongue_size: float | str | None = None,
-    keep_volume: bool = False,
-    rest_fit: bool = False,
+    quasi_static: bool = True,
+    **overrides: Any,
 ) -> ValidationResult:
-    """Leave-one-sensor-out validation of ``model`` (default: the shipped tongue) on ``recording``.
+    """Leave-one-sensor-out validation of ``model`` (default: the settings' mesh, else the shipped tongue) on
+    ``recording``, simulated as ``settings`` (a :class:`~tonguevis.sim.settings.RunSettings`, default everyone's)
+    with ``overrides`` (its fields as keywords) describe: the motion with every sensor is
+    :func:`tonguevis.sim.simulate`'s, and each held-out run uses the same settings.
 
-    Needs >= 3 tongue sensors with landmarks on the model (each run is driven
-    by >= 2).  ``rest`` (start_s, end_s) or a :class:`~tonguevis.preprocess.RestChoice`
-    defaults to the detected rest, else the stillest 0.2 s window (logged; the JSON says which).
-    ``sensor_stiffness`` as :func:`tonguevis.sim.simulate` (every physical predictor uses it), with
-    the CLI's words: a positive number, "default" or "hard" (:mod:`tonguevis.sensor_stiffness`).
-    ``sensor_patches`` as :func:`tonguevis.sim.simulate`: in each run the patches of the driving
-    sensors only close their gaps, and the held-out node moves with the modes and those patches.
-    ``frame`` as :func:`tonguevis.sim.simulate`: "speaker" (default) scores in the speaker's millimetres
-    (the model placed in the speaker, at ``tongue_size`` times its size, as :func:`~tonguevis.sim.simulate`),
-    "model" in the generic tongue's (the speaker scaled onto it).
-    ``keep_volume``: besides each dynamic method, the same runs with the volume kept
-    (:func:`tonguevis.sim.volume.volume_subspace`, the driving sensors' nodes held, the held-out
-    node free), scored as ``{method}_kept`` (``model_kept``, ``linear_kept``; the projection is applied
-    after the dynamics, so the runs are shared); the summary is of the run without it.
-    ``rest_fit`` as :func:`tonguevis.sim.simulate`: the tongue bent onto every rest sensor (the held-out
-    one's rest position too, as the interpolation baseline uses it; its motion is what is predicted).
+    Needs >= 3 tongue sensors with landmarks on the model (each run is driven by >= 2).
+    rest : the detected rest by default, else the stillest 0.2 s window (logged; the JSON says which).
+    method : the ``model`` predictor's: "warped" (default), "linear" (then equal to the ``linear`` baseline) or
+        "domains" (seed 001's model, :func:`tonguevis.analysis.validation_domains.held_out_domains`, seeded at
+        the driving sensors); ``linear``, ``static`` and ``kinematic`` are the modal baselines whatever it is.
+    sensor_stiffness : every physical predictor's.
+    sensor_patches : in each run the patches of the driving sensors only close their gaps, and the held-out
+        node moves with the modes and those patches.
+    frame, tongue_size : "speaker" (default) scores in the speaker's millimetres (the model placed in the
+        speaker at ``tongue_size``), "model" in the generic tongue's (the speaker scaled onto it).
+    keep_volume : besides each dynamic method, the same runs with the volume kept
+        (:func:`tonguevis.sim.volume.volume_subspace`, the driving sensors' nodes held, the held-out
+        node free), scored as ``{method}_kept``; the summary is of the motion with every sensor, kept too.
+    rest_fit : the tongue bent onto every rest sensor (the held-out one's rest position too, as the
+        interpolation baseline uses it; its motion is what is predicted).
+    palate : the motion with every sensor is simulated against it (its contact figures in the summary); the
+        held-out runs are kept below it the same way (:func:`tonguevis.sim.simulate.keep_below_palate`).
     """
-    from tonguevis.sim import TongueModel
     from tonguevis.io.sensor_map import how_to_map
     from tonguevis.preprocess.targets import TONGUE_SENSORS, working_tongue_sensors
     from tonguevis.sim.placement import targets_in_frame
-    from tonguevis.sim.simulate import DEFAULT_SENSOR_STIFFNESS, drive_schedule, simulate
+    from tonguevis.sim.settings import RunSettings, build_model, run_settings
+    from tonguevis.sim.simulate import TOUCH_REACH, contact_context, drive_schedule, held_to_palate, simulate
 
-    from tonguevis.sensor_stiffness import sensor_stiffness_value
-
-    sensor_stiffness = sensor_stiffness_value(sensor_stiffness, recording.metadata.get("file"))
-    patch_option = sensor_patches
-    model = model or TongueModel.default()
-    recording = recording.on_uniform_grid()  # as simulate: dropped frames back as missing samples
     file = recording.metadata.get("file")
+    if settings is not None and not isinstance(settings, RunSettings):  # validate(recording, model, ...)
+        settings, model = model if isinstance(model, RunSettings) else None, settings
+    try:
+        settings = run_settings(settings, **overrides)
+    except SimulationError as exc:
+        raise SimulationError(str(exc), file) from None
+    modes, landmarks, frame, tolerance = settings.modes, settings.landmarks, settings.frame, settings.newton_tolerance
+    sensor_stiffness, keep_volume = settings.sensor_stiffness_value, settings.keep_volume
+    model = model if model is not None else build_model(settings)
+    recording = recording.on_uniform_grid()  # as simulate: dropped frames back as missing samples
     working = working_tongue_sensors(recording)  # warns about a coil that never worked, once
     dead = [n for n in TONGUE_SENSORS if n in recording.sensors and n not in working]
     if dead:
@@ -148,8 +149,10 @@ def validate(
             f"{candidates or 'none'} (recording sensors: {', '.join(recording.sensor_names)}); "
             + how_to_map(recording), file)
     given = model
-    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, rest, tongue_size=tongue_size,
-                                        rest_fit=rest_fit)  # the model in the frame (its rest shape fitted)
+    model, prep, fit = targets_in_frame(recording, model, frame, landmarks, settings.rest,
+                                        settings.smooth_window, tongue_size=settings.tongue_size,
+                                        rest_fit=settings.rest_fit)  # the model in the frame (its rest shape fitted)
+    sensor_patches = settings.sensor_patches
     if sensor_patches == "default":  # 3 mm on the generic tongue, as simulate() takes it
         from tonguevis.sim.patches import PATCH_RADIUS
 
@@ -158,24 +161,27 @@ def validate(
     basis = model.basis(modes)
     w_full = model.rotation_matrix(basis)
     report(progress, 0, 4, "simulating with every sensor")
-    if sensor_stiffness == "default":
-        sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
-    motion = simulate(recording, given, modes=modes, warping=True, landmarks=landmarks,
-                      rest=prep.rest, tolerance=tolerance, sensor_stiffness=sensor_stiffness,
-                      sensor_patches=patch_option, frame=frame, tongue_size=tongue_size, rest_fit=rest_fit)
+    motion = simulate(recording, settings.replace(rest=prep.rest), given)
     centres = prep.aligned_rest
     s = len(names)
     dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
     phi_s = basis.phi[dofs].reshape(s, 3, -1)
     w_s = w_full[dofs].reshape(s, 3, -1)
+    drive, contact = prep.displacement, None
+    if settings.palate is not None:  # as simulate(): sensors touching the palate held to it, the tongue below it
+        contact = contact_context(settings.palate, prep, model, basis, recording)
+        contact["backend"] = settings.backend
+        reach = TOUCH_REACH * (1.0 if frame == "speaker" else fit["scale"])
+        drive, _ = held_to_palate(contact, model.mesh.points[nodes], drive, reach, names)
     # Trial h drives with every sensor but h: h's targets are marked missing,
     # which the integrator treats as a sensor that is not there; the other
     # sensors' dropouts are handled as in the simulation.
     schedules = []
     for h in range(s):
-        held = prep.displacement.copy()
+        held = drive.copy()
         held[:, h] = np.nan
-        schedules.append(drive_schedule(held, recording.rate, basis.eigenvalues, phi_s, sensor_stiffness))
+        schedules.append(drive_schedule(held, recording.rate, basis.eigenvalues, phi_s, sensor_stiffness,
+                                        contact=contact))
     trials = np.stack([sch[0] for sch in schedules])  # (S, F, S, 3)
     compliance = np.stack([sch[1] for sch in schedules])  # (S, F, S)
     # Per method and trial: the held-out node's trajectory (F, 3) and the converged flags; each
@@ -187,6 +193,10 @@ def validate(
         out, kept = [], []
         for h, (q, conv) in enumerate(runs):
             run_basis, run_w = basis, w_full
+            if contact is not None:  # where inertia carried the tongue into the palate, as simulate() corrects it
+                from tonguevis.sim.simulate import keep_below_palate
+
+                q, _ = keep_below_palate(q, contact, schedules[h][2], basis, phi_s, base_compliance)
             if sensor_patches is not None:  # the drivers' patches close their gaps; the held-out one has none
                 run_basis, run_w, q = _patched(model, basis, np.delete(nodes, h), q,
                                                np.delete(prep.displacement, h, axis=1), warping, sensor_patches)
@@ -203,8 +213,20 @@ def validate(
         if keep_volume:
             predicted[f"{method}_kept"] = kept
 
-    for k, (method, warping) in enumerate((("model", True), ("linear", False))):
+    from tonguevis.sim.constrained import point_stiffness
+
+    base_compliance = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * point_stiffness(
+        basis.eigenvalues, phi_s))
+    for k, (method, warping) in enumerate((("model", settings.warping), ("linear", False))):
         report(progress, 1 + k, 4, f"leave-one-out: {method}")
+        if method == "model" and settings.method == "domains":  # seed 001's model, seeded at the drivers
+            from tonguevis.analysis.validation_domains import held_out_domains
+
+            runs = held_out_domains(recording, settings.replace(rest=prep.rest), given, trajectories=True)
+            predicted["model"] = [(runs[name]["predicted"], runs[name]["converged"]) for name in names]
+            if keep_volume:
+                predicted["model_kept"] = [(runs[name]["kept"], runs[name]["converged"]) for name in names]
+            continue
         keep_held_out(method, _drive_trials(basis, phi_s, w_s, trials, compliance, warping, 1.0 / recording.rate,
                                             model.material, tolerance), warping)
     if quasi_static:
@@ -236,12 +258,15 @@ def validate(
     summary["plausibility"] = dict(motion.metadata.get("plausibility", {}))
     for key in ("recovered_frames", "implausible_frames"):
         summary[key] = list(motion.metadata.get(key, []))
-    settings = _settings(model, basis, modes, landmarks, quasi_static, tolerance, frame)
-    settings["sensor_stiffness"] = sensor_stiffness
-    settings["sensor_stiffness_n_per_m"] = motion.metadata.get("sensor_stiffness_n_per_m")
-    if rest_fit:
-        settings["rest_fit"] = fit.get("rest_fit")
-    return ValidationResult(scores, settings, summary, held_out)
+    described = _settings(model, basis, modes, landmarks, quasi_static, tolerance, frame)
+    described["method"] = settings.method
+    described["sensor_stiffness"] = sensor_stiffness
+    described["sensor_stiffness_n_per_m"] = motion.metadata.get("sensor_stiffness_n_per_m")
+    if settings.palate is not None:
+        described["palate"] = {"contact": motion.metadata.get("contact", {}), "held_out_runs": "kept below it"}
+    if settings.rest_fit:
+        described["rest_fit"] = fit.get("rest_fit")
+    return ValidationResult(scores, described, summary, held_out)
 
 
 def _sensor_scores(item: HeldOutSensor) -> dict[str, Any]:

@@ -9,32 +9,40 @@ import numpy as np
 
 from tonguevis.analysis.validation_scores import trajectory_scores
 from tonguevis.sim.domains import DomainModel
-from tonguevis.sim.model import TongueModel
 
 __all__ = ["held_out_domains"]
 
 
-def held_out_domains(recording, model=None, landmarks: str = "speaker", rest=None,
-                     sensor_stiffness: float | None | str = "default", frame: str = "speaker",
-                     tongue_size: float | str | None = None, tolerance: float = 1e-7, cache: bool = True,
-                     keep_volume: bool = False) -> dict:
+def held_out_domains(recording, settings=None, model=None, *, cache: bool = True, trajectories: bool = False,
+                     **overrides) -> dict:
     """Leave-one-sensor-out with the domains method, as :func:`tonguevis.analysis.validate` does for the modal
-    ones (which takes no method): per tongue sensor h, the domains seeded at the *other* sensors (the model
-    does not know where h sits) and the centre, driven by them as :func:`simulate_domains` drives them, and
-    h's node's trajectory scored against h's measurement.  Returns {sensor: {"rmse_mm", "corr", "frames",
-    "unconverged_frames", "frames_per_s"}} (:func:`tonguevis.analysis.validation_scores.trajectory_scores`);
-    ``keep_volume``: also "kept_rmse_mm" and "kept_corr", the same run with the volume kept
-    (:func:`tonguevis.sim.volume.volume_subspace`, the drivers' nodes held, h's free)."""
-    from tonguevis.sensor_stiffness import sensor_stiffness_value
+    ones (``validate(..., method="domains")`` calls this for its ``model`` predictor): per tongue sensor h, the
+    domains seeded at the *other* sensors (the model does not know where h sits) and the centre, driven by them
+    as :func:`simulate_domains` drives them, and h's node's trajectory scored against h's measurement.
+    ``settings``, ``overrides``: as :func:`tonguevis.sim.simulate` (a
+    :class:`~tonguevis.sim.settings.RunSettings`; the method is domains whatever they say).
+    Returns {sensor: {"rmse_mm", "corr", "frames", "unconverged_frames", "frames_per_s"}}
+    (:func:`tonguevis.analysis.validation_scores.trajectory_scores`); ``keep_volume``: also "kept_rmse_mm" and
+    "kept_corr", the same run with the volume kept (:func:`tonguevis.sim.volume.volume_subspace`, the drivers'
+    nodes held, h's free); ``trajectories``: also "predicted" (F, 3) m, "converged" (F,) and with
+    ``keep_volume`` "kept" (F, 3) m."""
+    from tonguevis.errors import SimulationError
     from tonguevis.sim.placement import targets_in_frame
-    from tonguevis.sim.simulate import DEFAULT_SENSOR_STIFFNESS, drive_schedule
+    from tonguevis.sim.settings import RunSettings, build_model, run_settings
+    from tonguevis.sim.simulate import drive_schedule
 
-    sensor_stiffness = sensor_stiffness_value(sensor_stiffness, recording.metadata.get("file"))
-    if sensor_stiffness == "default":
-        sensor_stiffness = DEFAULT_SENSOR_STIFFNESS
+    if settings is not None and not isinstance(settings, RunSettings):  # held_out_domains(recording, model, ...)
+        settings, model = model if isinstance(model, RunSettings) else None, settings
+    try:
+        settings = run_settings(settings, **overrides).replace(method="domains")
+    except SimulationError as exc:
+        raise SimulationError(str(exc), recording.metadata.get("file")) from None
+    sensor_stiffness, tolerance, keep_volume = (settings.sensor_stiffness_value, settings.newton_tolerance,
+                                                settings.keep_volume)
+    model = model if model is not None else build_model(settings)
     recording = recording.on_uniform_grid()
-    model, prep, _ = targets_in_frame(recording, model or TongueModel.default(), frame, landmarks, rest,
-                                      tongue_size=tongue_size)
+    model, prep, _ = targets_in_frame(recording, model, settings.frame, settings.landmarks, settings.rest,
+                                      settings.smooth_window, tongue_size=settings.tongue_size)
     nodes = np.asarray(prep.nodes)
     out = {}
     for h, name in enumerate(prep.names):
@@ -53,6 +61,8 @@ def held_out_domains(recording, model=None, landmarks: str = "speaker", rest=Non
         out[name] = {"rmse_mm": scores["rmse_mm"], "corr": scores["corr"], "frames": int(ok.sum()),
                      "unconverged_frames": int(np.sum(~result.converged)),
                      "frames_per_s": len(targets) / elapsed if elapsed > 0 else float("inf")}
+        if trajectories:
+            out[name].update(predicted=predicted, converged=np.asarray(result.converged, bool))
         if keep_volume:
             from tonguevis.sim.volume import held_nodes, volume_subspace
 
@@ -61,4 +71,6 @@ def held_out_domains(recording, model=None, landmarks: str = "speaker", rest=Non
             kept = predicted + c @ extra[rows_h].T
             scores = trajectory_scores(measured[ok], kept[ok])
             out[name].update(kept_rmse_mm=scores["rmse_mm"], kept_corr=scores["corr"])
+            if trajectories:
+                out[name]["kept"] = kept
     return out

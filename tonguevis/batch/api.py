@@ -65,15 +65,15 @@ def _counts(done: int, failed: int, fresh: int, total: int) -> str:
 
 @verbose
 def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.PathLike, *, jobs: int = 1,
-        client=None, model=None, mesh: str | os.PathLike | None = None, axes: str | None = None,
+        client=None, model=None,
         labels: str | os.PathLike | None = None, settings: BatchSettings | None = None, force: bool = False,
         progress: ProgressCallback | None = None, **options) -> BatchResult:
     """Process every recording of ``paths`` (files, or folders walked recursively) into ``out``.
 
     jobs : worker processes on this machine (1: in this process).
     client : a ``distributed.Client``: run on its Dask cluster instead (``jobs`` unused).
-    model : a TongueModel; or ``mesh`` (a file, with ``axes``) read by each worker;
-        default the shipped tongue.
+    model : a TongueModel; default the settings' ``mesh`` (a file, with ``mesh_axes``) read by each worker,
+        else the shipped tongue.
     labels : CSV table of speaker/syllable/trial per file (as ``tonguevis energy --labels``).
     settings / options : :class:`BatchSettings`, or its fields as keywords
         (``steps="simulate,energy"``, ``modes=40``, ``csv=True``...).
@@ -109,7 +109,7 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
     folders = store.output_folders(names, out_abs)
 
     t0 = time.perf_counter()
-    spec = ModelSpec.of(model, mesh, axes)
+    spec = ModelSpec.of(model, settings.mesh, settings.mesh_axes)
     built = model if model is not None else spec.build()
     spec.key = model_key(built)
     keys = []

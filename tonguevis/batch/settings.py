@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Iterable
 
 from tonguevis.errors import TonguevisError
-from tonguevis.workflows.settings import RunSettings
+from tonguevis.sim.settings import RunSettings, build_model
 
 #: The steps, in the order they run for a recording.
 STEPS = ("simulate", "energy", "segment", "validate")
@@ -45,15 +45,14 @@ def parse_steps(steps: str | Iterable[str]) -> tuple[str, ...]:
 @dataclass(frozen=True)
 class BatchSettings(RunSettings):
     """The settings of every step (the defaults are those of the single-file commands): the run's
-    :class:`~tonguevis.workflows.settings.RunSettings` (how each recording is simulated; the model
+    :class:`~tonguevis.sim.settings.RunSettings` (how each recording is simulated; the model
     comes from the :class:`ModelSpec`) and the batch's own steps.
 
     steps : subset of :data:`STEPS`.  "simulate" saves each motion (``motion.npz``)
         and its summary row; energy and segment simulate when no saved motion
         with the same key exists.
-    modes, landmarks, warping, sensor_stiffness, rest : as ``tonguevis simulate``
-        (``sensor_stiffness`` "default", a number, or "hard"/None for hard constraints;
-        ``rest`` (start_s, end_s) for every recording, None to find it).
+    every :class:`RunSettings` field : as ``tonguevis simulate`` (``rest`` (start_s, end_s) for every
+        recording, None to find it; ``palate`` a palate file for every recording).
     sensor_map : sensor map for every recording (preset name, JSON path or dict);
         None uses a ``sensor_map.json`` beside each recording.
     read_options : reader options for every recording (``-O``: ``axes=``, ``audio=False`` ...), a dict
@@ -64,7 +63,6 @@ class BatchSettings(RunSettings):
     segment_first : segment only the first N productions of each recording (None: all).
     quasi_static : the quasi-static baseline of the validation (``tonguevis validate --no-static``).
     csv : write CSV beside every Parquet table.
-    sensor_patches : as :func:`tonguevis.simulate` (None: none; "default" or a radius in m).
     """
 
     steps: tuple[str, ...] = DEFAULT_STEPS
@@ -95,22 +93,10 @@ class BatchSettings(RunSettings):
         return RunSettings(**{f.name: getattr(self, f.name) for f in dataclasses.fields(RunSettings)})
 
     def step_settings(self, step: str) -> dict:
-        """The settings ``step``'s results depend on (JSON-able)."""
-        sim = {"modes": self.modes, "landmarks": self.landmarks, "warping": self.warping,
-               "sensor_stiffness": self.sensor_stiffness, "rest": self.rest}
-        read = {"read_options": dict(self.read_options)} if self.read_options else {}  # old keys stay valid
-        if self.sensor_patches is not None:  # likewise: only when asked for
-            read["sensor_patches"] = self.sensor_patches
-        sim.update(read)
-        if self.keep_volume:  # likewise; the simulation's results only (validate does not project)
-            sim["keep_volume"] = True
-        if self.method not in (None, "warped" if self.warping else "linear"):  # likewise: only when it changes
-            sim["method"] = self.method
-        frame = {"frame": self.frame, "tongue_size": self.tongue_size} \
-            if self.frame != "speaker" or self.tongue_size is not None else {}  # likewise
-        sim.update(frame)
-        if self.rest_fit:  # likewise
-            sim["rest_fit"] = True
+        """The settings ``step``'s results depend on (JSON-able): every field of the run's
+        :class:`RunSettings` (:meth:`RunSettings.key`: a palate by its content; the model is the
+        :class:`ModelSpec`'s, hashed apart), the reader options, and the step's own."""
+        sim = {**self.run_settings().key(model=False), "read_options": dict(self.read_options)}
         if step == "simulate":
             return sim
         if step == "energy":
@@ -119,16 +105,18 @@ class BatchSettings(RunSettings):
             return {**sim, "keep": self.keep, "tier": self.tier, "segment_first": self.segment_first,
                     "mode": "constraint", "seeds": "auto", "threshold": 0.05, "adjust": False}
         if step == "validate":
-            return {"modes": self.modes, "landmarks": self.landmarks, "sensor_stiffness": self.sensor_stiffness,
-                    "rest": self.rest, "quasi_static": self.quasi_static, **read, **frame,
-                    **({"rest_fit": True} if self.rest_fit else {})}
+            return {**sim, "quasi_static": self.quasi_static}
         raise BatchError(f"unknown step {step!r}")
 
     def as_dict(self) -> dict:
         out = asdict(self)
         out["sensor_map"] = _sensor_map_text(self.sensor_map)
-        for name in ("mesh", "mesh_axes", "palate", "backend"):  # the model is the ModelSpec's; no contact
+        for name in ("mesh", "mesh_axes"):  # the model is the ModelSpec's
             out.pop(name, None)
+        out["palate"] = None if self.palate is None else (self.palate if isinstance(self.palate, str)
+                                                          else "a palate given in Python")
+        if out.get("rest") is not None and hasattr(self.rest, "as_dict"):
+            out["rest"] = self.rest.as_dict()
         return out
 
 
@@ -169,7 +157,6 @@ class ModelSpec:
     def build(self):
         """The :class:`~tonguevis.sim.TongueModel` this spec describes."""
         from tonguevis.sim import TongueModel
-        from tonguevis.workflows.settings import build_model
 
         if self.kind in ("default", "file"):  # the one way a model is built from settings
             return build_model(RunSettings(mesh=self.mesh, mesh_axes=self.axes))

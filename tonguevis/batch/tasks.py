@@ -167,14 +167,14 @@ def _motion(task: Task, manifest: dict, rec, model, save: bool):
 
     path = task.folder / store.MOTION
     if not save and store.step_current(manifest, "simulate", task.keys["simulate"], task.folder):
-        from tonguevis.sim.placement import placed_model_of
+        from tonguevis.sim.placement import PlacedModel, placed_model_of
 
         motion = Motion.load(path)
         if getattr(motion.model, "base_model", None) is not None:
             return motion  # with sensor patches: its own model, the modes and the patches (Motion.load rebuilt it)
         placed = placed_model_of(motion.model)
         # the same model (the key says so), with its caches; placed in the speaker as the saved one was
-        motion.model = model if placed is None else model.placed(placed.placement, placed.keep_frequencies)
+        motion.model = model if placed is None else PlacedModel(model, placed.placement, placed.keep_frequencies)
         return motion
     motion = simulate_recording(rec, model, task.settings.run_settings())
     if save:
@@ -235,9 +235,7 @@ def _validate(task, entry, rec, model, motion, seconds):
     from tonguevis.analysis.validation import validate
 
     s = task.settings
-    result = validate(rec, model, modes=s.modes, landmarks=s.landmarks, rest=s.rest,
-                      sensor_stiffness=s.sensor_stiffness, quasi_static=s.quasi_static,
-                      sensor_patches=s.sensor_patches, rest_fit=s.rest_fit, frame=s.frame, tongue_size=s.tongue_size)
+    result = validate(rec, s.run_settings(), model, quasi_static=s.quasi_static)
     result.write_json(task.folder / "validation.json")
     rows = tables.validation_rows(entry, task.file, result.as_dict())
     written = tables.write(tables.to_arrow("validation", rows), task.folder / "validation.parquet", s.csv)

@@ -108,83 +108,75 @@ def add_productions_from_argument(parser: argparse.ArgumentParser) -> None:
                              "phones) instead of finding them from the tongue tip")
 
 
-def add_model_arguments(parser: argparse.ArgumentParser, modes: int = 100) -> None:
-    parser.add_argument("--mesh", type=Path, metavar="PATH",
-                        help="tetrahedral tongue mesh (TetGen .node/.ele, VTU, Gmsh); default: the shipped tongue")
-    add_mesh_axes_argument(parser)
-    parser.add_argument("--modes", type=int, default=modes, metavar="M", help=f"vibration modes (default {modes})")
-    parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
-                        help="sensor nodes: snapped to the speaker's layout (default) or the paper's placement rule")
-    add_physics_arguments(parser)
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+def add_run_arguments(parser: argparse.ArgumentParser, *, every: bool = False, modes_type=int,
+                      quiet: bool = True) -> None:
+    """The options of a run, the same (names, meanings, defaults) in every command that simulates (simulate,
+    segment, energy, morph, batch, validate, view, export-video, live): each is a field of
+    :class:`~tonguevis.sim.settings.RunSettings`, read back by :func:`run_settings_of`, and its default is the
+    settings' own.  ``every``: the command reads several recordings (the rest is for each); ``modes_type``:
+    the type of ``--modes`` (segment's keeps an old meaning for one release); ``quiet``: also ``--quiet``."""
+    from tonguevis.sim.settings import METHODS, RunSettings
 
-
-def add_physics_arguments(parser: argparse.ArgumentParser) -> None:
-    """How the tongue follows the sensors: ``--linear``, ``--method``, ``--keep-volume``,
-    ``--sensor-stiffness``, ``--sensor-patches``/``--no-sensor-patches``, ``--fit-rest`` (every simulating
-    command has them, so two commands given the same options simulate the same motion)."""
-    parser.add_argument("--linear", action="store_true", help="linear modal model (no modal warping); --method linear")
-    parser.add_argument("--method", choices=("warped", "linear", "domains"), default=None,
-                        help="the tongue's physics: modal warping (default), the linear modal model, or 'domains': "
-                             "seed 001's nonlinear StVK on quadratic domains (slower: tens of frames/s)")
-    parser.add_argument("--keep-volume", action="store_true",
-                        help="keep the tongue's volume: each frame projected onto volume-preserving shapes (a "
-                             "pressure projection, the sensor nodes held; any --method)")
-    add_sensor_stiffness_argument(parser)
-    add_sensor_patches_argument(parser)
-    add_rest_fit_argument(parser)
-
-
-def add_rest_fit_argument(parser: argparse.ArgumentParser) -> None:
-    """``--fit-rest``: bend the placed tongue onto the rest sensors first (tonguevis.sim.rest_fit)."""
-    parser.add_argument("--fit-rest", dest="rest_fit", action="store_true",
-                        help="bend the tongue so every sensor node sits on its rest sensor before simulating "
-                             "(the tongue's own static response, jaw and hyoid held; its modes solved anew, "
-                             "about 2 s): the rest shape the speaker's, not the generic one's")
-
-
-def add_mesh_axes_argument(parser: argparse.ArgumentParser) -> None:
-    """``--mesh-axes MAP``: the axes of ``--mesh`` (``--axes``, its old name, kept for one release)."""
-    parser.add_argument("--mesh-axes", dest="mesh_axes", metavar="MAP",
-                        help="axis mapping of --mesh into x anterior, y left, z up, e.g. -x,-z,-y (ArtiSynth); "
-                             "the recording's axes are -O axes=MAP")
-    parser.add_argument("--axes", dest="mesh_axes", action=DeprecatedAlias, new="--mesh-axes")
-
-
-def add_sensor_stiffness_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--sensor-stiffness", type=sensor_stiffness_arg, default="default", metavar="K|hard",
-                        help="how hard the sensor nodes are pulled onto the sensors, in units of the tongue's own "
-                             "stiffness there (default 20: the tongue's most natural shape that follows them, "
-                             "measured best on real recordings); 'hard' holds them exactly, as the paper")
-
-
-def add_sensor_patches_argument(parser: argparse.ArgumentParser) -> None:
-    """``--sensor-patches [MM]`` (the default) and ``--no-sensor-patches``: close each sensor's gap to the
-    surface with its patch (tonguevis.sim.patches), or not."""
-    parser.add_argument("--sensor-patches", type=_patch_radius_arg, nargs="?", const="default", default="default",
-                        metavar="MM",
-                        help="put every sensor on the tongue's surface (the default): after the dynamics, the "
-                             "tongue's own local deformation under each sensor (a patch of MM millimetres on the "
-                             "model, default 3, fading out by 5/3 of it) closes the gap the modes leave (up to "
-                             "2-6 mm on real recordings); the held-out sensors are predicted as without it")
-    parser.add_argument("--no-sensor-patches", dest="sensor_patches", action="store_const", const=None,
-                        help="no patches: the sensor nodes only pulled by springs towards the sensors (the "
-                             "sensors may float millimetres off the surface)")
-
-
-def add_frame_arguments(parser: argparse.ArgumentParser, frame_dest: str = "frame") -> None:
-    """``--model-frame`` and ``--tongue-size``: in whose millimetres the tongue is simulated (tonguevis.sim.placement).
-    ``frame_dest``: the attribute ``--model-frame`` sets (``tonguevis view`` has its own ``--frame N``)."""
-    parser.add_argument("--model-frame", dest=frame_dest, action="store_const", const="model", default="speaker",
-                        help="simulate in the generic tongue's frame and millimetres, the speaker scaled onto it "
-                             "(the paper's way); default: the model placed in the speaker, every figure in the "
-                             "speaker's millimetres")
-    parser.add_argument("--tongue-size", type=_tongue_size_arg, default="adult", metavar="X|adult|alignment",
-                        help="the speaker's tongue as a multiple of the model's (1: the generic adult tongue, "
-                             "turned and moved so the rest sensors lie on its surface); 'alignment': the size the "
-                             "rest sensors' fit onto the model's nodes implies (the same motion as --model-frame in "
-                             "the speaker's units); default 'adult': the alignment's size when it is an adult "
-                             "tongue's (half to twice the model's volume), else the generic size (said when so)")
+    defaults = RunSettings()
+    group = parser.add_argument_group("how the tongue is simulated (the same options in every command that simulates)")
+    group.add_argument("--mesh", type=Path, metavar="PATH",
+                       help="tetrahedral tongue mesh (TetGen .node/.ele, VTU, Gmsh, .npz); default: the shipped tongue")
+    group.add_argument("--mesh-axes", dest="mesh_axes", metavar="MAP",
+                       help="axis mapping of --mesh into x anterior, y left, z up, e.g. -x,-z,-y (ArtiSynth); "
+                            "the recording's axes are -O axes=MAP")
+    group.add_argument("--axes", dest="mesh_axes", action=DeprecatedAlias, new="--mesh-axes")
+    group.add_argument("--modes", type=modes_type, default=defaults.modes, metavar="M",
+                       help=f"vibration modes (default {defaults.modes})")
+    group.add_argument("--landmarks", choices=("speaker", "rule"), default=defaults.landmarks,
+                       help="sensor nodes: snapped to the speaker's layout (default) or the paper's placement rule")
+    group.add_argument("--method", choices=METHODS, default=None,
+                       help="the tongue's physics: 'warped' (modal warping, the paper's; default), 'linear' (the "
+                            "linear modal model) or 'domains' (the nonlinear StVK tongue of Luo et al. 2017 on "
+                            "quadratic domains: slower, a few hundred frames/s)")
+    group.add_argument("--linear", action="store_true", help="the linear modal model: --method linear")
+    group.add_argument("--keep-volume", action="store_true",
+                       help="keep the tongue's volume: each frame projected onto volume-preserving shapes (a "
+                            "pressure projection, the sensor nodes held; any --method)")
+    group.add_argument("--sensor-stiffness", type=sensor_stiffness_arg, default=defaults.sensor_stiffness,
+                       metavar="K|hard",
+                       help="how hard the sensor nodes are pulled onto the sensors, in units of the tongue's own "
+                            "stiffness there (default 20: the tongue's most natural shape that follows them, "
+                            "measured best on real recordings); 'hard' holds them exactly, as the paper")
+    group.add_argument("--sensor-patches", type=_patch_radius_arg, nargs="?", const="default",
+                       default=defaults.sensor_patches, metavar="MM",
+                       help="put every sensor on the tongue's surface (the default): after the dynamics, the "
+                            "tongue's own local deformation under each sensor (a patch of MM millimetres on the "
+                            "model, default 3, fading out by 5/3 of it) closes the gap the modes leave (up to "
+                            "2-6 mm on real recordings); the held-out sensors are predicted as without it")
+    group.add_argument("--no-sensor-patches", dest="sensor_patches", action="store_const", const=None,
+                       help="no patches: the sensor nodes only pulled by springs towards the sensors (the "
+                            "sensors may float millimetres off the surface)")
+    group.add_argument("--fit-rest", dest="rest_fit", action="store_true",
+                       help="bend the tongue so every sensor node sits on its rest sensor before simulating "
+                            "(the tongue's own static response, jaw and hyoid held; its modes solved anew, "
+                            "about 2 s): the rest shape the speaker's, not the generic one's")
+    which = " (for every recording)" if every else ""
+    group.add_argument("--rest", type=float, nargs=2, metavar=("START", "END"),
+                       help=f"rest interval in seconds{which}; default: the longest still interval of >= 1 s, "
+                            "else the stillest 0.2 s window (the summary says which)")
+    group.add_argument("--palate", metavar="PALATE",
+                       help=f"the speaker's palate{which} (a file made by `tonguevis palate` from trace "
+                            "recordings) or 'generic': the tongue is kept below it and the contact is reported; "
+                            "default: no contact (the generic palate is drawn only)")
+    group.add_argument("--model-frame", dest="model_frame", action="store_const", const="model",
+                       default=defaults.frame,
+                       help="simulate in the generic tongue's frame and millimetres, the speaker scaled onto it "
+                            "(the paper's way); default: the model placed in the speaker, every figure in the "
+                            "speaker's millimetres")
+    group.add_argument("--tongue-size", type=_tongue_size_arg, default=defaults.tongue_size,
+                       metavar="X|adult|alignment",
+                       help="the speaker's tongue as a multiple of the model's (1: the generic adult tongue, "
+                            "turned and moved so the rest sensors lie on its surface); 'alignment': the size the "
+                            "rest sensors' fit onto the model's nodes implies (the same motion as --model-frame in "
+                            "the speaker's units); default 'adult': the alignment's size when it is an adult "
+                            "tongue's (half to twice the model's volume), else the generic size (said when so)")
+    if quiet:
+        parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def _tongue_size_arg(text: str):
@@ -201,13 +193,6 @@ def _tongue_size_arg(text: str):
     return value
 
 
-def frame_options(args) -> dict:
-    """``frame`` and ``tongue_size`` of :func:`tonguevis.sim.simulate` from ``--model-frame``/``--tongue-size``."""
-    from tonguevis.workflows.settings import RunSettings
-
-    return {"frame": getattr(args, "frame", "speaker"), "tongue_size": getattr(args, "tongue_size", RunSettings.tongue_size)}
-
-
 def _patch_radius_arg(text: str):
     if text == "default":
         return "default"
@@ -220,14 +205,6 @@ def _patch_radius_arg(text: str):
     return value / 1000.0
 
 
-def sensor_patches_option(args):
-    """The library's ``sensor_patches`` from ``--sensor-patches``/``--no-sensor-patches``: None, "default" or
-    metres; a command without the options gets the run settings' default."""
-    from tonguevis.workflows.settings import RunSettings
-
-    return getattr(args, "sensor_patches", RunSettings.sensor_patches)
-
-
 def sensor_stiffness_arg(text: str):
     """``--sensor-stiffness`` value: a positive number, 'hard' (None) or 'default', the library's words
     (:func:`tonguevis.sensor_stiffness.sensor_stiffness_value`)."""
@@ -238,14 +215,6 @@ def sensor_stiffness_arg(text: str):
         return sensor_stiffness_value(text)
     except SimulationError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def add_rest_argument(parser: argparse.ArgumentParser, every: bool = False) -> None:
-    """``--rest START END``: the rest interval in seconds, for every command that simulates."""
-    which = " (for every recording)" if every else ""
-    parser.add_argument("--rest", type=float, nargs=2, metavar=("START", "END"),
-                        help=f"rest interval in seconds{which}; default: the longest still interval of >= 1 s, "
-                             "else the stillest 0.2 s window (the summary says which)")
 
 
 def rest_arg(args) -> tuple[float, float] | None:
@@ -280,49 +249,45 @@ def rest_line(motion) -> str:
 
 
 def read_recording_args(args):
-    from tonguevis.workflows import open_recording
+    from tonguevis.workflows.recording import open_recording
 
     return open_recording(args.file, args.sensors, **reading_options(args))
 
 
-def run_settings_of(args, modes: int | None = None):
-    """The :class:`~tonguevis.workflows.settings.RunSettings` of a command's options (--mesh, --mesh-axes,
-    --modes, --linear, --method, --landmarks, --sensor-stiffness, --sensor-patches, --keep-volume, --fit-rest,
-    --rest, --palate, --model-frame, --tongue-size); options a command does not have keep their defaults."""
-    from tonguevis.workflows.settings import RunSettings
+def run_settings_of(args, **changes):
+    """The :class:`~tonguevis.sim.settings.RunSettings` of a command's run options (:func:`add_run_arguments`),
+    with ``changes`` (field -> value) on top.  A palate file is read now: a bad one is said before anything
+    runs (one line, naming it)."""
+    from tonguevis.sim.settings import RunSettings
 
-    defaults = RunSettings()
-    palate = getattr(args, "palate", None)
-    if palate is not None:  # read now: a bad file is said before anything runs (one line, naming it)
+    palate = args.palate
+    if palate is not None and palate != "generic":
         from tonguevis.palate import load_palate
 
         palate = load_palate(palate)
+    method = args.method or ("linear" if args.linear else None)
     return RunSettings(
-        mesh=getattr(args, "mesh", None), mesh_axes=getattr(args, "mesh_axes", None),
-        modes=getattr(args, "modes", defaults.modes) if modes is None else modes,
-        warping=not getattr(args, "linear", False), landmarks=getattr(args, "landmarks", defaults.landmarks),
-        sensor_stiffness=getattr(args, "sensor_stiffness", defaults.sensor_stiffness),
-        sensor_patches=sensor_patches_option(args), rest=rest_arg(args), palate=palate,
-        method=getattr(args, "method", None) or ("linear" if getattr(args, "linear", False) else None),
-        keep_volume=bool(getattr(args, "keep_volume", False)), rest_fit=bool(getattr(args, "rest_fit", False)),
-        **frame_options(args))
+        mesh=args.mesh, mesh_axes=args.mesh_axes, modes=args.modes, method=method, landmarks=args.landmarks,
+        sensor_stiffness=args.sensor_stiffness, sensor_patches=args.sensor_patches, rest=rest_arg(args),
+        palate=palate, frame=args.model_frame, tongue_size=args.tongue_size, keep_volume=args.keep_volume,
+        rest_fit=args.rest_fit).replace(**changes)
 
 
 def load_model_args(args):
     """The tongue model of ``--mesh``/``--mesh-axes``, else the shipped default."""
-    from tonguevis.workflows.settings import build_model
+    from tonguevis.sim.settings import RunSettings, build_model
 
-    return build_model(run_settings_of(args))
+    return build_model(RunSettings(mesh=args.mesh, mesh_axes=args.mesh_axes))
 
 
-def simulate_args(args, recording, model, modes: int | None = None, progress=None):
-    """Simulate with the command's settings (:func:`run_settings_of`), with a tqdm bar (unless --quiet
-    or a ``progress`` callback is given)."""
+def simulate_args(args, recording, model, progress=None, **changes):
+    """Simulate with the command's settings (:func:`run_settings_of`, with ``changes``), with a tqdm bar
+    (unless --quiet or a ``progress`` callback is given)."""
     from tonguevis._progress import tqdm_progress
-    from tonguevis.workflows import simulate_recording
+    from tonguevis.sim.simulate import simulate
 
-    settings = run_settings_of(args, modes)
+    settings = run_settings_of(args, **changes)
     if progress is not None:
-        return simulate_recording(recording, model, settings, progress=progress)
+        return simulate(recording, settings, model, progress=progress)
     with tqdm_progress("simulating", disable=getattr(args, "quiet", False)) as bar:
-        return simulate_recording(recording, model, settings, progress=bar)
+        return simulate(recording, settings, model, progress=bar)

@@ -22,8 +22,7 @@ from pathlib import Path
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from tonguevis.batch.settings import DEFAULT_STEPS, STEPS
-    from tonguevis.cli._common import (add_frame_arguments, add_model_arguments, add_productions_from_argument,
-                                       add_reader_options_argument, add_rest_argument)
+    from tonguevis.cli._common import add_productions_from_argument, add_reader_options_argument, add_run_arguments
 
     parser.add_argument("paths", nargs="+", type=Path, metavar="CORPUS",
                         help="a folder of recordings (walked recursively) or recording files")
@@ -52,38 +51,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-static", action="store_true", help="validation without the quasi-static baseline")
     parser.add_argument("--force", action="store_true", help="redo every step, even those up to date")
     add_reader_options_argument(parser, " of every recording")
-    add_model_arguments(parser)
-    add_frame_arguments(parser)  # the tongue's size and frame, as simulate's
-    add_rest_argument(parser, every=True)
+    add_run_arguments(parser, every=True)
 
 
 def load_model(args):
-    """The tongue model of ``--mesh``/``--mesh-axes`` as (model, None), or (None, mesh file) for the workers to read.
-
-    A hook the tests replace.
-    """
-    return None, args.mesh
+    """The tongue model given in Python (None: the settings' ``--mesh``, read by each worker, else the shipped
+    tongue).  A hook the tests replace."""
+    return None
 
 
 def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
     from tonguevis.batch import BatchSettings, run as run_batch
-    import dataclasses
+    import os
 
     from tonguevis.cli._common import parse_options, run_settings_of
-    from tonguevis.workflows.settings import RunSettings
 
     # How each recording is simulated comes from the options every simulating command shares (so the
-    # batch simulates what `tonguevis simulate` and `segment` do with the same options); the model's mesh
-    # goes to the workers apart (load_model).
+    # batch simulates what `tonguevis simulate` and `segment` do with the same options); the mesh and the palate
+    # go to the workers as their files (read by each worker; the palate checked here first).
     run_settings = run_settings_of(args)
-    simulation = {f.name: getattr(run_settings, f.name) for f in dataclasses.fields(RunSettings)
-                  if f.name not in ("mesh", "mesh_axes", "palate")}
+    if args.palate not in (None, "generic"):
+        run_settings = run_settings.replace(palate=os.path.abspath(args.palate))
     settings = BatchSettings(
-        **simulation, steps=args.steps, sensor_map=args.sensors,
+        **{name: getattr(run_settings, name) for name in run_settings.names()},
+        steps=args.steps, sensor_map=args.sensors,
         read_options=parse_options(args.option), keep=None if args.all else (2, 3, 4), window=args.window,
         tier=args.productions_from, segment_first=args.segment_first, quasi_static=not args.no_static, csv=args.csv)
-    model, mesh = load_model(args)
+    model = load_model(args)
     client = None
     if args.scheduler is not None:
         from tonguevis.batch.api import require
@@ -94,9 +89,8 @@ def run(args: argparse.Namespace) -> int:
         client = Client(args.scheduler)
     try:
         with tqdm_progress("batch", disable=args.quiet, unit="recording") as progress:
-            result = run_batch(args.paths, args.out, jobs=args.jobs, client=client, model=model, mesh=mesh,
-                               axes=args.mesh_axes, labels=args.labels, settings=settings, force=args.force,
-                               progress=progress)
+            result = run_batch(args.paths, args.out, jobs=args.jobs, client=client, model=model,
+                               labels=args.labels, settings=settings, force=args.force, progress=progress)
     except KeyboardInterrupt:
         print(f"the recordings finished are kept in {args.out}: run the same command again to resume",
               file=sys.stderr)

@@ -23,8 +23,8 @@ from pathlib import Path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import (add_frame_arguments, add_companion_arguments, add_model_arguments, add_productions_from_argument,
-                                       add_reader_options_argument, add_rest_argument)
+    from tonguevis.cli._common import (add_companion_arguments, add_productions_from_argument,
+                                       add_reader_options_argument, add_run_arguments)
 
     parser.add_argument("paths", nargs="+", type=Path, metavar="PATH", help="recordings or folders of recordings")
     parser.add_argument("--sensors", metavar="MAP",
@@ -50,9 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     # --labels is the name table above: each recording's TextGrid is the NAME.TextGrid beside it.
     add_reader_options_argument(parser, " of every recording")
     add_companion_arguments(parser, labels=False)
-    add_model_arguments(parser)
-    add_frame_arguments(parser)  # the tongue's size and frame, as simulate's
-    add_rest_argument(parser, every=True)
+    add_run_arguments(parser, every=True)
 
 
 def load_model(args):
@@ -67,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
     from tonguevis.analysis.corpus import CorpusError, load_corpus, unknown_labels, with_labels
     from tonguevis.workflows.corpus import corpus_energy_curves
     from tonguevis.analysis.energy import GROUP_KEYS, summarize, write_curves_csv, write_summary_csv
-    from tonguevis.cli._common import reading_options, rest_arg
+    from tonguevis.cli._common import reading_options, run_settings_of
+    from tonguevis.workflows.corpus import CurveSettings
 
     by = tuple(k.strip() for k in args.group_by.split(",") if k.strip())
     bad = [k for k in by if k not in GROUP_KEYS]
@@ -79,14 +78,12 @@ def run(args: argparse.Namespace) -> int:
     if args.audio is not None and len(corpus) > 1:
         raise CorpusError(f"--audio names the sound of one recording, but {len(corpus)} were found; leave it out "
                           "and put each recording's WAV beside it under the same name (NAME.wav)")
+    settings = run_settings_of(args)
+    curves = CurveSettings(keep=None if args.all else (2, 3, 4), window=args.window, tier=args.productions_from)
     model = load_model(args)
     with tqdm_progress("energy curves", disable=args.quiet) as progress:
-        result = corpus_energy_curves(corpus, model=model, sensor_map=args.sensors, modes=args.modes,
-                                      keep=None if args.all else (2, 3, 4), keep_motions=False, window=args.window,
-                                      landmarks=args.landmarks, warping=not args.linear, rest=rest_arg(args),
-                                      tier=args.productions_from, open_options=reading_options(args),
-                                      sensor_stiffness=args.sensor_stiffness, sensor_patches=args.sensor_patches,
-                                      progress=progress)
+        result = corpus_energy_curves(corpus, settings, model, curves=curves, keep_motions=False, progress=progress,
+                                      reading={"sensor_map": args.sensors, **reading_options(args)})
     for path, reason in result.skipped:
         print(f"skipped {path}: {reason}")
     for name, rest in result.rests.items():

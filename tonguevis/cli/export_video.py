@@ -12,15 +12,13 @@ from tonguevis.cli.view import COLOR_CHOICES
 
 def add_arguments(parser) -> None:
     from tonguevis.cli._common import (DeprecatedAlias, add_companion_arguments, add_reader_options_argument,
-                                       add_rest_argument)
+                                       add_run_arguments)
 
     parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the demo /ta/ train, spk1_ta)")
     parser.add_argument("--out", type=Path, required=True, metavar="MP4", help="the video to write")
     parser.add_argument("--start", type=float, metavar="S", help="first second (default: the start)")
     parser.add_argument("--end", type=float, metavar="S", help="last second (default: the end)")
     parser.add_argument("--sensors", metavar="MAP", help="sensor map: a preset or a JSON file of name -> channel")
-    parser.add_argument("--mesh", type=Path, metavar="PATH", help="tetrahedral tongue mesh (default: the shipped one)")
-    parser.add_argument("--modes", type=int, default=100, metavar="M", help="vibration modes (default 100)")
     parser.add_argument("--fps", type=int, default=25, help="video frames per second (default 25)")
     parser.add_argument("--size", default="1280x720", metavar="WxH", help="video size in pixels (default 1280x720)")
     parser.add_argument("--color", choices=COLOR_CHOICES, default="displacement",
@@ -30,18 +28,14 @@ def add_arguments(parser) -> None:
                              "or jaw (the jaw's motion removed, as simulated)")
     parser.add_argument("--frame", choices=("head", "jaw"), dest="reference", action=DeprecatedAlias,
                         new="--reference")  # its old name: in `view`, --frame is a frame number
-    parser.add_argument("--palate", metavar="PALATE",
-                        help="keep the tongue below a palate and draw it: the speaker's (a file from "
-                             "`tonguevis palate`) or 'generic' (the shipped one); default: no contact")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    add_rest_argument(parser)
+    add_run_arguments(parser)
     add_reader_options_argument(parser)
     add_companion_arguments(parser, labels=False)  # the video has the sound, not the labels
 
 
 def run(args) -> int:
     from tonguevis._progress import tqdm_progress
-    from tonguevis.cli._common import reading_options, rest_arg, run_settings_of
+    from tonguevis.cli._common import reading_options, run_settings_of
     from tonguevis.errors import RecordingError
     from tonguevis.workflows.session import demo_recording_path, load_session
     from tonguevis.workflows.simulation import simulate_session
@@ -56,7 +50,7 @@ def run(args) -> int:
         raise RecordingError(f"--size must look like 1280x720, got {args.size!r}") from None
     settings = run_settings_of(args)  # first: a bad palate or setting is said before anything runs
     options = reading_options(args)  # -O, then --audio FILE
-    session = load_session(path, sensor_map=args.sensors, rest=rest_arg(args), **options)
+    session = load_session(path, sensor_map=args.sensors, rest=settings.rest, **options)
     with tqdm_progress("simulating", disable=args.quiet) as progress:
         simulate_session(session, settings, progress=progress)
     with tqdm_progress("rendering", disable=args.quiet) as progress:

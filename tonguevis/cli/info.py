@@ -98,7 +98,7 @@ def describe(rec) -> list[str]:
 
 
 def read_from_args(args, path):
-    from tonguevis.workflows import open_recording
+    from tonguevis.workflows.recording import open_recording
 
     from tonguevis.cli._common import reading_options
 

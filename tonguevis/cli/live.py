@@ -15,22 +15,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--profile", metavar="ID",
                         help="the patient's profile (an id in the profiles folder, or a profile.json): its targets, "
                              "offsets and sensor map; sweeps are saved in its folder (default: the profile 'default')")
-    parser.add_argument("--palate", metavar="FILE", help="a palate file (`tonguevis palate`) drawn in the views")
-    parser.add_argument("--modes", type=int, default=100, help="vibration modes of the live model (default 100, "
-                                                              "the replay's)")
-    from tonguevis.cli._common import add_frame_arguments, add_rest_fit_argument, add_sensor_patches_argument
+    from tonguevis.cli._common import add_run_arguments
 
-    add_sensor_patches_argument(parser)  # the sensors on the surface, frame by frame, as in the replay
-    add_rest_fit_argument(parser)  # the tongue bent onto the rest the clinician takes (its modes: about 2 s)
-    add_frame_arguments(parser)  # the tongue's size (the adult one by default), as the replay's
+    add_run_arguments(parser, quiet=False)  # the replay's options: the same tongue, frame by frame
 
 
 def run(args) -> int:
+    from tonguevis.cli._common import run_settings_of
     from tonguevis.cli.record import parse_address
-    from tonguevis.workflows.settings import RunSettings
+    from tonguevis.live.simulator import check_live_settings
 
-    RunSettings(modes=args.modes, sensor_patches=args.sensor_patches, rest_fit=args.rest_fit, frame=args.frame,
-                tongue_size=args.tongue_size)  # said before Qt
+    settings = run_settings_of(args)  # said before Qt: a bad setting or palate file, one line naming it
+    check_live_settings(settings)
     address = None
     if args.address:
         host, port = parse_address(args.address)  # a clear error for a bad HOST:PORT, before any window
@@ -47,6 +43,4 @@ def run(args) -> int:
         profile = load_profile(args.profile)
     from tonguevis.gui.live_window import run_live  # the one way into Qt (pyproject's import contracts)
 
-    return run_live(address, sensor_map=sensor_map, profile=profile, palate=args.palate, modes=args.modes,
-                    sensor_patches=args.sensor_patches, rest_fit=args.rest_fit, frame=args.frame,
-                    tongue_size=args.tongue_size)
+    return run_live(address, settings, sensor_map=sensor_map, profile=profile)

@@ -28,7 +28,7 @@ def _frame_spec(text: str) -> tuple[Path, float]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import add_frame_arguments, add_model_arguments, add_reader_options_argument, add_rest_argument
+    from tonguevis.cli._common import add_reader_options_argument, add_run_arguments
 
     parser.add_argument("source", type=_frame_spec, metavar="SOURCE@TIME", help="source shape (t = 0)")
     parser.add_argument("target", type=_frame_spec, metavar="TARGET@TIME", help="target shape (t = 1)")
@@ -41,9 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--one-way", action="store_true", help="MP4 plays source → target only (default: and back)")
     parser.add_argument("--sensors", metavar="MAP", help="sensor map for recordings (default: sensor_map.json beside)")
     add_reader_options_argument(parser, " of both recordings")
-    add_model_arguments(parser)
-    add_frame_arguments(parser)  # the tongue's size and frame, as simulate's
-    add_rest_argument(parser, every=True)
+    add_run_arguments(parser, every=True)
 
 
 def load_model(args):
@@ -56,7 +54,7 @@ def load_model(args):
 def _motion(path: Path, model, args, progress):
     from tonguevis.cli._common import reading_options, simulate_args
     from tonguevis.sim import Motion
-    from tonguevis.workflows import open_recording
+    from tonguevis.workflows.recording import open_recording
 
     if path.suffix.lower() == ".npz":
         return Motion.load(path)

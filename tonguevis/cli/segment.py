@@ -19,18 +19,14 @@ DEFAULT_MODES = 100
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import (DeprecatedAlias, add_companion_arguments, add_frame_arguments,
-                                       add_mesh_axes_argument, add_physics_arguments, add_productions_from_argument,
-                                       add_reader_options_argument, add_rest_argument)
+    from tonguevis.cli._common import (DeprecatedAlias, add_companion_arguments, add_productions_from_argument,
+                                       add_reader_options_argument, add_run_arguments)
 
     parser.add_argument("file", type=Path,
                         help="the recording (NDI Wave TSV, Carstens .pos, EST .ema, ...) or a saved motion (.npz)")
     parser.add_argument("--sensors", metavar="MAP",
                         help="sensor map: a preset (paper, haskins, mngu0) or a JSON file of name -> channel "
                              "(default: sensor_map.json beside the file, if there is one)")
-    parser.add_argument("--mesh", metavar="PATH", type=Path,
-                        help="tongue mesh to use instead of ours (TetGen .node/.ele, VTU, Gmsh, .npz)")
-    add_mesh_axes_argument(parser)
     which = parser.add_mutually_exclusive_group()
     which.add_argument("--production", metavar="K", type=int,
                        help="segment production K (1-based, as listed by 'tonguevis syllables', with the same "
@@ -54,14 +50,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="post-segmentation adjustment: move interface tets while the error falls")
     parser.add_argument("--no-anchors", action="store_true",
                         help="constraint modes without the anchors as constrained nodes")
-    parser.add_argument("--modes", type=_count_or_old_kind, default=None, metavar="M",
-                        help="vibration modes of the simulation (default 100)")
     parser.add_argument("--modal-modes", type=int, action=DeprecatedAlias, new="--modes")
-    parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
-                        help="sensor nodes: the speaker's own layout (default) or the paper's placement rule")
-    add_physics_arguments(parser)  # the batch's and simulate's options: the same motion as theirs
-    add_frame_arguments(parser)
-    add_rest_argument(parser)
+    add_run_arguments(parser, modes_type=_count_or_old_kind, quiet=False)  # simulate's and the batch's: one motion
     parser.add_argument("--out", type=Path, required=True, metavar="OUT.vtu", help="VTU file to write")
     parser.add_argument("--png", type=Path, metavar="OUT.png", help="also render a picture (off screen)")
     parser.add_argument("--save", type=Path, metavar="OUT.npz", help="also save the whole result")
@@ -89,8 +79,10 @@ def resolve_mode_options(args) -> None:
         deprecation_note(f"--modes {old_kind}", f"--mode-kind {old_kind} (--modes is now the number of modes)")
         args.modes = None
     args.mode_kind = args.mode_kind or old_kind or "constraint"
-    if args.modes is None:
-        args.modes = args.modal_modes if args.modal_modes is not None else DEFAULT_MODES
+    if args.modal_modes is not None:
+        args.modes = args.modal_modes
+    elif args.modes is None:
+        args.modes = DEFAULT_MODES
 
 
 def _seeding(args) -> dict:
@@ -149,7 +141,7 @@ def load_model(mesh: Path | None, axes: str | None):
 
 
 def _recording(path: Path, sensors, options=None):
-    from tonguevis.workflows import open_recording
+    from tonguevis.workflows.recording import open_recording
 
     # a sensor_map.json, NAME.wav and NAME.TextGrid beside the file are used by default
     return open_recording(path, sensors, **(options or {}))
@@ -176,7 +168,7 @@ def _motion(args):
         return rec, motion
     rec = _recording(args.file, args.sensors, reading_options(args))
     model = load_model(args.mesh, args.mesh_axes)
-    return rec, simulate_args(args, rec, model, modes=args.modes)
+    return rec, simulate_args(args, rec, model)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -10,19 +10,13 @@ import numpy as np
 from tonguevis.sim.plausibility import plausibility_line
 
 from tonguevis.cli._common import (
-    add_frame_arguments, add_model_arguments, add_recording_arguments, add_rest_argument, load_model_args,
-    read_recording_args, rest_line, simulate_args,
+    add_recording_arguments, add_run_arguments, load_model_args, read_recording_args, rest_line, simulate_args,
 )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_recording_arguments(parser)
-    add_model_arguments(parser)
-    add_frame_arguments(parser)
-    add_rest_argument(parser)
-    parser.add_argument("--palate", metavar="PALATE",
-                        help="keep the tongue below a palate and report penetration and contact: the speaker's "
-                             "(a file from `tonguevis palate`) or 'generic' (the shipped one)")
+    add_run_arguments(parser)
     parser.add_argument("--out", type=Path, metavar="DIR",
                         help="write motion.npz here: q(t), times, per-frame figures, metadata and the model (any "
                              "frame is rebuilt from it: Motion.load); a few MB per minute of recording")

@@ -28,7 +28,7 @@ def run(args) -> int:
     from tonguevis.cli._common import parse_options
     from tonguevis.errors import TonguevisError
     from tonguevis.live.server import ReplayServer, serve_until_done
-    from tonguevis.workflows import open_recording
+    from tonguevis.workflows.recording import open_recording
 
     if not args.speed > 0:
         raise TonguevisError(f"--speed must be positive, not {args.speed}")

@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     from tonguevis.cli._common import reading_options
     from tonguevis.io.textgrid import tier_names
     from tonguevis.preprocess.labelled import PRODUCTIONS_TIER
-    from tonguevis.workflows import find_recording_productions, head_references, open_recording
+    from tonguevis.workflows.recording import find_recording_productions, head_references, open_recording
 
     rec = open_recording(args.file, args.sensors, **reading_options(args))
     sensor_map = rec.metadata.get("sensor_map")

@@ -14,28 +14,16 @@ import argparse
 from pathlib import Path
 
 from tonguevis.cli._common import (
-    add_frame_arguments, add_mesh_axes_argument, add_recording_arguments, add_rest_argument, add_sensor_patches_argument, add_rest_fit_argument,
-    add_sensor_stiffness_argument, frame_options, load_model_args, read_recording_args, rest_arg,
+    add_recording_arguments, add_run_arguments, load_model_args, read_recording_args, run_settings_of,
 )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_recording_arguments(parser)
-    parser.add_argument("--mesh", type=Path, metavar="PATH",
-                        help="tetrahedral tongue mesh (TetGen .node/.ele, VTU, Gmsh); default: the shipped tongue")
-    add_mesh_axes_argument(parser)
-    parser.add_argument("--modes", type=int, default=100, metavar="M", help="vibration modes (default 100)")
-    parser.add_argument("--landmarks", choices=("speaker", "rule"), default="speaker",
-                        help="sensor nodes: snapped to the speaker's layout (default) or the paper's placement rule")
-    add_sensor_stiffness_argument(parser)
-    add_sensor_patches_argument(parser)
-    add_rest_fit_argument(parser)
-    add_frame_arguments(parser)
-    add_rest_argument(parser)
+    add_run_arguments(parser)
     parser.add_argument("--no-static", action="store_true", help="skip the quasi-static baseline")
     parser.add_argument("--json", type=Path, required=True, metavar="OUT", help="write the results here (JSON)")
     parser.add_argument("--md", type=Path, metavar="OUT", help="also write a Markdown report")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 #: Beyond this many seconds of recording the quasi-static baseline (a Newton solve per frame in
@@ -58,13 +46,10 @@ def run(args: argparse.Namespace) -> int:
     from tonguevis.analysis.validation import validate
     from tonguevis._files import atomic_write_text
     from tonguevis.analysis.validation_report import axis_table, recording_markdown
-    from tonguevis.errors import TonguevisError
     from tonguevis.preprocess.rest import RestChoice
     from tonguevis.sim.plausibility import plausibility_line
 
-    if args.modes < 1:
-        raise TonguevisError(f"--modes must be at least 1, got {args.modes}")
-    rest = rest_arg(args)
+    settings = run_settings_of(args)  # first: a bad setting or palate is said before anything is read
     recording = read_recording_args(args)
     advice = long_static_advice(recording, args.no_static)
     if advice:
@@ -73,10 +58,7 @@ def run(args: argparse.Namespace) -> int:
         logger.warning(advice)
     model = load_model_args(args)
     with tqdm_progress("validating", disable=args.quiet) as progress:
-        result = validate(recording, model, modes=args.modes, landmarks=args.landmarks,
-                          rest=rest, sensor_stiffness=args.sensor_stiffness,
-                          quasi_static=not args.no_static, progress=progress, sensor_patches=args.sensor_patches,
-                          rest_fit=args.rest_fit, **frame_options(args))
+        result = validate(recording, settings, model, quasi_static=not args.no_static, progress=progress)
     print(plausibility_line(result.recording))
     doc = result.as_dict()
     result.write_json(args.json)

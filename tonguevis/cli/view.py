@@ -9,21 +9,14 @@ COLOR_CHOICES = ("displacement", "energy", "contact", "plain", "difference")
 
 
 def add_arguments(parser) -> None:
-    from tonguevis.cli._common import (add_companion_arguments, add_frame_arguments, add_reader_options_argument,
-                                       add_rest_argument, add_rest_fit_argument, add_sensor_patches_argument)
+    from tonguevis.cli._common import add_companion_arguments, add_reader_options_argument, add_run_arguments
 
     parser.add_argument("file", nargs="?", type=Path, help="an EMA recording (default: the demo /ta/ train, spk1_ta)")
     parser.add_argument("--sensors", metavar="MAP",
                         help="sensor map: a preset (paper, haskins, mngu0) or a JSON file of name -> channel")
-    parser.add_argument("--mesh", type=Path, metavar="PATH", help="tetrahedral tongue mesh (default: the shipped one)")
-    parser.add_argument("--modes", type=int, default=100, metavar="M", help="vibration modes (default 100)")
     parser.add_argument("--screenshot", type=Path, metavar="PNG",
                         help="open the window, show --frame, save the whole window as PNG and exit")
     parser.add_argument("--frame", type=int, metavar="N", help="frame shown for --screenshot (default: the middle)")
-    parser.add_argument("--palate", metavar="PALATE",
-                        help="keep the tongue below a palate and show the contact: the speaker's (a file from "
-                             "`tonguevis palate`) or 'generic' (the shipped one); default: no contact, the generic "
-                             "palate drawn")
     parser.add_argument("--reference", choices=("head", "jaw"), default="head",
                         help="frame of reference of the views: head (default: tongue and jaw move with the jaw, "
                              "palate fixed) or jaw (the jaw's motion removed)")
@@ -40,31 +33,21 @@ def add_arguments(parser) -> None:
     parser.add_argument("--compare-linear", action="store_true",
                         help="simulate B without modal warping (compare a recording with itself: --compare A)")
     parser.add_argument("--compare-sensors", metavar="MAP", help="sensor map of B (as --sensors)")
-    add_rest_argument(parser)
-    add_sensor_patches_argument(parser)
-    add_rest_fit_argument(parser)
-    add_frame_arguments(parser, frame_dest="model_frame")  # --frame N is the screenshot's frame
+    add_run_arguments(parser, quiet=False)
     add_reader_options_argument(parser, " of FILE")
     add_companion_arguments(parser)
 
 
 def run(args) -> int:
-    from tonguevis.cli._common import parse_options, rest_arg
+    from tonguevis.cli._common import parse_options, reading_options, run_settings_of
 
-    rest = rest_arg(args)
-    options = parse_options(args.option)  # a malformed -O stops here, before a window opens
-    palate = None
-    if args.palate is not None:  # a bad palate file stops here, as one line naming it
-        from tonguevis.palate import load_palate
-
-        palate = load_palate(args.palate)
+    settings = run_settings_of(args)  # a bad setting or palate file stops here, as one line naming it
+    parse_options(args.option)  # a malformed -O stops here, before a window opens
+    reading = {**({"sensor_map": args.sensors} if args.sensors else {}), **reading_options(args)}
     from tonguevis.gui.app import run_view  # Qt only loads here: `import tonguevis.cli.view` stays light
 
-    return run_view(args.file, args.sensors, args.mesh, args.modes, args.screenshot, args.frame, rest=rest,
-                    audio=args.audio, labels=args.label_file, palate=palate, reference=args.reference,
-                    color=args.color, compare=_compare_options(args), options=options,
-                    sensor_patches=args.sensor_patches, rest_fit=args.rest_fit, model_frame=args.model_frame,
-                    tongue_size=args.tongue_size)
+    return run_view(args.file, settings, reading=reading, screenshot=args.screenshot, frame=args.frame,
+                    look={"reference": args.reference, "color": args.color}, compare=_compare_options(args))
 
 
 def _compare_options(args) -> dict | None:

@@ -5,83 +5,40 @@ from __future__ import annotations
 import json
 import os
 import sys
-import traceback
 
-from tonguevis._logging import logger
-
-
-def application():
-    from PySide6.QtWidgets import QApplication
-
-    from tonguevis.gui.qt_workarounds import keep_none_alive
-
-    keep_none_alive()  # every window: a long playback makes as many void Qt calls as the live view
-    app = QApplication.instance()
-    if app is None:
-        app = QApplication(sys.argv[:1])
-        app.setApplicationName("tonguevis")
-        app.setOrganizationName("tonguevis")
-    return app
+from tonguevis.gui.application import application, install_error_hook  # noqa: F401 (re-exported)
 
 
-def install_error_hook(window) -> None:
-    """Unexpected exceptions in Qt callbacks become a dialog; the app keeps running."""
-
-    def hook(kind, value, tb):
-        logger.error("unexpected error:\n%s", "".join(traceback.format_exception(kind, value, tb)))
-        try:
-            window.show_error("Unexpected error", f"{kind.__name__}: {value}")
-        except Exception:  # never let the hook itself raise
-            pass
-
-    sys.excepthook = hook
-
-
-def create_window(file=None, sensor_map=None, mesh=None, modes: int = 100, settings=None, feature_tabs: bool = True,
-                  rest=None, audio=None, labels=None, palate=None, frame: str | None = None,
-                  options: dict | None = None, sensor_patches="default", rest_fit: bool = False,
-                  model_frame: str = "speaker", tongue_size: float | str | None = "adult"):
-    """A shown MainWindow that opens ``file`` (default: the demo), with ``rest`` (start_s, end_s) if given,
-    and the sound ``audio`` and TextGrid ``labels`` if given (else those found beside the file);
-    simulated against ``palate`` (a PalateSurface, a file or "generic"; None: no contact), shown in
-    ``frame`` ("head" or "jaw"; default head); ``options``: the reader options (``-O``) of ``file``;
-    ``sensor_patches``: as :func:`tonguevis.simulate` (Simulation ▸ Sensors on the surface); ``rest_fit``:
-    the tongue bent onto the rest sensors (Simulation ▸ Fit the tongue to the rest sensors); ``model_frame``
-    and ``tongue_size``: in whose millimetres and at what size the tongue is simulated (as
-    :class:`~tonguevis.workflows.settings.RunSettings` ``frame`` and ``tongue_size``)."""
+def create_window(file=None, settings=None, *, reading: dict | None = None, preferences=None,
+                  feature_tabs: bool = True, reference: str | None = None):
+    """A shown MainWindow that opens ``file`` (default: the demo) and simulates it as ``settings`` (a
+    :class:`~tonguevis.sim.settings.RunSettings`, default everyone's; its ``rest`` is the recording's rest when
+    given, its ``palate`` the contact) describe.  ``reading``: :func:`~tonguevis.workflows.open_recording`'s
+    keywords (``sensor_map``, ``audio``, ``labels`` and reader options, ``-O``); ``preferences``: a QSettings
+    (recent files); ``reference``: "head" or "jaw" (the views' frame; default head)."""
     from tonguevis.gui.window import MainWindow
+    from tonguevis.sim.settings import RunSettings
 
     application()
-    window = MainWindow(settings=settings, modes=modes, mesh_path=mesh, palate=palate)
-    if sensor_patches != window.sensor_patches:
-        window.sensor_patches = sensor_patches
-        window.patches_action.blockSignals(True)
-        window.patches_action.setChecked(sensor_patches is not None)
-        window.patches_action.blockSignals(False)
-    if rest_fit:
-        window.rest_fit_action.blockSignals(True)
-        window.rest_fit_action.setChecked(True)
-        window.rest_fit_action.blockSignals(False)
-        window.state.change_run_settings(window, rest_fit=True)
-    if model_frame != window.state.run_settings.frame or tongue_size != window.state.run_settings.tongue_size:
-        window.state.change_run_settings(window, frame=model_frame, tongue_size=tongue_size)
-        key = window._tongue_size()
-        if key is not None:
-            window.size_actions[key].setChecked(True)
-    if frame is not None:
-        window.state.set_reference(frame)
+    settings = settings if settings is not None else RunSettings()
+    rest, settings = settings.rest, settings.replace(rest=None)  # the rest is the recording's, not every one's
+    window = MainWindow(preferences=preferences, run_settings=settings)
+    if reference is not None:
+        window.state.set_reference(reference)
     if feature_tabs:
         from tonguevis.gui.tabs import add_feature_tabs
 
         add_feature_tabs(window)
     window.show()
-    if file is None and rest is None and audio is None and labels is None and not options:
+    reading = dict(reading or {})
+    if file is None and rest is None and not reading:
         window.open_demo()  # with the palate given, if any
     else:
         from tonguevis.workflows.session import demo_recording_path
 
+        sensor_map, audio, labels = (reading.pop(key, None) for key in ("sensor_map", "audio", "labels"))
         window.open_recording(file if file is not None else demo_recording_path(), sensor_map=sensor_map, rest=rest,
-                              audio=audio, labels=labels, options=options)
+                              audio=audio, labels=labels, options=reading)
     return window
 
 
@@ -107,30 +64,24 @@ def opening_problem(window, file):
     return TonguevisError(" ".join(dialog.text().split()))
 
 
-def run_view(file=None, sensor_map=None, mesh=None, modes: int = 100, screenshot=None, frame: int | None = None,
-             rest=None, audio=None, labels=None, palate=None, reference: str | None = None,
-             color: str | None = None, compare: dict | None = None, options: dict | None = None,
-             sensor_patches="default", rest_fit: bool = False, model_frame: str = "speaker",
-             tongue_size: float | str | None = "adult") -> int:
-    """``tonguevis view``: run the app; with ``screenshot``, save the window at ``frame``, print the
-    rest line and exit.  ``rest``: (start_s, end_s) of the rest interval, None to find it; ``audio``,
-    ``labels``: a WAV and a TextGrid, None for those beside the file; ``palate``: simulate against it
-    (None: no contact); ``reference``: "head" or "jaw" frame; ``color``: the surface colouring;
-    ``compare``: the keyword arguments of :meth:`MainWindow.open_compare` (``path`` ...) for a
-    second recording shown with the first (a screenshot waits for both simulations); ``options``: reader
-    options (``-O``) of ``file``; ``model_frame``, ``tongue_size``: as :func:`create_window`'s."""
+def run_view(file=None, settings=None, *, reading: dict | None = None, screenshot=None, frame: int | None = None,
+             look: dict | None = None, compare: dict | None = None) -> int:
+    """``tonguevis view``: run the app on ``file`` simulated as ``settings`` (see :func:`create_window`, as
+    ``reading``); with ``screenshot``, save the window at ``frame``, print the rest line and exit.
+    ``look``: {"reference": "head"|"jaw", "color": a colouring}; ``compare``: the keyword arguments of
+    :meth:`MainWindow.open_compare` (``path`` ...) for a second recording shown with the first (a screenshot
+    waits for both simulations)."""
+    look = look or {}
     app = application()
-    window = create_window(file, sensor_map, mesh, modes, rest=rest, audio=audio, labels=labels, palate=palate,
-                           frame=reference, options=options, sensor_patches=sensor_patches, rest_fit=rest_fit,
-                           model_frame=model_frame, tongue_size=tongue_size)
+    window = create_window(file, settings, reading=reading, reference=look.get("reference"))
     if compare is not None and window.session is not None:
         if not window.open_compare(**compare) and screenshot is not None:
             window.close()
             from tonguevis.errors import TonguevisError
 
             raise TonguevisError(window.state.status)  # "<title>: <message naming the file>"
-    if color is not None:
-        window.state.set_color(color)
+    if look.get("color") is not None:
+        window.state.set_color(look["color"])
     if screenshot is None:
         install_error_hook(window)
         return app.exec()

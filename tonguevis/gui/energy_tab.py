@@ -42,7 +42,9 @@ class EnergyTab(QtWidgets.QWidget):
     state : the app model (optional); current_recording : callable returning the name
     of the recording the 3D views show (default: the stem of the model's primary session).
     model_provider : callable making the tongue model for "Add recordings…" (called in the
-    job's thread; default: the app model's, else the shipped one built by the job).
+    job's thread; default: the app model's, else the one of the run settings, built by the job).
+    settings : the :class:`~tonguevis.sim.settings.RunSettings` "Add recordings…" simulates with (default: the
+    app model's ``run_settings`` at the time, so the curves are simulated as the views' recording is).
     """
 
     frameSelected = QtCore.Signal(str, float)
@@ -50,12 +52,12 @@ class EnergyTab(QtWidgets.QWidget):
     motionsLoaded = QtCore.Signal(dict)  # recording name -> Motion, after "Add recordings"
 
     def __init__(self, state=None, current_recording: Callable[[], str | None] | None = None, parent=None,
-                 model_provider: Callable[[], object] | None = None, simulate_options: dict | None = None):
+                 model_provider: Callable[[], object] | None = None, settings=None):
         super().__init__(parent)
         self.state = state
         self.current_recording = current_recording or self._shown_recording
         self.model_provider = model_provider
-        self.simulate_options = dict(simulate_options or {})
+        self.settings = settings
         self.motions: dict = {}
         self.job = None
         self.curves: list[EnergyCurve] = []
@@ -203,6 +205,14 @@ class EnergyTab(QtWidgets.QWidget):
         if files:
             self.load_paths(files)
 
+    def run_settings(self):
+        """The :class:`~tonguevis.sim.settings.RunSettings` the recordings added are simulated with."""
+        from tonguevis.sim.settings import RunSettings
+
+        if self.settings is not None:
+            return self.settings
+        return self.state.run_settings if self.state is not None else RunSettings()
+
     def load_paths(self, paths) -> None:
         """Simulate the recordings (files or folders) through the job runner, then add their curves."""
         from tonguevis.analysis.corpus import load_corpus
@@ -220,15 +230,15 @@ class EnergyTab(QtWidgets.QWidget):
         # Read on the GUI thread; a model the job has to build is handed back, not assigned there.
         model = None if self.state is None else self.state.tongue_model
         mesh_path = None if self.state is None else self.state.mesh_path
-        provider, options = self.model_provider, dict(self.simulate_options)
+        provider, settings = self.model_provider, self.run_settings()
 
         def work(progress):
-            from tonguevis.workflows.simulation import build_model
+            from tonguevis.sim.settings import build_model
 
             used = model
             if used is None:
-                used = provider() if provider is not None else build_model(mesh_path)
-            return corpus_energy_curves(corpus, model=used, progress=progress, **options), used
+                used = provider() if provider is not None else build_model(settings)
+            return corpus_energy_curves(corpus, settings, used, progress=progress), used
 
         self.add_button.setEnabled(False)
         self.progress.setVisible(True)

@@ -148,24 +148,25 @@ class LiveWindow(QMainWindow):
     to connect from the panel).
 
     sensor_names : the stream's slot names: a list in slot order, or a sensor map (name -> NDI Id);
-        without it the names the device sends (see :meth:`slot_names`).  settings : a :class:`~tonguevis.workflows.settings.RunSettings`
-        (default the replay's, with ``modes``); model : the unplaced tongue model.
+        without it the names the device sends (see :meth:`slot_names`).  settings : a :class:`~tonguevis.sim.settings.RunSettings`
+        (default everyone's: the replay's); its ``palate`` is drawn, its ``rest`` (START, END on the stream's
+        clock from the first frame) taken when the stream passes END instead of the stillest moment; model : the
+        unplaced tongue model.
     profile : a :class:`~tonguevis.live.profiles.Profile` (its targets, offsets; sweeps saved in its
         folder under ``profiles_root``); None: the profile "default" there (made when first saved).
-    palate : a palate file or surface in the stream's head-corrected frame (drawn, not simulated).
     auto_rest : take the rest by itself from the stillest half second of the first seconds.
     """
 
     def __init__(self, source=None, sensor_names=None, settings=None, model=None, profile=None,
-                 profiles_root=None, palate=None, auto_rest: bool = True, modes: int | None = None, parent=None):
+                 profiles_root=None, auto_rest: bool = True, parent=None):
         super().__init__(parent)
         keep_none_alive()
-        from tonguevis.workflows.settings import RunSettings
+        from tonguevis.live.simulator import check_live_settings
+        from tonguevis.sim.settings import RunSettings
 
         self.setWindowTitle("tonguevis live")
         settings = settings if settings is not None else RunSettings()
-        if modes is not None:
-            settings = settings.replace(modes=modes)
+        check_live_settings(settings)
         self.settings, self.model = settings, model
         self.given_names = (dict(sensor_names) if isinstance(sensor_names, dict) else list(sensor_names)) \
             if sensor_names else None
@@ -173,7 +174,7 @@ class LiveWindow(QMainWindow):
         self.profile = profile if profile is not None else self._default_profile()
         self.targets = list(self.profile.targets)
         self.auto_rest = auto_rest
-        self.palate = self._load_palate(palate)
+        self.palate = settings.palate_surface()
         self.source = None
         self.simulator: LiveSimulator | None = None
         self.sweep = None
@@ -197,13 +198,6 @@ class LiveWindow(QMainWindow):
             return load_profile("default", self.profiles_root)
         except ProfileError:
             return Profile("default", name="default")
-
-    def _load_palate(self, palate):
-        if palate is None:
-            return None
-        from tonguevis.palate import load_palate
-
-        return load_palate(palate)
 
     def _reset_counters(self) -> None:
         self.frames_drawn = 0
@@ -455,9 +449,13 @@ class LiveWindow(QMainWindow):
             self._recent.append((frame.timestamp_s, np.asarray(frame.positions, dtype=np.float64)))
         if self._clock0 is None:
             self._clock0 = newest.timestamp_s
-        if self.simulator is None and self.auto_rest and len(self._recent) >= 2 and \
-                self._recent[-1][0] - self._recent[0][0] >= AUTO_REST_S - 1e-9:
-            self._take_rest(names, stillest=True)
+        if self.simulator is None and self.auto_rest and len(self._recent) >= 2:
+            given = self.settings.rest
+            if given is not None:  # the rest the user gave: when the stream has passed its end
+                if newest.timestamp_s - self._clock0 >= given[1]:
+                    self._take_rest(names, stillest=False, interval=given)
+            elif self._recent[-1][0] - self._recent[0][0] >= AUTO_REST_S - 1e-9:
+                self._take_rest(names, stillest=True)
         step = None
         simulate_s = 0.0
         sim = self.simulator
@@ -695,7 +693,9 @@ class LiveWindow(QMainWindow):
         self.midsagittal.ghost = points[:, [0, 2]]
 
     # ------------------------------------------------------------------ the rest
-    def _take_rest(self, names: list[str], stillest: bool) -> bool:
+    def _take_rest(self, names: list[str], stillest: bool, interval=None) -> bool:
+        """The rest from the stillest moment of the recent frames, the last half second, or ``interval``
+        (start_s, end_s on the stream's clock from its first frame)."""
         recent = list(self._recent)
         times = np.array([t for t, _ in recent])
         if len(times) < 2:
@@ -711,6 +711,13 @@ class LiveWindow(QMainWindow):
                 for t, p in recent:
                     sim.observe(t, p)
                 sim.take_rest(REST_WINDOW_S)
+            elif interval is not None:
+                start, end = (self._clock0 or 0.0) + interval[0], (self._clock0 or 0.0) + interval[1]
+                inside = (times >= start - 1e-9) & (times <= end + 1e-9)
+                if inside.sum() < 2:
+                    raise LiveSimulationError(f"the rest {interval[0]:g}-{interval[1]:g} s (--rest) holds "
+                                              f"{int(inside.sum())} frame(s) of the stream; give a longer one")
+                sim.set_rest(times[inside], np.stack([p for (_, p), keep in zip(recent, inside) if keep]))
             else:
                 last = times >= times[-1] - REST_WINDOW_S
                 sim.set_rest(times[last], np.stack([p for (_, p), keep in zip(recent, last) if keep]))
@@ -725,7 +732,8 @@ class LiveWindow(QMainWindow):
             self.plotter.remove_actor("tongue")
             self.surface_mesh = None
         start, end = sim.rest_times[0], sim.rest_times[-1]
-        self.rest_label.setText(f"rest {'(stillest moment)' if stillest else 'taken'}: stream time "
+        how = "(stillest moment)" if stillest else "(as given)" if interval is not None else "taken"
+        self.rest_label.setText(f"rest {how}: stream time "
                                 f"{start:.2f}-{end:.2f} s; {len(sim.driving_names)} sensors drive the tongue "
                                 f"({', '.join(sim.driving_names)}), {self.settings.modes} modes")
         self.show_status("rest taken")
@@ -938,22 +946,16 @@ class LiveWindow(QMainWindow):
         super().closeEvent(event)
 
 
-def run_live(address: str | None = None, sensor_map=None, profile=None, palate=None, modes: int = 100,
-             sensor_patches="default", rest_fit: bool = False, frame: str = "speaker",
-             tongue_size="adult") -> int:
-    """``tonguevis live``: the live window, connected to ``address`` ("HOST:PORT") at once when given;
-    ``sensor_map`` : name -> NDI Id; ``profile`` : a Profile; ``palate`` : a palate file; ``sensor_patches``:
-    as :class:`~tonguevis.workflows.settings.RunSettings` (the sensors on the surface); ``rest_fit``: the tongue
-    bent onto each rest taken (``--fit-rest``); ``frame``, ``tongue_size``: as RunSettings'.  Runs until closed."""
-    from tonguevis.gui.app import application, install_error_hook
+def run_live(address: str | None = None, settings=None, *, sensor_map=None, profile=None) -> int:
+    """``tonguevis live``: the live window, connected to ``address`` ("HOST:PORT") at once when given,
+    simulating as ``settings`` (a :class:`~tonguevis.sim.settings.RunSettings`: the replay's by default; its
+    palate drawn); ``sensor_map`` : name -> NDI Id; ``profile`` : a Profile.  Runs until closed."""
+    from tonguevis.gui.application import application, install_error_hook
     from tonguevis.live.source import WaveFrontSource
-    from tonguevis.workflows.settings import RunSettings
 
-    settings = RunSettings(modes=modes, sensor_patches=sensor_patches, rest_fit=rest_fit, frame=frame,
-                           tongue_size=tongue_size)  # checked before any window
     source = WaveFrontSource(*parse_source(address)) if address else None
     app = application()
-    window = LiveWindow(source, sensor_names=sensor_map, settings=settings, profile=profile, palate=palate)
+    window = LiveWindow(source, sensor_names=sensor_map, settings=settings, profile=profile)
     install_error_hook(window)
     window.show()
     return app.exec()

@@ -13,8 +13,9 @@ MAX_RECENT = 8
 
 
 class MenusMixin:
-    """Needs ``self.state``, ``self.settings``, ``self.view3d``, ``self.transport`` and the
-    window's open/export/rest methods."""
+    """Needs ``self.state``, ``self.preferences``, ``self.view3d``, ``self.transport`` and the
+    window's open/export/rest methods.  The Simulation menu's items write the app model's run settings;
+    their check marks follow its ``run_settings`` events (:meth:`_reflect_run_settings`), whoever changed them."""
 
     def _build_menus(self) -> None:
         bar = self.menuBar()
@@ -67,22 +68,20 @@ class MenusMixin:
         self.patches_action.setCheckable(True)
         self.patches_action.setToolTip("close the gap between each sensor and the tongue's surface with the tongue's "
                                        "own local deformation under it (tonguevis simulate --sensor-patches)")
-        self.patches_action.setChecked(self.state.run_settings.sensor_patches is not None)
-        self.patches_action.toggled.connect(self.set_sensor_patches)
+        self.patches_action.triggered.connect(self.set_sensor_patches)
         simulation.addAction(self.patches_action)
         self.rest_fit_action = QAction("&Fit the tongue to the rest sensors", self)
         self.rest_fit_action.setCheckable(True)
         self.rest_fit_action.setToolTip("bend the tongue so that every sensor node sits on its rest sensor before "
                                         "simulating (tonguevis simulate --fit-rest): the speaker's rest shape")
-        self.rest_fit_action.setChecked(bool(self.state.run_settings.rest_fit))
-        self.rest_fit_action.toggled.connect(self.set_rest_fit)
+        self.rest_fit_action.triggered.connect(self.set_rest_fit)
         simulation.addAction(self.rest_fit_action)
         self.method_actions = self._choice_menu(simulation, "&Method", (
             ("warped", "&Modal warping (the paper)", "linear FEM modes made nonlinear by modal warping (Yang 2013)"),
             ("linear", "&Linear modes", "the linear modal model, no warping"),
             ("domains", "&Quadratic domains (StVK, seed 001; slow)",
              "the successor's nonlinear StVK tongue on quadratic domains: tens of frames per second")),
-            self._method(), self.set_method)
+            None, self.set_method)
         self.size_actions = self._choice_menu(simulation, "Tongue &size", (
             ("adult", "&Adult (the alignment's size when an adult's, else the generic one)",
              "the size the rest sensors' alignment implies when it is an adult tongue's (half to twice the "
@@ -93,7 +92,9 @@ class MenusMixin:
             ("generic", "&Generic adult tongue (about 100 cm³)",
              "the model's own size, turned and moved so the rest sensors lie on its upper surface "
              "(tonguevis simulate --tongue-size 1)")),
-            self._tongue_size(), self.set_tongue_size)
+            None, self.set_tongue_size)
+        self._reflect_run_settings()
+        connected(self.state.events.run_settings, self._reflect_run_settings)
         play = bar.addMenu("&Playback")
         self._action(play, "&Play / pause", lambda: self.state.toggle_playing(self), "Space")
         self._action(play, "Step &forward", lambda: self.state.step(1, self), "Right")
@@ -110,7 +111,7 @@ class MenusMixin:
             action = QAction(text, self)
             action.setCheckable(True)
             action.setToolTip(tip)
-            action.setChecked(key == current)
+            action.setChecked(key == current)  # None: the run settings' events check one
             action.triggered.connect(lambda _checked=False, key=key: choose(key))
             group.addAction(action)
             menu.addAction(action)
@@ -118,16 +119,20 @@ class MenusMixin:
         menu.setToolTipsVisible(True)
         return actions
 
-    def _method(self) -> str:
+    def _reflect_run_settings(self, _event=None) -> None:
+        """The Simulation menu's check marks as the app model's run settings say (programmatic checks: only a
+        user's click triggers an item, so nothing is written back)."""
         settings = self.state.run_settings
-        return settings.method or ("warped" if settings.warping else "linear")
+        self.patches_action.setChecked(settings.sensor_patches is not None)
+        self.rest_fit_action.setChecked(bool(settings.rest_fit))
+        self.method_actions[settings.method].setChecked(True)
+        key = self._tongue_size()
+        for name, action in self.size_actions.items():
+            action.setChecked(name == key)
 
     def set_method(self, method: str) -> None:
-        """Simulate with ``method`` ("warped", "linear" or "domains") from now on, and the open recording again."""
-        self.state.change_run_settings(self, method=method, warping=method != "linear")
-        self.method_actions[method].setChecked(True)
-        if self.session is not None:
-            self._simulate(self.session)
+        """Simulate with ``method`` ("warped", "linear" or "domains") from now on (the open recording again)."""
+        self.state.change_run_settings(self, method=method)
 
     #: Simulation ▸ Tongue size: the menu's keys and the run settings' ``tongue_size``.
     TONGUE_SIZES = {"adult": "adult", "alignment": None, "generic": 1.0}
@@ -138,28 +143,16 @@ class MenusMixin:
         return next((key for key, value in self.TONGUE_SIZES.items() if value == size), None)
 
     def set_tongue_size(self, key: str) -> None:
-        """Simulate at the tongue size ``key`` ("adult", "alignment" or "generic") from now on, and the open
-        recording again."""
+        """Simulate at the tongue size ``key`` ("adult", "alignment" or "generic") from now on."""
         self.state.change_run_settings(self, tongue_size=self.TONGUE_SIZES[key])
-        self.size_actions[key].setChecked(True)
-        if self.session is not None:
-            self._simulate(self.session)
 
     def set_sensor_patches(self, on: bool) -> None:
-        """Simulate with (or without) the sensor patches, and simulate the open recording again."""
-        self.sensor_patches = "default" if on else None
-        if self.patches_action.isChecked() != on:
-            self.patches_action.setChecked(on)
-        if self.session is not None:
-            self._simulate(self.session)
+        """Simulate with (or without) the sensor patches from now on."""
+        self.state.change_run_settings(self, sensor_patches="default" if on else None)
 
     def set_rest_fit(self, on: bool) -> None:
-        """Simulate with (or without) the rest shape fitted to the rest sensors, and the open recording again."""
+        """Simulate with (or without) the rest shape fitted to the rest sensors from now on."""
         self.state.change_run_settings(self, rest_fit=bool(on))
-        if self.rest_fit_action.isChecked() != on:
-            self.rest_fit_action.setChecked(on)
-        if self.session is not None:
-            self._simulate(self.session)
 
     def _build_export_menu(self, menu) -> None:
         """File ▸ Export: one item per row of the export table (tonguevis.workflows.exports), the same
@@ -194,7 +187,7 @@ class MenusMixin:
         own, to connect from its panel (a device, or ``tonguevis stream FILE``)."""
         from tonguevis.gui.live_window import LiveWindow
 
-        window = LiveWindow()
+        window = LiveWindow(settings=self.state.run_settings.replace(rest=None))  # the replay's settings
         self._live_windows = [w for w in getattr(self, "_live_windows", []) if w.isVisible()] + [window]
         window.show()
         return window
@@ -208,14 +201,14 @@ class MenusMixin:
         return action
 
     def recent_files(self) -> list[str]:
-        value = self.settings.value("recent", [])
+        value = self.preferences.value("recent", [])
         if isinstance(value, str):
             value = [value]
         return [str(v) for v in (value or [])]
 
     def _remember(self, path: Path) -> None:
         recent = [str(path)] + [p for p in self.recent_files() if p != str(path)]
-        self.settings.setValue("recent", recent[:MAX_RECENT])
+        self.preferences.setValue("recent", recent[:MAX_RECENT])
         self._fill_recent()
 
     def _fill_recent(self) -> None:

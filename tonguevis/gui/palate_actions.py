@@ -20,7 +20,6 @@ from tonguevis.errors import TonguevisError
 __all__ = ["PalateMixin", "read_palate"]
 
 PALATE_FILTER = "Palate surfaces (*.stl *.obj *.ply *.vtk *.vtu *.off *.npz);;All files (*)"
-NO_PALATE = object()  # "use the window's palate" (None is a choice: no palate)
 
 
 def read_palate(path):
@@ -35,7 +34,7 @@ def read_palate(path):
 
 
 class PalateMixin:
-    """Needs the window's ``palate``, ``session``, ``state``, ``_simulate``, ``show_error``."""
+    """Needs the window's ``palate``, ``session``, ``state``, ``controller``, ``show_error``."""
 
     def ask_load_palate(self) -> None:
         path, _ = QFileDialog.getOpenFileName(self, "Load the speaker's palate (from tonguevis palate)",
@@ -66,13 +65,13 @@ class PalateMixin:
             self.palate = palate
             self.state.set_status(f"palate for the next recording: {self._palate_name(palate)}", self)
             return
-        self._simulate(self.session, palate=palate)
+        self.controller.try_settings(palate=palate)
 
     @staticmethod
     def _palate_name(palate) -> str:
-        from tonguevis.render.drawing import palate_label
+        from tonguevis.gui.controller import palate_name
 
-        return "none (no contact)" if palate is None else palate_label(palate)
+        return palate_name(palate)
 
     # -- fitting ----------------------------------------------------------------------
     def ask_fit_palate(self) -> None:
@@ -90,7 +89,7 @@ class PalateMixin:
 
     def _ask_probe(self, first) -> str | None:
         """The probe sensor: PROBE when the first trace has it, else the user picks one of its sensors."""
-        from tonguevis.workflows import open_recording
+        from tonguevis.workflows.recording import open_recording
 
         try:
             names = open_recording(first, audio=False).sensor_names

@@ -106,7 +106,7 @@ class RestIntervalDialog(QDialog):
 
 
 class RestMixin:
-    """The window's rest actions; needs ``self.session``, ``self._simulate``, ``self.show_error``."""
+    """The window's rest actions; needs ``self.session``, ``self.controller``, ``self.show_error``."""
 
     def ask_rest_interval(self) -> None:
         """Simulation ▸ Set rest interval…: ask, then simulate again with the answer."""
@@ -136,7 +136,7 @@ class RestMixin:
                 self.show_error("Rest interval not usable", str(exc), session.path)
                 return False
         session.given_rest = interval
-        self._simulate(session)
+        self.controller.resimulate()
         return True
 
     def _build_rest_status(self) -> None:

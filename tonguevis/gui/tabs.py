@@ -25,6 +25,6 @@ def add_feature_tabs(window) -> None:
     from tonguevis.gui.segmentation_tab import SegmentationTab
 
     state = window.state
-    window.register_tab("Energy", EnergyTab(state, simulate_options={"modes": window.modes}))
+    window.register_tab("Energy", EnergyTab(state))
     window.register_tab("Morph", MorphTab(state))
     window.register_tab("Segmentation", SegmentationTab(state))

@@ -2,10 +2,11 @@
 
 The window holds the app model (:class:`~tonguevis.appstate.AppState`, ``window.state``)
 and lays out the views; it does not push data into them.  Opening a recording is
-``state.set_session(session)``; its simulation runs through the job runner
-(:func:`tonguevis.gui.worker.run_job`) and, back on the GUI thread, the motion is
-set on the session and announced with ``state.set_motion(session)``.  Every view
-showing a session follows the model (``state.follow_session(view.set_session)``);
+``state.set_session(session)``; changing how the app simulates is ``state.change_run_settings(...)``.
+The :class:`~tonguevis.gui.controller.SimulationController` (``window.controller``) follows both and
+simulates through the job runner; back on the GUI thread the motion is set on the session and
+announced with ``state.set_motion(session)``.  Every view showing a session follows the model
+(``state.follow_session(view.set_session)``); the menus' check marks follow ``run_settings`` events;
 the status bar shows the model's ``status`` events.
 """
 
@@ -25,7 +26,7 @@ from tonguevis.gui.dialogs import SensorMapDialog, error_box
 from tonguevis.gui.elastic_label import ElasticLabel
 from tonguevis.gui.menus import MenusMixin
 from tonguevis.gui.modal_tab import ModalTab
-from tonguevis.gui.palate_actions import NO_PALATE, PalateMixin
+from tonguevis.gui.palate_actions import PalateMixin
 from tonguevis.gui.palate_panel import PalatePanel
 from tonguevis.gui.playback import PlaybackController
 from tonguevis.gui.rest_dialog import RestMixin
@@ -33,32 +34,31 @@ from tonguevis.gui.sensor_panel import SensorPanel
 from tonguevis.workflows.session import Session, load_session, needs_sensor_map, remap_session
 from tonguevis.gui.transport import TransportBar
 from tonguevis.gui.view3d import View3D
-from tonguevis.gui.worker import Job, run_job
+from tonguevis.gui.controller import SimulationController
 
 from tonguevis._logging import logger
 MESH_SUFFIXES = (".vtu", ".vtk", ".msh", ".node", ".ele", ".mesh", ".npz", ".inp", ".xdmf")
 
 class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
-    """The tonguevis window.  ``modes``, ``mesh_path`` and ``palate`` (None: no contact; "generic";
-    a speaker's PalateSurface or palate file) configure the simulation."""
+    """The tonguevis window.  ``run_settings`` (a :class:`~tonguevis.sim.settings.RunSettings`; default
+    the app model's, everyone's defaults) says how it simulates, ``preferences`` (a QSettings) where it keeps
+    the recent files."""
 
     simulation_finished = Signal(bool)  # True on success (scripts and tests wait for it)
     compare_finished = Signal(bool)  # the compared recording's simulation: True on success
 
-    def __init__(self, state: AppState | None = None, settings: QSettings | None = None, modes: int = 100,
-                 mesh_path: str | os.PathLike | None = None, warping: bool = True, palate=None):
+    def __init__(self, state: AppState | None = None, preferences: QSettings | None = None, run_settings=None):
         super().__init__()
         self.setWindowTitle("tonguevis")
         self.resize(1500, 950)
         self.setAcceptDrops(True)
         self.state = state or AppState()
-        self.settings = settings or QSettings("tonguevis", "tonguevis")
-        # How the app simulates: one RunSettings in the app model (tonguevis.workflows.settings).
-        self.state.change_run_settings(self, modes=modes, warping=warping, palate=palate)
-        if mesh_path is not None or self.state.mesh_path is not None:
-            self.state.set_tongue_model(None, mesh_path, self)
-        self.worker: Job | None = None  # the simulation's job
-        self.export_job: Job | None = None  # the latest export or palate fit
+        self.preferences = preferences or QSettings("tonguevis", "tonguevis")
+        if run_settings is not None:  # how the app simulates: one RunSettings in the app model
+            self.state.set_run_settings(run_settings, self)
+        # First: a recording opened starts its simulation before the views draw it.
+        self.controller = SimulationController(self)
+        self.export_job = None  # the latest export or palate fit (a Job)
         self.last_dialog = None
         self.feature_tabs: dict[str, QWidget] = {}
         connected(self.state.events.status, self._show_status)
@@ -146,7 +146,8 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
     def mesh_path(self):
         return self.state.mesh_path
 
-    # The run settings' fields, read and written through the app model (the menus and scripts use these).
+    # The run settings' fields, read and written through the app model (the menus and scripts use these;
+    # writing one re-simulates the open recordings: the controller follows the model).
     modes = property(lambda self: self.state.run_settings.modes,
                      lambda self, value: self.state.change_run_settings(self, modes=value))
     warping = property(lambda self: self.state.run_settings.warping,
@@ -157,6 +158,16 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
                               lambda self, value: self.state.change_run_settings(self, sensor_patches=value))
     palate = property(lambda self: self.state.run_settings.palate,
                       lambda self, value: self.state.change_run_settings(self, palate=value))
+
+    @property
+    def worker(self):
+        """The primary recording's latest simulation job (running or done; None once stopped)."""
+        return self.controller.jobs["primary"]
+
+    @property
+    def compare_job(self):
+        """The compared recording's latest simulation job (running or done; None once stopped)."""
+        return self.controller.jobs["compare"]
 
     @property
     def time_views(self) -> dict[str, object]:
@@ -257,7 +268,7 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         self.show_session(session)
 
     def open_mesh(self, path) -> None:
-        from tonguevis.workflows.simulation import build_model
+        from tonguevis.sim.settings import build_model
 
         try:
             model = build_model(path)  # on the GUI thread: reading a mesh is quick
@@ -267,14 +278,14 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         except Exception as exc:  # a model that cannot be built from this mesh
             self.show_error("Cannot use mesh", f"{type(exc).__name__}: {exc}", path)
             return
-        self.state.set_tongue_model(model, path, self)
+        same = os.fspath(path) == self.state.mesh_path
+        self.state.set_tongue_model(model, os.fspath(path), self)  # a new mesh: the controller re-simulates
         self.state.set_status(f"mesh {path}: {model.mesh.n_nodes} nodes", self)
-        if self.session is not None:
-            self._simulate(self.session)
+        if same:  # read again from the same file: the settings did not change, the model did
+            self.controller.resimulate()
 
     def show_session(self, session: Session) -> None:
-        """Simulate the recording and show it at once (plots, audio) while it simulates."""
-        self._simulate(session)  # first: the job prepares while the views draw the recording
+        """Show the recording at once (plots, audio) while it simulates (the controller starts its job)."""
         self.state.set_session(session, source=self)
 
     def _session_opened(self, event) -> None:
@@ -297,80 +308,12 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         self.state.set_range(start, end, period, self)
         self.show_rest(session)
 
-    # -- simulation through the job runner -----------------------------------------
-    def _simulate(self, session: Session, palate=NO_PALATE) -> None:
-        """Simulate ``session`` in a job, against ``palate`` (default: the window's).
-
-        The job returns the model it used and the motion; nothing is assigned until
-        :meth:`_on_simulated` runs on the GUI thread.  A long recording's first seconds come
-        first (:meth:`_on_preview`): the views show them while the rest simulates."""
-        from tonguevis.workflows.simulation import simulate_motion
-
-        self._cancel_worker()
-        palate = self.palate if palate is NO_PALATE else palate
-        model = self.state.tongue_model  # read here, on the GUI thread
-        settings = self.state.run_settings.replace(palate=palate, rest=session.given_rest)
-        recording = session.recording
-
-        def work(progress, partial):
-            return simulate_motion(recording, settings, model, progress=progress, preview=partial)
-
-        def explain(message: str) -> str:
-            if palate is None:
-                return message
-            kept = "" if session.motion is None else " The views keep the previous simulation."
-            return message + (f"\n\n(simulated against the {self._palate_name(palate)}: File ▸ No palate simulates "
-                              f"without contact.{kept})")
-
-        against = "" if palate is None else f" against the {self._palate_name(palate)}"
-        self.state.set_status(f"simulating {session.name} with {self.modes} modes{against}…", self)
-        self.worker = run_job(self, "Simulation", work,
-                              lambda result: self._on_simulated(session, result, settings.mesh),
-                              label=f"Simulating {session.name}…", path=session.path, explain=explain,
-                              on_failed=lambda _message: self.simulation_finished.emit(False),
-                              on_cancelled=lambda: self.simulation_finished.emit(False),
-                              status=lambda text: self.state.set_status(text, self),
-                              on_partial=lambda result: self._on_preview(session, result))
-
-    def _on_preview(self, session: Session, result) -> None:
-        """A long recording's first seconds, simulated (on the GUI thread): shown while the rest simulates
-        in the background (the job's dialog closes; its progress goes on in the status bar)."""
-        if self.state.role_of(session) is None:
-            return  # a newer recording was opened meanwhile
-        result.apply(session)
-        self.state.set_motion(session, self)
-        shown = result.motion.metadata["preview"]
-        self.state.set_status(
-            f"{session.name}: showing the first {result.motion.times[-1] - result.motion.times[0]:.0f} s "
-            f"({shown['frames']} of {shown['of']} frames) while the rest simulates; opening another recording "
-            f"stops it", self)
-
-    def _on_simulated(self, session: Session, result, mesh_path) -> None:
-        """The job's result, on the GUI thread: the model kept, the motion set on the session and announced."""
-        if self.state.tongue_model is None and self.state.mesh_path == mesh_path:
-            self.state.set_tongue_model(result.model, mesh_path, self)  # built by the job: kept for the next
-        if self.state.role_of(session) is None:
-            return  # a newer recording was opened meanwhile
-        result.apply(session)
-        self.palate = session.palate  # a palate chosen becomes the window's once it simulated
-        self.state.set_motion(session, self)
-        motion = session.motion
-        self.state.set_status(
-            f"{session.name}: {motion.n_frames} frames simulated, "
-            f"{int((~motion.converged).sum())} not converged; press Space to play"
-            + "".join(f"; {note}" for note in session.notes), self)
-        self.simulation_finished.emit(True)
-
+    # -- status ---------------------------------------------------------------------
     def _show_status(self, event) -> None:
         """The status line, whole in its tooltip: the notes after a simulation (plausibility, contact, the
         tongue's size) run past the bar's width."""
         self.statusBar().showMessage(event.value)
         self.statusBar().setToolTip(event.value)
-
-    def _cancel_worker(self) -> None:
-        if self.worker is not None:
-            self.worker.stop()
-        self.worker = None
 
     # -- exports ------------------------------------------------------------------
     def grab_window(self):
@@ -404,9 +347,7 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
 
     def closeEvent(self, event) -> None:
         self.playback.shutdown()
-        self._cancel_worker()
-        if self.compare_job is not None:
-            self.compare_job.stop()
+        self.controller.shutdown()
         self.compare_panel.close_view()
         if self.export_job is not None:
             self.export_job.stop()

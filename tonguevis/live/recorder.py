@@ -295,7 +295,7 @@ def write_head_corrected(path, sensor_map: dict[str, int] | None = None) -> tupl
     """
     from tonguevis.io.ndi_wave import write_ndi_wave
     from tonguevis.preprocess.correction import head_corrected, head_references
-    from tonguevis.workflows import open_recording
+    from tonguevis.workflows.recording import open_recording
 
     path = Path(path)
     rec = open_recording(path, sensor_map, audio=False, labels=False)

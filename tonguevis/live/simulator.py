@@ -129,11 +129,27 @@ class _Engagement:
         return weight, anchored
 
 
+def check_live_settings(settings) -> None:
+    """LiveSimulationError, naming the setting, for what a frame-by-frame simulation cannot do yet: the domains
+    method and the volume kept (both need the whole recording: the domains' nonlinear solve runs at a few hundred
+    frames/s, the volume's pressure subspace is built from the motion's own shapes) and the trajectories' smoothing
+    (a Savitzky-Golay window looks ahead)."""
+    if settings.method == "domains":
+        raise LiveSimulationError("the live view simulates with modal warping or the linear modes (--method warped "
+                                  "or linear); the domains method runs on whole recordings only (tonguevis simulate)")
+    if settings.keep_volume:
+        raise LiveSimulationError("--keep-volume needs the whole recording (its pressure shapes come from the "
+                                  "motion's own): replay the recording (tonguevis view) to see it")
+    if settings.smooth_window is not None:
+        raise LiveSimulationError("smoothing the trajectories looks ahead in time: the live view has its own "
+                                  "display smoothing instead (the panel's slider)")
+
+
 class LiveSimulator:
     """The tongue driven by a live stream, one frame at a time (see the module docstring).
 
     sensor_names : the stream's slot names (S_all; the sensor map's names: TT, TD, ..., REF1, JAW).
-    settings : a :class:`~tonguevis.workflows.settings.RunSettings` (modes, warping, landmarks,
+    settings : a :class:`~tonguevis.sim.settings.RunSettings` (modes, warping, landmarks,
         sensor stiffness, frame, tongue size; the mesh through ``model``); default the replay's.
     model : the unplaced tongue model (default the settings' mesh, else the shipped tongue).
     rate : the stream's sample rate (Hz); the dynamic solve's step is 1/rate.
@@ -144,10 +160,11 @@ class LiveSimulator:
     """
 
     def __init__(self, sensor_names, settings=None, model=None, rate: float = 100.0, dtype=np.float32,
-                 tolerance: float = 1e-8):
-        from tonguevis.workflows.settings import RunSettings, build_model
+                 tolerance: float | None = None):
+        from tonguevis.sim.settings import RunSettings, build_model
 
         self.settings = settings if settings is not None else RunSettings()
+        check_live_settings(self.settings)
         self.sensor_names = [str(n) for n in sensor_names]
         if len(set(self.sensor_names)) != len(self.sensor_names):
             raise LiveSimulationError(f"the stream's slot names repeat: {self.sensor_names}")
@@ -156,7 +173,7 @@ class LiveSimulator:
             raise LiveSimulationError(f"the stream's rate must be a positive number of Hz, got {rate!r}")
         self.rate = float(rate)
         self.dtype = np.dtype(dtype)
-        self.tolerance = float(tolerance)
+        self.tolerance = float(tolerance) if tolerance is not None else self.settings.newton_tolerance
         self._recent: deque = deque(maxlen=max(8, int(round(REST_SEARCH_S * self.rate))))
         self.ready = False
         self.frames_done = 0
@@ -201,7 +218,6 @@ class LiveSimulator:
         from tonguevis.sim.newmark import NewmarkSettings
         from tonguevis.sim.newmark_kernel import CompiledIntegrator
         from tonguevis.sim.placement import targets_in_frame
-        from tonguevis.sim.simulate import DEFAULT_SENSOR_STIFFNESS
 
         times = np.asarray(times, dtype=np.float64)
         positions = np.asarray(positions_mm, dtype=np.float64) / 1000.0
@@ -255,9 +271,7 @@ class LiveSimulator:
         self.eigenvalues = basis.eigenvalues
         self.phi_s = basis.phi[dofs].reshape(n_s, 3, -1)
         self.w_s = w_full[dofs].reshape(n_s, 3, -1)
-        stiffness = s.sensor_stiffness
-        if stiffness == "default":
-            stiffness = DEFAULT_SENSOR_STIFFNESS
+        stiffness = s.sensor_stiffness_value
         self.k_ref = point_stiffness(basis.eigenvalues, self.phi_s)
         self._base = 0.0 if stiffness is None else 1.0 / (stiffness * self.k_ref)
         from tonguevis.sim.dropouts import RAMP_STIFFNESS

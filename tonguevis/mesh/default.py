@@ -8,16 +8,16 @@ from tonguevis.errors import MeshError
 from tonguevis.mesh.landmarks import Landmarks, read_landmarks
 from tonguevis.mesh.readers import read_mesh
 from tonguevis.mesh.tetmesh import TetMesh
-from tonguevis.paths import MESH_DIR
+from tonguevis.paths import MESH_DIR, SHIPPED_TONGUE
 
-DEFAULT_MESH_NAME = "tongue.vtu"
+DEFAULT_MESH_NAME = SHIPPED_TONGUE.name
 DEFAULT_LANDMARKS_NAME = "tongue_landmarks.json"
 CONTEXT_SURFACES = {"jaw": "jaw.stl", "palate": "palate.stl"}
 
 
 def default_mesh_path() -> Path:
     """Path of the shipped tongue mesh (``meshes/tongue.vtu``)."""
-    return MESH_DIR / DEFAULT_MESH_NAME
+    return SHIPPED_TONGUE
 
 
 def default_landmarks_path() -> Path:

@@ -69,6 +69,19 @@ def proper_axis_mappings() -> list[str]:
     return mappings
 
 
+def _shipped_tongue() -> TetMesh:
+    """The shipped tongue (``meshes/tongue.vtu``, metres) as the template, read by meshio alone: the mesh
+    readers find axes with this module, so it cannot read through them."""
+    from tonguevis.mesh.meshio_read import quiet_meshio_read
+    from tonguevis.paths import SHIPPED_TONGUE
+
+    if not SHIPPED_TONGUE.exists():
+        raise MeshError("the default mesh is missing; run `python scripts/build_meshes.py`", SHIPPED_TONGUE)
+    mesh = quiet_meshio_read(SHIPPED_TONGUE)
+    return TetMesh(np.asarray(mesh.points, dtype=np.float64), np.asarray(mesh.cells_dict["tetra"], dtype=np.int64),
+                   {"source": str(SHIPPED_TONGUE)})
+
+
 def _normalised_boundary(mesh: TetMesh) -> np.ndarray:
     """Boundary nodes centred on the volume centroid, in units of the cube root of the volume."""
     volumes = np.abs(mesh.tet_volumes())
@@ -88,9 +101,7 @@ def find_axes(mesh: TetMesh, template: TetMesh | None = None) -> AxesFit:
     from scipy.spatial import cKDTree  # lazy: keeps `import tonguevis` light
 
     if template is None:
-        from tonguevis.mesh.default import load_default_mesh
-
-        template = load_default_mesh()
+        template = _shipped_tongue()
     reference = _normalised_boundary(template)
     reference_tree = cKDTree(reference)
     points = _normalised_boundary(mesh)

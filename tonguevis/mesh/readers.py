@@ -16,7 +16,6 @@ unless ``unit=`` says what the file uses.
 from __future__ import annotations
 
 import os
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +23,7 @@ import numpy as np
 from tonguevis.errors import MeshError
 from tonguevis.mesh.axes import apply_axes
 from tonguevis.mesh.checks import checked_tets
+from tonguevis.mesh.meshio_read import quiet_meshio_read  # noqa: F401 (re-exported)
 from tonguevis.mesh.tetmesh import TetMesh
 
 from tonguevis._logging import logger
@@ -133,34 +133,6 @@ def _read_meshio(path: Path) -> tuple[np.ndarray, np.ndarray]:
         found = sorted({c.type for c in mesh.cells})
         raise MeshError(f"no linear tetrahedra ('tetra' cells) in the file; found cell types {found}", path)
     return np.asarray(mesh.points, dtype=np.float64)[:, :3], np.concatenate(blocks).astype(np.int64)
-
-
-#: quiet_meshio_read swaps the process's sys.stdout and sys.stderr: one read at a time.  Two reads in two
-#: threads (the app simulates a compared recording beside the open one, each reading the palate) used to
-#: interleave their swaps and leave sys.stdout pointing at one of the captures for good: every later
-#: print was lost (``tonguevis view --compare ... --screenshot`` printed nothing and a GUI test was flaky).
-_QUIET_READ = threading.Lock()
-
-
-def quiet_meshio_read(path):
-    """meshio.read, with meshio's stderr chatter captured and its ``sys.exit``
-    on unparsable XML turned into :class:`meshio.ReadError`."""
-    import contextlib
-    import io
-
-    import meshio
-
-    import warnings
-
-    chatter = io.StringIO()
-    try:
-        # meshio's STL sniffing overflows on some headers (a harmless RuntimeWarning).
-        with _QUIET_READ, contextlib.redirect_stderr(chatter), contextlib.redirect_stdout(chatter), \
-                warnings.catch_warnings(), np.errstate(all="ignore"):
-            warnings.simplefilter("ignore", RuntimeWarning)
-            return meshio.read(path)
-    except SystemExit as exc:
-        raise meshio.ReadError(" ".join(chatter.getvalue().split()) or "unreadable file") from exc
 
 
 def _tetgen_rows(path: Path) -> list[list[str]]:

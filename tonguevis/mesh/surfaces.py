@@ -102,7 +102,7 @@ def read_surface(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
 
     if not os.path.exists(path):
         raise MeshError("no such surface file", path)
-    from tonguevis.mesh.readers import quiet_meshio_read
+    from tonguevis.mesh.meshio_read import quiet_meshio_read
 
     try:
         surface = quiet_meshio_read(path)

@@ -9,7 +9,7 @@ node.  The simulation, the validation and every front end go through it.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -17,9 +17,6 @@ from tonguevis.errors import SimulationError
 from tonguevis.io.recording import Recording
 from tonguevis.preprocess._names import TONGUE
 from tonguevis.preprocess.rest import RestChoice, choose_rest_interval
-
-if TYPE_CHECKING:
-    from tonguevis.sim.model import TongueModel
 
 from tonguevis._logging import logger
 
@@ -62,13 +59,16 @@ class PreparedTargets:
 
 def prepare_targets(
     recording: Recording,
-    model: "TongueModel",
+    model,
     landmarks: str = "speaker",
     rest: RestChoice | tuple[float, float] | None = None,
     smooth_window: int | None = None,
     transform=None,
 ) -> PreparedTargets:
     """Rest interval, head and jaw correction, rest pose, similarity fit, sensor-node choice (§3.1).
+
+    model : a :class:`~tonguevis.sim.model.TongueModel` (its mesh and landmarks: anything with those will do;
+        the simulation layer is above this one, so it is not imported here).
 
     rest : a :class:`RestChoice` (used as is), a (start_s, end_s) the user gave
         (checked), or None: :func:`choose_rest_interval` finds it (the longest
@@ -81,7 +81,10 @@ def prepare_targets(
         instead of fitting one, e.g. the identity for a model already placed in the speaker
         (:mod:`tonguevis.sim.placement`); ``alignment_rms`` is still measured against the rule nodes.
     """
-    from tonguevis import preprocess as pp
+    from tonguevis.preprocess.alignment import fit_similarity
+    from tonguevis.preprocess.correction import correct_jaw, head_corrected
+    from tonguevis.preprocess.filtering import smooth
+    from tonguevis.preprocess.rest import rest_pose
 
     file = recording.metadata.get("file")
     if landmarks not in ("rule", "speaker"):
@@ -104,15 +107,15 @@ def prepare_targets(
     if not isinstance(rest, RestChoice):
         rest = choose_rest_interval(recording, sensors=names, given=rest)
     rest_interval = rest.interval
-    rec = pp.head_corrected(recording, rest_interval=rest_interval)
+    rec = head_corrected(recording, rest_interval=rest_interval)
     jaw_moved = None
     if "JAW" in rec.sensors:
         jaw = rec.sensors["JAW"]
-        jaw_moved = jaw - pp.rest_pose(rec, rest_interval, sensors=["JAW"])["JAW"]
-        rec = pp.correct_jaw(rec, rest_interval=rest_interval)
+        jaw_moved = jaw - rest_pose(rec, rest_interval, sensors=["JAW"])["JAW"]
+        rec = correct_jaw(rec, rest_interval=rest_interval)
     if smooth_window:
-        rec = pp.smooth(rec, window=smooth_window, sensors=names)
-    rest_positions = pp.rest_pose(rec, rest_interval, sensors=names)
+        rec = smooth(rec, window=smooth_window, sensors=names)
+    rest_positions = rest_pose(rec, rest_interval, sensors=names)
     source = np.array([rest_positions[n] for n in names])
     rule_nodes = np.array([int(model.landmarks.sensors[n]) for n in names])
     target = model.mesh.points[rule_nodes]
@@ -120,7 +123,7 @@ def prepare_targets(
     if not midsagittal and len(names) < 3:
         raise SimulationError(f"a 3-D alignment needs at least 3 tongue sensors, got {names}", file)
     if transform is None:
-        transform = pp.fit_similarity(source, target, midsagittal=midsagittal)
+        transform = fit_similarity(source, target, midsagittal=midsagittal)
     aligned_rest = transform.apply(source)
     alignment_rms = float(np.sqrt(np.mean(np.sum((aligned_rest - target) ** 2, axis=1))))
     if landmarks == "speaker":

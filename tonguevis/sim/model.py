@@ -284,15 +284,6 @@ class TongueModel:
             return 0.5 * np.einsum("fm,mk,fk->f", q, basis.info["stiffness"], q)
         return 0.5 * np.einsum("fm,m,fm->f", q, basis.eigenvalues, q)
 
-    def placed(self, transform, keep_frequencies: bool = True) -> "TongueModel":
-        """This model moved into another frame by the similarity ``transform`` (x' = s R x + t, metres),
-        e.g. into a speaker by the inverse of the recording's alignment: a
-        :class:`~tonguevis.sim.placement.PlacedModel` whose modes are this model's, moved (no new
-        eigen-solve); ``keep_frequencies`` keeps its natural frequencies (see that module)."""
-        from tonguevis.sim.placement import PlacedModel
-
-        return PlacedModel(self, transform, keep_frequencies)
-
     def __repr__(self) -> str:
         return (
             f"TongueModel({self.mesh.n_nodes} nodes, {self.mesh.n_tets} tets, "

@@ -212,6 +212,7 @@ class Motion:
         placement = meta.get("placement")
         if placement is not None:  # a model placed in the speaker: the shipped modes (cache), moved
             from tonguevis.preprocess.alignment import SimilarityTransform
+            from tonguevis.sim.placement import PlacedModel
 
             if "scale" in placement:
                 move = SimilarityTransform(placement["scale"], placement["rotation"], placement["translation"])
@@ -221,7 +222,7 @@ class Motion:
                 move = SimilarityTransform(scale, matrix[:3, :3] / scale, matrix[:3, 3])
             source = TongueModel(TetMesh(arrays["source_points"], arrays["tets"], metadata={"file": str(path)}),
                                  landmarks, Material(**placement["source_material"]))
-            model = source.placed(move, keep_frequencies=placement["keep_frequencies"])
+            model = PlacedModel(source, move, placement["keep_frequencies"])
             if meta.get("rest_fit") is not None:  # bent onto the rest sensors: the saved rest shape on that placement
                 from tonguevis.sim.rest_fit import RestFittedModel
 
@@ -277,3 +278,12 @@ def _json_default(obj):
     if isinstance(obj, (np.floating,)):
         return float(obj)
     return str(obj)
+
+
+def rest_of(motion):
+    """The :class:`~tonguevis.preprocess.rest.RestChoice` a motion was simulated with (None for motions saved
+    before it was recorded)."""
+    from tonguevis.preprocess.rest import RestChoice
+
+    data = getattr(motion, "metadata", {}).get("rest")
+    return RestChoice.from_dict(data) if isinstance(data, dict) and "interval" in data else None

@@ -39,11 +39,8 @@ import numpy as np
 from tonguevis.mesh.tetmesh import TetMesh
 from tonguevis.sim.modal import ModalBasis
 from tonguevis.sim.model import TongueModel
+from tonguevis.sim.settings import ADULT, FRAMES  # noqa: F401 (re-exported)
 
-FRAMES = ("speaker", "model")
-#: ``tongue_size=ADULT``: the size the rest alignment implies when it is an adult tongue's, else the generic
-#: adult size (the front ends' default, :class:`~tonguevis.workflows.settings.RunSettings`).
-ADULT = "adult"
 #: Tongue volumes, as multiples of the shipped model's (about 100 cm³, an adult's), taken for an adult's.
 #: The alignment's size falls well outside on the shared Opti-Speech speaker (4.4-6.6 times: coils
 #: spread wider than the paper's placement rule) and inside on the demo speakers and Haskins (0.9-1.4).
@@ -262,7 +259,7 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
         rule_scale = fit.scale
         fit, _ = surface_fit(prep, model, 1.0 / tongue_size)
         how = "upper surface"
-        placed = model.placed(fit.inverse(), keep_frequencies=keep_frequencies)
+        placed = PlacedModel(model, fit.inverse(), keep_frequencies)
         from tonguevis.preprocess.alignment import SimilarityTransform as _Similarity
 
         prep = prepare_targets(recording, placed, landmarks, prep.rest, smooth_window,
@@ -280,7 +277,7 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
                 "be the tongue's size; tongue_size=1 ('tonguevis simulate/validate --tongue-size 1') keeps the "
                 "generic size, the sensors fitted onto its surface", recording.metadata.get("file", "recording"), placement.scale, volume,
                 "further apart" if volume > 1 else "closer together")
-        model = model.placed(placement, keep_frequencies=keep_frequencies)
+        model = PlacedModel(model, placement, keep_frequencies)
         linear = placement.scale * placement.rotation
         prep = replace(
             prep, displacement=prep.displacement @ linear.T, aligned_rest=placement.apply(prep.aligned_rest),

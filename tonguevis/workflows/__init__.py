@@ -3,8 +3,8 @@
 None of the front ends strings the stages together on its own (when each did, they drifted
 apart).  No Qt here.
 
-* :class:`RunSettings` (:mod:`.settings`): one description of how a recording is simulated;
-  :func:`build_model` the one way to build the tongue model from it.
+* :class:`RunSettings` (:mod:`tonguevis.sim.settings`, re-exported): one description of how a recording is
+  simulated; :func:`build_model` the one way to build the tongue model from it.
 * :func:`open_recording`, :func:`head_corrected`, :func:`find_recording_productions`
   (:mod:`.recording`): read a recording with its sensor map, sound and labels; its productions.
 * :func:`simulate_recording`, :func:`simulate_motion`, :func:`rest_of` (:mod:`.simulation`):
@@ -18,7 +18,7 @@ from __future__ import annotations
 from tonguevis.preprocess.rest import RestChoice, check_rest_interval, choose_rest_interval
 from tonguevis.workflows.recording import (find_recording_productions, head_corrected, head_references,
                                            open_recording)
-from tonguevis.workflows.settings import RunSettings, build_model
+from tonguevis.sim.settings import RunSettings, build_model
 from tonguevis.workflows.simulation import rest_of, simulate_recording
 
 __all__ = [

@@ -17,7 +17,7 @@ from tonguevis.analysis.corpus import Corpus, CorpusEntry
 from tonguevis.workflows.recording import find_recording_productions
 from tonguevis.workflows.simulation import rest_of, simulate_recording
 
-__all__ = ["CorpusResult", "corpus_energy_curves", "entry_curves", "open_entry"]
+__all__ = ["CorpusResult", "CurveSettings", "corpus_energy_curves", "entry_curves", "open_entry"]
 
 
 @dataclass
@@ -31,54 +31,72 @@ class CorpusResult:
     rests: dict = field(default_factory=dict)  # recording name -> the RestChoice its simulation used
 
 
-def corpus_energy_curves(corpus: Corpus, model=None, sensor_map=None, modes: int = 100,
-                         keep=(2, 3, 4), keep_motions: bool = True, window: str = "release", progress=None,
-                         tier: str | None = None, open_options: dict | None = None,
-                         **simulate_options) -> CorpusResult:
-    """Simulate every recording of ``corpus`` and cut its energy into production curves.
+@dataclass(frozen=True)
+class CurveSettings:
+    """How each simulated recording of a corpus is cut into energy curves (``tonguevis energy``'s ``--all``,
+    ``--window`` and ``--productions-from``; the batch's ``keep``, ``window`` and ``tier``).
 
-    sensor_map : for every file (dict, JSON path or preset); None uses a
-        ``sensor_map.json`` beside a recording when there is one.
     keep : production positions kept per train (the paper's 2-4; None = all).
-    window : "release" (release to next release, §3.2) or "vowel" (previous
-        vowel to own vowel: the consonant mid-curve, see :func:`vowel_windows`).
+    window : "release" (release to next release, §3.2) or "vowel" (previous vowel to own vowel: the consonant
+        mid-curve, see :func:`~tonguevis.analysis.energy.vowel_windows`).
+    tier : take every recording's productions from this label tier instead of finding them (every non-empty
+        interval; ``keep`` then unused).
+    """
+
+    keep: tuple[int, ...] | None = (2, 3, 4)
+    window: str = "release"
+    tier: str | None = None
+
+    def __post_init__(self) -> None:
+        from tonguevis.analysis.energy import EnergyError
+
+        if self.window not in ("release", "vowel"):
+            raise EnergyError(f"window must be 'release' or 'vowel', got {self.window!r}")
+        if self.keep is not None:
+            object.__setattr__(self, "keep", tuple(int(k) for k in self.keep))
+
+
+def corpus_energy_curves(corpus: Corpus, settings=None, model=None, *, curves: CurveSettings | None = None,
+                         reading: dict | None = None, keep_motions: bool = True, progress=None,
+                         **overrides) -> CorpusResult:
+    """Simulate every recording of ``corpus`` as ``settings`` (a :class:`~tonguevis.sim.settings.RunSettings`,
+    default everyone's; ``overrides``: its fields as keywords) describe, on ``model`` (default: the settings'),
+    and cut its energy into production curves as ``curves`` (:class:`CurveSettings`) say.
+
+    reading : keywords of :func:`tonguevis.workflows.open_recording` for every recording: ``sensor_map``
+        (dict, JSON path or preset; None uses a ``sensor_map.json`` beside a recording when there is one),
+        ``audio=``, ``labels=``, reader options.
     progress(done, total, message) is called once per recording.
-    tier : take every recording's productions from this label tier instead of
-        finding them (every non-empty interval; ``keep`` then unused).
-    open_options : passed to :func:`tonguevis.workflows.open_recording` for every
-        recording (``audio=``, ``labels=``).
-    simulate_options : passed to :func:`tonguevis.workflows.simulate_recording`
-        (``rest=(start_s, end_s)`` for every recording, ``landmarks``, ``warping``...).
     """
     from tonguevis._progress import report
-    from tonguevis.analysis.energy import EnergyError
     from tonguevis.errors import RecordingError
-    from tonguevis.sim import TongueModel
+    from tonguevis.sim.settings import build_model, run_settings
 
-    if window not in ("release", "vowel"):
-        raise EnergyError(f"window must be 'release' or 'vowel', got {window!r}")
-
-    model = model or TongueModel.default()
-    curves, motions, tables, skipped, rests = [], {}, {}, [], {}
+    settings = run_settings(settings, **overrides)
+    curves = curves if curves is not None else CurveSettings()
+    reading = dict(reading or {})
+    sensor_map = reading.pop("sensor_map", None)
+    model = model if model is not None else build_model(settings)
+    found_curves, motions, tables, skipped, rests = [], {}, {}, [], {}
     for k, entry in enumerate(corpus.entries):
         report(progress, k, len(corpus), f"simulating {entry.path.name}")
         try:
-            entry, rec = open_entry(entry, sensor_map, open_options)
+            entry, rec = open_entry(entry, sensor_map, reading)
         except RecordingError as exc:
             if not entry.walked:
                 raise
             logger.warning("skipping %s: %s", entry.path, exc)
             skipped.append((entry.path, str(exc)))
             continue
-        motion = simulate_recording(rec, model, modes=modes, **simulate_options)
+        motion = simulate_recording(rec, model, settings)
         rests[entry.name] = rest_of(motion)
-        found, table = entry_curves(entry, rec, motion, keep=keep, window=window, tier=tier)
-        curves.extend(found)
+        found, table = entry_curves(entry, rec, motion, keep=curves.keep, window=curves.window, tier=curves.tier)
+        found_curves.extend(found)
         if keep_motions:
             motions[entry.name] = motion
         tables[entry.name] = table
     report(progress, len(corpus), len(corpus), "done")
-    return CorpusResult(curves, motions, tables, skipped, rests)
+    return CorpusResult(found_curves, motions, tables, skipped, rests)
 
 
 def open_entry(entry: CorpusEntry, sensor_map=None, open_options: dict | None = None):
@@ -88,7 +106,7 @@ def open_entry(entry: CorpusEntry, sensor_map=None, open_options: dict | None = 
         ``sensor_map.json`` beside it when there is one.  The entry's labels are
         then taken from the recording's metadata unless a label table gave them.
     """
-    from tonguevis.workflows import open_recording  # the package's door (scripts and tests may wrap it)
+    from tonguevis.workflows.recording import open_recording
 
     mapping = sensor_map
     if mapping is None and (entry.path.parent / "sensor_map.json").is_file():

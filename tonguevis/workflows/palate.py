@@ -32,7 +32,7 @@ def palate_from_traces(paths, probe: str = "PROBE", sensor_map=None, progress=No
     positions are kept in ``metadata["head_references"]``: the simulation then registers the palate
     into the speech's head frame by the same references instead of guessing a shift.
     """
-    from tonguevis.workflows import open_recording  # the package's: one door for reading, scripts may wrap it
+    from tonguevis.workflows.recording import open_recording
 
     paths = list(paths)
     if not paths:

@@ -75,7 +75,7 @@ def production_intervals(productions: Any) -> list[tuple[float, float]]:
 def find_production_table(recording: Recording):
     """Every CV production of the recording (a ProductionTable: a ``productions`` tier of its
     TextGrid, else found), or None when none can be found (logged)."""
-    from tonguevis.workflows import find_recording_productions
+    from tonguevis.workflows.recording import find_recording_productions
 
     try:
         return find_recording_productions(recording, keep=None)
@@ -181,7 +181,7 @@ class Session:
     def set_motion(self, motion, frames, palate=None, shown_palate=None) -> None:
         """The simulation's results: ``motion``, its drawing ``frames``, the rest it used and its note;
         the ``palate`` it was simulated against and the one the views show (see the class doc)."""
-        from tonguevis.workflows import rest_of
+        from tonguevis.sim.motion import rest_of
 
         from tonguevis.io.recording import unstated_axes_note
         from tonguevis.sim.placement import size_note
@@ -236,7 +236,8 @@ def load_session(path: str | os.PathLike, sensor_map: dict | str | None = None, 
         (see :func:`tonguevis.workflows.open_recording`).
     options : the reader's (``-O``: ``axes=``, ``channels=`` ...), as ``open_recording``.
     """
-    from tonguevis.workflows import check_rest_interval, open_recording
+    from tonguevis.preprocess.rest import check_rest_interval
+    from tonguevis.workflows.recording import open_recording
 
     path = Path(path)
     recording = open_recording(path, sensor_map, audio=audio, labels=labels, **options)

@@ -1,8 +1,7 @@
 """Simulating a recording, as every front end does (no Qt; the app's job thread runs this too).
 
-* :func:`simulate_recording`: choose the rest (given, detected, or the stillest window),
-  prepare the targets and simulate with a :class:`~tonguevis.workflows.settings.RunSettings`;
-  ``motion.metadata["rest"]`` says which rest was used and :func:`rest_of` gives it back.
+* :func:`simulate_recording`: :func:`tonguevis.sim.simulate` with the model first, as the workflows
+  always called it; ``motion.metadata["rest"]`` says which rest was used and :func:`rest_of` gives it back.
 * :func:`simulate_motion`: the same for the app and ``export-video``, returning a
   :class:`Simulated` (the model, the motion, its drawing frames and the palate shown); the GUI
   thread then sets them on the session (:meth:`Simulated.apply`): nothing shared is assigned
@@ -11,7 +10,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,67 +17,26 @@ from tonguevis._logging import verbose
 from tonguevis._progress import ProgressCallback
 from tonguevis.render.frames import MotionFrames
 from tonguevis.io.recording import Recording
-from tonguevis.preprocess.rest import RestChoice
 from tonguevis.workflows.session import Session
-from tonguevis.workflows.settings import RunSettings, build_model
+from tonguevis.sim.motion import rest_of  # noqa: F401 (re-exported)
+from tonguevis.sim.settings import RunSettings, build_model, run_settings
 
 
 #: Frames sampled for the colour ranges of a preview (the whole motion samples up to frames.COLOUR_FRAMES).
 PREVIEW_COLOUR_FRAMES = 200
-#: simulate_recording's keywords that are settings of the run (the others go to tonguevis.sim.simulate as they are).
-#: Keywords of :func:`simulate_recording` that change its RunSettings (every field: given as keywords, the
-#: others went to ``simulate()`` beside the settings' own and clashed, e.g. ``tongue_size=`` or ``frame=``).
-_SETTING_NAMES = tuple(f.name for f in dataclasses.fields(RunSettings))
-
-
-def run_settings(settings: RunSettings | None = None, **changes: Any) -> RunSettings:
-    """``settings`` (default: the defaults) with ``changes`` applied (field name -> value)."""
-    settings = settings or RunSettings()
-    return settings.replace(**changes) if changes else settings
 
 
 @verbose
 def simulate_recording(recording: Recording, model=None, settings: RunSettings | None = None, *,
                        progress: ProgressCallback | None = None, **options: Any):
-    """Drive ``model`` (default: built from ``settings``) with ``recording``; returns a
-    :class:`~tonguevis.sim.Motion`.
-
-    settings : a :class:`RunSettings` (default: ``tonguevis simulate``'s); any of its fields given
-        as a keyword (``modes=``, ``warping=``, ``landmarks=``, ``rest=``, ``sensor_stiffness=``,
-        ``sensor_patches=``, ``palate=``, ``backend=``, ``frame=``, ``tongue_size=``, ``method=``,
-        ``rest_fit=`` ...) overrides it.
-    rest : None (the longest still interval, else the stillest window, with a warning), a
-        (start_s, end_s) the user gave (checked: a bad one raises RecordingError naming the file
-        and the problem), or a :class:`RestChoice` (used as is).
-    options : the others go to :func:`tonguevis.sim.simulate` as they are (``smooth_window``,
-        ``tolerance``, ``preview``...).
-    The choice of rest is in ``motion.metadata["rest"]``; :func:`rest_of` reads it back.
-    """
-    from tonguevis.errors import SimulationError
+    """:func:`tonguevis.sim.simulate` with the model first (the workflows' order, kept for scripts):
+    ``simulate(recording, settings, model, progress=progress, **options)``.  ``options`` are fields of
+    :class:`RunSettings` overriding ``settings`` (``rest=`` may be a :class:`RestChoice`, used as is) and
+    :func:`~tonguevis.sim.simulate`'s own keywords (``preview``...).  The choice of rest is in
+    ``motion.metadata["rest"]``; :func:`rest_of` reads it back."""
     from tonguevis.sim.simulate import simulate
 
-    changes = {name: options.pop(name) for name in _SETTING_NAMES if name in options}
-    rest_choice = changes.pop("rest", None) if isinstance(changes.get("rest"), RestChoice) else None
-    palate_given = changes.pop("palate", None) if "palate" in changes else None
-    try:
-        settings = run_settings(settings, **changes)
-    except SimulationError as exc:  # say which recording the bad setting was for
-        raise SimulationError(str(exc), recording.metadata.get("file")) from None
-    if model is None:
-        model = build_model(settings)
-    sim_options = settings.simulate_options()
-    if rest_choice is not None:
-        sim_options["rest"] = rest_choice
-    palate = palate_given if palate_given is not None else settings.palate
-    if palate is not None:
-        sim_options["palate"] = palate
-    return simulate(recording, model, progress=progress, **sim_options, **options)
-
-
-def rest_of(motion) -> RestChoice | None:
-    """The rest a motion was simulated with (None for motions saved before it was recorded)."""
-    data = getattr(motion, "metadata", {}).get("rest")
-    return RestChoice.from_dict(data) if isinstance(data, dict) and "interval" in data else None
+    return simulate(recording, settings, model, progress=progress, **options)
 
 
 def staged(progress: ProgressCallback | None, stage: int, stages: int, name: str) -> ProgressCallback | None:
@@ -178,7 +135,6 @@ def shown_palate(recording, motion, model, palate):
         return generic_shown(simulated=False, model=motion.model)
     from tonguevis.palate import load_palate
     from tonguevis.sim.simulate import placed_palate
-    from tonguevis.workflows import rest_of
 
     surface = load_palate(palate)
     if surface.metadata.get("generic"):

@@ -1,0 +1,278 @@
+"""The palate in the simulation's frame and the contact's glue around the frame loop: where the palate is placed
+(:func:`place_palate`, :func:`placed_palate`), what the contact solve needs (:func:`contact_context`), sensors
+touching it held to it (:func:`held_to_palate`), the shapes kept below it (:func:`keep_below_palate`) and the
+contact report of a motion.  The solves themselves are :mod:`tonguevis.sim.contact`'s."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tonguevis._logging import logger
+from tonguevis.errors import SimulationError
+from tonguevis.io.recording import Recording
+from tonguevis.preprocess.rest import RestChoice
+from tonguevis.preprocess.targets import PreparedTargets
+from tonguevis.sim.model import TongueModel
+from tonguevis.sim.plausibility import raise_spread
+
+
+def place_palate(palate, prep: PreparedTargets, quiet: bool = False, model: TongueModel | None = None,
+                 speech_references: dict | None = None):
+    """The palate in the model frame, where the contact solve and the app's views use it: (surface, raised by m).
+
+    palate : a :class:`~tonguevis.palate.PalateSurface`, a palate file or "generic"
+    (:func:`tonguevis.palate.load_palate`).  A speaker's palate (the recording's frame,
+    from ``tonguevis palate``) is carried onto the model by the recording's alignment
+    ``prep.transform``, then raised where the tongue sensors went above it
+    (:func:`_register_palate`) and, on the shipped tongue (``model`` None or it), joined to the
+    generic palate behind and beside it (:func:`tonguevis.palate.joined_palate`); one whose
+    metadata say ``frame == "model"`` (the generic one) is used as is.
+
+    speech_references : the speech's head references where its head correction holds them
+    (:func:`tonguevis.preprocess.correction.reference_pose`); a palate fitted from traces with the
+    same references (``metadata["head_references"]``) is first carried into the speech's head
+    frame by them (:func:`_by_head_references`), so only what they cannot tell is left to the raise.
+    """
+    from tonguevis.palate import load_palate
+
+    from tonguevis.sim.placement import in_model_frame
+
+    palate = load_palate(palate)
+    if palate.metadata.get("frame") == "model":  # the generic palate: placed with the model
+        return palate if model is None else in_model_frame(palate, model), 0.0
+    from tonguevis.palate import generic_palate, joined_palate
+
+    palate = _by_head_references(palate, speech_references, quiet)
+    t = prep.transform
+    placed, shift = _register_palate(palate.transformed(t.rotation, t.scale, t.translation), prep, quiet=quiet)
+    if model is not None and not shipped_tongue(model):  # the generic palate is our tongue's roof, not this mesh's
+        return placed, shift
+    # A traced palate covers the front of the roof: the generic one, moved to meet it, completes it.
+    generic = generic_palate() if model is None else in_model_frame(generic_palate(), model)
+    return joined_palate(placed, generic), shift
+
+
+def _by_head_references(palate, speech_references: dict | None, quiet: bool = False):
+    """``palate`` carried from its traces' head frame into the speech's by the head references both
+    recorded (a rigid fit; said once with the references and the residual); as it is otherwise."""
+    from tonguevis.preprocess.correction import register_references
+
+    traced = palate.metadata.get("head_references")
+    if not traced or not speech_references:
+        return palate
+    fit = register_references({n: np.asarray(v, dtype=float) for n, v in traced.items()}, speech_references)
+    if fit is None:
+        if not quiet:
+            logger.warning("the palate's head references (%s) and the speech's (%s) share fewer than 3: not "
+                           "registered by them", ", ".join(traced), ", ".join(speech_references))
+        return palate
+    rotation, translation, residual, names = fit
+    moved = palate.transformed(rotation, 1.0, translation)
+    moved.metadata["head_registration"] = {"references": names, "residual_mm": 1e3 * residual,
+                                          "moved_mm": 1e3 * float(np.linalg.norm(translation))}
+    if not quiet:
+        logger.info("palate registered into the speech's head frame by the head references %s (moved %.1f mm, "
+                    "residual %.2f mm)", ", ".join(names), 1e3 * float(np.linalg.norm(translation)), 1e3 * residual)
+    return moved
+
+
+def _speech_references(recording: Recording, prep: PreparedTargets, palate) -> dict:
+    """The speech's head references in its head-corrected frame, when the palate has references to meet."""
+    from tonguevis.palate import load_palate
+    from tonguevis.preprocess.correction import head_corrected, reference_pose
+
+    if not load_palate(palate).metadata.get("head_references"):
+        return {}
+    return reference_pose(head_corrected(recording, rest_interval=prep.rest_interval))
+
+
+def shipped_tongue(model: TongueModel) -> bool:
+    """Whether ``model`` is on the shipped tongue mesh (the one the generic palate belongs to), also
+    placed in a speaker (:mod:`tonguevis.sim.placement`)."""
+    from pathlib import Path
+
+    from tonguevis.mesh.default import default_mesh_path
+    from tonguevis.sim.placement import source_model
+
+    model = source_model(model)
+
+    source = model.mesh.metadata.get("source")
+    try:
+        return source is not None and Path(source).resolve() == default_mesh_path().resolve()
+    except OSError:
+        return False
+
+
+def placed_palate(recording: Recording, palate, model: TongueModel | None = None, landmarks: str = "speaker",
+                  rest: RestChoice | tuple[float, float] | None = None, smooth_window: int | None = None,
+                  frame: str = "speaker", tongue_size: float | str | None = None):
+    """The palate as :func:`simulate` places it for ``recording`` on ``model`` (unplaced, as given to
+    :func:`simulate`): (surface in the motion's ``frame``, raised by m).
+
+    For drawing a motion against its palate: pass the motion's landmarks, rest and frame
+    (``motion.metadata["landmarks"]``, :func:`tonguevis.workflows.rest_of`,
+    ``motion.metadata.get("frame", "model")``: motions saved before the speaker frame are in the
+    model's; ``motion.metadata["fit"]["tongue_size"]``) so the alignment is the one the simulation used.
+    """
+    from tonguevis.sim.placement import targets_in_frame
+
+    framed, prep, _ = targets_in_frame(recording, model or TongueModel.default(), frame, landmarks, rest,
+                                       smooth_window, tongue_size=tongue_size)
+    return place_palate(palate, prep, quiet=True, model=framed,  # the simulation said it once
+                        speech_references=_speech_references(recording, prep, palate))
+
+
+def contact_context(palate, prep, model, basis, recording) -> dict:
+    """What the contact solve needs: the palate in the model frame, candidate nodes and their modes."""
+    palate, shift = place_palate(palate, prep, model=model,
+                                 speech_references=_speech_references(recording, prep, palate))
+    candidates = np.asarray(model.dorsal_nodes)
+    gap, _ = palate.clearance(model.mesh.points[candidates])
+    inside = np.nanmean(gap < -1e-3) if np.isfinite(gap).any() else 0.0
+    if inside > 0.2:
+        raise SimulationError(
+            f"the palate cuts through the tongue at rest ({100 * inside:.0f} % of its upper surface more than 1 mm "
+            f"inside it, up to {-1e3 * np.nanmin(gap):.0f} mm): is it this speaker's palate, from this session?",
+            recording.metadata.get("file"))
+    dofs = (3 * candidates[:, None] + np.arange(3)).ravel()
+    return {"palate": palate, "candidates": candidates, "points": model.mesh.points,
+            "phi_nodes": basis.phi[dofs].reshape(len(candidates), 3, -1), "sensor_nodes": np.asarray(prep.nodes),
+            "jaw_offset": prep.jaw_offset if prep.jaw_offset is not None else np.zeros((recording.n_samples, 3)),
+            "registration_shift_m": shift}
+
+
+def keep_below_palate(q, contact, schedule, basis, phi_s, compliance: float):
+    """The dynamic shapes projected out of the palate where inertia carried them in (see contact.correct_frames)."""
+    from tonguevis.sim.contact import CONFLICT_RADIUS, correct_frames
+
+    cand, pts = contact["candidates"], contact["points"]
+    near = np.linalg.norm(pts[cand][:, None] - pts[contact["sensor_nodes"]][None], axis=2) < CONFLICT_RADIUS
+    allowed = np.ones((len(q), len(cand)), dtype=bool)
+    for f, s in schedule["conflicts"]:
+        allowed[f] &= ~near[:, s]
+    return correct_frames(basis.eigenvalues, contact["phi_nodes"], phi_s, q, pts, cand, contact["palate"],
+                          contact["jaw_offset"], allowed, compliance=compliance,
+                          backend=contact.get("backend", "warp"))
+
+
+def contact_probe(contact, schedule, model):
+    """What :func:`tonguevis.sim.figures.frame_figures` needs to measure contact, per chunk of frames.
+
+    Every candidate node counts, also those around a sensor above the palate (the tongue drawn
+    there is inside it): the figures say what the geometry is."""
+    from tonguevis.sim.figures import ContactProbe
+
+    cand, pts = contact["candidates"], contact["points"]
+    return ContactProbe(pts, cand, contact["palate"], contact["jaw_offset"], model.surface_faces,
+                        np.zeros((0, 2), dtype=np.int64), np.zeros((len(cand), 0), dtype=bool))
+
+
+#: m (the speaker's): a sensor this close under the palate is taken to touch it.  The coil and its glue
+#: lie between tongue and palate (an NDI Wave sensor is about 1 mm thick with its glue) and the Wave's
+#: stated accuracy is 0.5 mm: a coil measured within 1 mm of the palate at a closure is pressed on it,
+#: with the tongue around it touching.  Without this, of the frames with a sensor that close to the
+#: speaker's palate, 7 of 387 (/ta/ 009) and 2 of 753 (/ka/ 006) showed no contact.
+TOUCH_REACH = 1e-3
+
+
+def held_to_palate(contact: dict, rest: np.ndarray, displacement: np.ndarray, reach: float,
+                   names) -> tuple[np.ndarray, dict]:
+    """The sensor displacements the tongue follows: those of a sensor within ``reach`` (m) below the
+    palate moved up onto it, along the palate's normal; and what was moved, for the metadata.
+
+    rest : (S, 3) the sensor nodes' rest positions (m, the simulation's frame).
+    displacement : (F, S, 3) m, the measured sensors' displacements (NaN where not measured).
+    Returns ((F, S, 3) displacements, {"reach_mm", "frames": {name: frames held}, "largest_move_mm"}).
+    Sensors above the palate, far below it or outside its footprint are left as measured.
+    """
+    frames, sensors = displacement.shape[:2]
+    where = rest[None] + displacement + contact["jaw_offset"][:frames, None]
+    gap, normal = contact["palate"].clearance(where.reshape(-1, 3))
+    gap, normal = gap.reshape(frames, sensors), normal.reshape(frames, sensors, 3)
+    near = np.isfinite(gap) & (gap > 0) & (gap <= reach)
+    held = displacement.copy()
+    held[near] -= normal[near] * gap[near][:, None]  # the normal points down, away from the palate
+    info = {"reach_mm": 1e3 * reach,
+            "frames": {name: int(near[:, k].sum()) for k, name in enumerate(names) if near[:, k].any()},
+            "largest_move_mm": float(1e3 * gap[near].max()) if near.any() else 0.0}
+    return held, info
+
+
+def sensor_depth(contact, sensors: np.ndarray, cut: slice) -> np.ndarray:
+    """(F, S) how far (m, >= 0) each sensor (F, S, 3, model frame, jaw's frame) lies above the palate;
+    0 below it, NaN where not measured or no palate lies above."""
+    offset = contact["jaw_offset"][cut]
+    gap, _ = contact["palate"].clearance((sensors + offset[:, None]).reshape(-1, 3))
+    gap = gap.reshape(sensors.shape[:2])
+    return np.where(np.isfinite(gap), np.maximum(0.0, -gap), np.nan)
+
+
+def contact_report(pen, contact_area, contact, schedule, times, sensor_depth, names):
+    """The contact figures for metadata, from the per-frame penetration (m) of the tongue's nodes,
+    its contact area (m²) and the depth (F, S) m of each sensor above the palate.
+
+    They say what the geometry says: a sensor above the palate is penetration (the tongue follows
+    the sensor there), and a frame is in contact when the tongue touches, enters or presses on the
+    palate, whatever made it."""
+    above = np.nan_to_num(sensor_depth) > 0
+    deepest_sensor = float(np.nanmax(sensor_depth)) if np.isfinite(sensor_depth).any() else 0.0
+    touching = (contact_area > 0) | (pen > 0) | (schedule["active"][:len(pen)] > 0)  # touching, inside or pressed
+    conflicts = sorted({s for _, s in schedule["conflicts"]})
+    figures = {
+        "penetration_max_mm": float(1e3 * max(pen.max() if len(pen) else 0.0, deepest_sensor)),
+        "tongue_penetration_max_mm": float(1e3 * pen.max()) if len(pen) else 0.0,
+        "sensor_penetration_max_mm": 1e3 * deepest_sensor,
+        "sensors_above_palate": {name: {"frames": int(above[:, k].sum()),
+                                        "deepest_mm": float(1e3 * np.nanmax(sensor_depth[:, k]))}
+                                 for k, name in enumerate(names) if above[:, k].any()},
+        "frames_in_contact": int(touching.sum()),
+        "frames_with_contact_forces": int(np.sum(schedule["active"] > 0)),
+        "frames_corrected_after_the_dynamics": int(len(schedule.get("corrected_frames", []))),
+        "contact_area_max_mm2": float(1e6 * contact_area.max()) if len(contact_area) else 0.0,
+        "conflicts": {"frames": len({f for f, _ in schedule["conflicts"]}),
+                      "by_sensor_index": {int(s): sum(1 for _, t in schedule["conflicts"] if t == s) for s in conflicts},
+                      "first_s": float(times[schedule["conflicts"][0][0]]) if schedule["conflicts"] else None},
+        "palate": {k: v for k, v in contact["palate"].metadata.items()
+                   if k in ("rms_m", "source", "frame", "kept", "joined", "min_bend_radius_m", "bend_radius_m",
+                            "head_registration", "raise_by_sensor_mm")},
+        "palate_raised_mm": float(1e3 * contact.get("registration_shift_m", 0.0)),
+        **({"sensors_held_to_palate": contact["held_to_palate"]} if "held_to_palate" in contact else {}),
+    }
+    return figures
+
+
+def _register_palate(palate, prep, percentile: float = 1.0, quiet: bool = False):
+    """The palate raised, if need be, until the tongue sensors stay below it; (palate, shift in m).
+
+    A palate traced in another sitting than the speech (no head references to
+    relate the two, as in Opti-Speech exports) can sit millimetres too low: on
+    the real /ta/ and /ka/ the dorsum sensor read 5-11 mm above the traced
+    palate, which no tongue does.  The sensors' positions over the whole
+    recording (head frame) are the evidence: the palate is moved up along
+    the model's z until all but ``percentile`` % of them are below it.
+
+    What each sensor alone would call for (its own ``percentile``, in mm; sensors with under 5 % of their
+    samples under the palate left out) goes into the palate's ``metadata["raise_by_sensor_mm"]``: a
+    raise set by one sensor while another needs far less (on OSN12: TD 9.6 mm, TT 1.8 mm) is a tilt
+    between the sittings or a soft palate the dorsum lifts, which a rigid raise cannot undo and which
+    leaves the front of the roof too high for the tip.
+    """
+    head = prep.aligned_rest[None] + prep.displacement + prep.jaw_offset[:, None]
+    gap, _ = palate.clearance(head.reshape(-1, 3))
+    gap = gap.reshape(head.shape[:2])
+    needs = {}
+    for k, name in enumerate(prep.names):
+        own = gap[:, k][np.isfinite(gap[:, k])]
+        if len(own) >= 0.05 * len(gap) and len(own):
+            needs[name] = round(1e3 * max(0.0, -float(np.percentile(own, percentile))), 2)
+    gap = gap[np.isfinite(gap)]
+    if len(gap) == 0:
+        return palate, 0.0
+    shift = max(0.0, -float(np.percentile(gap, percentile)))
+    if shift > 0:
+        if not quiet:
+            logger.warning("the palate lies %.1f mm below where the tongue sensors went: raised by that much "
+                           "(traced in another sitting?)%s", 1e3 * shift, raise_spread(needs))
+        palate = palate.transformed(np.eye(3), 1.0, np.array([0.0, 0.0, shift]))
+    palate.metadata["raise_by_sensor_mm"] = needs
+    return palate, shift
