@@ -47,13 +47,21 @@ class BatchResult:
     def ok(self) -> bool:
         return not self.failures
 
+    @property
+    def lost(self) -> list[str]:
+        """Recordings not done because their worker went away (a SLURM job ended): a rerun does them."""
+        return [file for file, step, _ in self.failures if step == "lost"]
+
     def summary(self) -> str:
         """One line: counts, time, where the results are."""
         n = len(self.files)
         parts = [f"{len(self.done)} done"]
         if self.up_to_date:
             parts.append(f"{len(self.up_to_date)} up to date")
-        parts.append(f"{len(self.failures)} failed" + (f" (see {self.out / store.FAILURES})" if self.failures else ""))
+        failed = len(self.failures) - len(self.lost)
+        parts.append(f"{failed} failed" + (f" (see {self.out / store.FAILURES})" if failed else ""))
+        if self.lost:
+            parts.append(f"{len(self.lost)} lost with their SLURM job (run the same command again to resume)")
         return (f"batch: {n} recording{'s' if n != 1 else ''} in {self.seconds:.1f} s: {', '.join(parts)}; "
                 f"tables in {self.out}")
 
@@ -67,11 +75,15 @@ def _counts(done: int, failed: int, fresh: int, total: int) -> str:
 def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.PathLike, *, jobs: int = 1,
         client=None, model=None,
         labels: str | os.PathLike | None = None, settings: BatchSettings | None = None, force: bool = False,
-        progress: ProgressCallback | None = None, **options) -> BatchResult:
+        progress: ProgressCallback | None = None, slurm=None, notify=None, **options) -> BatchResult:
     """Process every recording of ``paths`` (files, or folders walked recursively) into ``out``.
 
     jobs : worker processes on this machine (1: in this process).
     client : a ``distributed.Client``: run on its Dask cluster instead (``jobs`` unused).
+    slurm : a :class:`tonguevis.batch.slurm.SlurmOptions`: submit SLURM jobs of Dask workers and run
+        there (``jobs`` unused); their logs go to ``out/slurm/``, their ids to the manifests and batch.json.
+        A recording in flight on a job that ends is lost (``failures`` with step "lost"), the rest go on.
+    notify : ``notify(line)`` for each SLURM job event (submitted, running, ended); default: logged (info).
     model : a TongueModel; default the settings' ``mesh`` (a file, with ``mesh_axes``) read by each worker,
         else the shipped tongue.
     labels : CSV table of speaker/syllable/trial per file (as ``tonguevis energy --labels``).
@@ -89,7 +101,10 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
     from tonguevis.analysis.corpus import find_recordings, load_corpus
 
     started = time.perf_counter()
-    require("pyarrow", *(["distributed"] if client is not None else ["joblib"] if jobs > 1 else []))
+    require("pyarrow", *(["distributed"] if client is not None else ["distributed", "dask_jobqueue"]
+                         if slurm is not None else ["joblib"] if jobs > 1 else []))
+    if client is not None and slurm is not None:
+        raise BatchError("give a Dask client or SLURM options, not both")
     settings = replace(settings or BatchSettings(), **options) if options else (settings or BatchSettings())
     if jobs < 1:
         raise BatchError(f"jobs must be at least 1, got {jobs}")
@@ -136,6 +151,7 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
     result.timings["plan"] = time.perf_counter() - started - result.timings["model"]
     failed: dict[str, tuple[str, str]] = {}
     total = len(names)
+    slurm_jobs: dict = {}
 
     def on_done(outcome) -> None:
         if outcome.failure:
@@ -154,7 +170,13 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
     if tasks:
         from tonguevis.batch import runners, tasks as task_module
 
-        if client is not None:
+        if slurm is not None:
+            from tonguevis.batch.slurm import slurm_cluster
+
+            with slurm_cluster(slurm, out_abs / store.SLURM_LOGS, notify) as watch:
+                runners.run_dask(tasks, spec, watch.client, on_done, watch)
+                slurm_jobs = watch.record()
+        elif client is not None:
             runners.run_dask(tasks, spec, client, on_done)
         elif jobs == 1:
             task_module.remember_model(spec, built)
@@ -173,11 +195,19 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
     store.write_settings(out_abs, {
         "tonguevis": __version__, "corpus": str(root), "recordings": len(names), "settings": settings.as_dict(),
         "model": {"kind": spec.kind, "mesh": str(spec.mesh) if spec.kind == "file" else None, "key": spec.key},
-        "runner": "dask" if client is not None else ("here" if jobs == 1 else f"loky, {jobs} workers"),
+        "runner": _runner(jobs, client, slurm),
+        **({"slurm": {"options": slurm.as_dict(), **slurm_jobs, "logs": str(out_abs / store.SLURM_LOGS)}}
+           if slurm is not None else {}),
         "last_run": {"done": len(result.done), "up_to_date": len(result.up_to_date),
                      "failed": len(result.failures), "seconds": result.seconds},
     })
     return result
+
+
+def _runner(jobs: int, client, slurm) -> str:
+    if slurm is not None:
+        return f"slurm, {slurm.jobs} job{'s' if slurm.jobs != 1 else ''} of {slurm.cores} one-thread worker(s)"
+    return "dask" if client is not None else ("here" if jobs == 1 else f"loky, {jobs} workers")
 
 
 def require(*modules: str) -> None:

@@ -1,4 +1,4 @@
-"""Where the tasks run: in this process, in joblib's loky worker processes, or on a Dask cluster.
+"""Where the tasks run: in this process, in joblib's loky worker processes, or on a Dask cluster (SLURM's too).
 
 Each runner calls ``on_done(outcome)`` in the parent as every recording
 finishes, in completion order.  The parent has already built the model's
@@ -8,6 +8,7 @@ workers load both instead of computing them at once.
 
 from __future__ import annotations
 
+import time
 import uuid
 from typing import Callable
 
@@ -15,6 +16,8 @@ from tonguevis.batch.settings import BatchError, ModelSpec
 from tonguevis.batch.tasks import Outcome, Task, process
 
 OnDone = Callable[[Outcome], None]
+#: Seconds between looks at the SLURM jobs while no result comes.
+POLL_SECONDS = 0.25
 
 
 def run_here(tasks: list[Task], spec: ModelSpec, on_done: OnDone) -> None:
@@ -38,23 +41,50 @@ def run_loky(tasks: list[Task], spec: ModelSpec, jobs: int, on_done: OnDone) -> 
                          f"rerun to resume ({exc})") from exc
 
 
-def run_dask(tasks: list[Task], spec: ModelSpec, client, on_done: OnDone) -> None:
-    """On a Dask distributed cluster through ``client``; a task lost with its worker is recorded as a failure."""
+def run_dask(tasks: list[Task], spec: ModelSpec, client, on_done: OnDone, watch=None) -> None:
+    """On a Dask distributed cluster through ``client``; a task lost with its worker is recorded as a failure.
+
+    watch : a :class:`tonguevis.batch.slurm.JobWatch` when the workers are SLURM jobs: polled between
+        results (the jobs' starts and ends), it names the job a recording was lost with, and says when
+        every job has ended: the recordings not started are then reported lost too and the run returns.
+    """
     from distributed import as_completed
+    from distributed.scheduler import KilledWorker
 
     if not tasks:
         return
     run = uuid.uuid4().hex[:8]
-    shared = client.scatter(spec, broadcast=True)
+    # Scattered data lives on the workers it was sent to; SLURM jobs end (scancel, walltime) and take theirs
+    # with them, so there the (small) spec goes with each task instead.
+    shared = spec if watch is not None else client.scatter(spec, broadcast=True)
     futures = {client.submit(process, task, shared, key=f"tonguevis-{run}-{k}-{task.file}"): task
                for k, task in enumerate(tasks)}
     try:
-        for future in as_completed(futures):
-            task = futures[future]
-            try:
-                outcome = future.result()
-            except Exception as exc:  # noqa: BLE001 - the worker died or the task could not run there
-                outcome = Outcome(task.file, failure=("worker", f"{type(exc).__name__}: {exc}"))
-            on_done(outcome)
+        completed = as_completed(futures)
+        while not completed.is_empty():
+            finished = completed.next_batch(block=watch is None)
+            if watch is not None:
+                ended = watch.poll()
+                if not finished and ended:
+                    for future, task in futures.items():
+                        if not future.done():
+                            on_done(Outcome(task.file, failure=("lost", f"not started: {ended}; run the same "
+                                                                        "command again to resume")))
+                    return
+                if not finished:
+                    time.sleep(POLL_SECONDS)
+            for future in finished:
+                task = futures[future]
+                try:
+                    outcome = future.result()
+                except Exception as exc:  # noqa: BLE001 - the worker died or the task could not run there
+                    if watch is not None and isinstance(exc, KilledWorker):
+                        outcome = Outcome(task.file, failure=("lost", watch.lost(task.file, exc)))
+                    else:
+                        outcome = Outcome(task.file, failure=("worker", f"{type(exc).__name__}: {exc}"))
+                else:
+                    if watch is not None:
+                        watch.done(outcome.file, outcome.slurm_job)
+                on_done(outcome)
     finally:
         client.cancel(list(futures))

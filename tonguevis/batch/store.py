@@ -8,8 +8,9 @@ Layout of ``DIR``::
         simulation.parquet  energy.parquet  productions.parquet  segmentation.parquet (+ segmentation.npz: labels)
         validation.parquet (+ validation.json, as tonguevis validate --json)      [+ .csv of each with --csv]
     simulation.parquet  energy.parquet  productions.parquet  segmentation.parquet  validation.parquet  [+ .csv]
-    failures.csv        file, step, error
-    batch.json          the settings, the model's key, the counts of the last run
+    failures.csv        file, step, error (step "lost": its SLURM job ended while it ran; a rerun does it)
+    batch.json          the settings, the model's key, the counts of the last run (with --slurm: its jobs)
+    slurm/              with --slurm: the jobs' logs (tonguevis-batch-JOBID.out/.err)
 
 A step counts as done when the manifest holds it with the current key and its
 files exist; every file is written to a temporary name and renamed, and the
@@ -34,6 +35,7 @@ MOTION = "motion.npz"
 SEGMENT_LABELS = "segmentation.npz"
 FAILURES = "failures.csv"
 SETTINGS = "batch.json"
+SLURM_LOGS = "slurm"
 #: Threads reading the recordings' tables while gathering (the reads are small and mostly wait).
 READERS = 4
 

@@ -57,7 +57,8 @@ class Task:
 @dataclass
 class Outcome:
     """What a worker reports back: the steps done now, the failure (step, message) if any, wall and CPU
-    seconds (of the worker's thread), the worker's process id and its largest resident memory (MiB)."""
+    seconds (of the worker's thread), the worker's process id and its largest resident memory (MiB),
+    and the SLURM job the worker ran in (None outside SLURM)."""
 
     file: str
     done: tuple[str, ...] = ()
@@ -66,6 +67,7 @@ class Outcome:
     cpu_seconds: float = 0.0
     pid: int = field(default_factory=os.getpid)
     max_rss_mb: float = 0.0
+    slurm_job: str | None = field(default_factory=lambda: os.environ.get("SLURM_JOB_ID"))
 
 
 def remember_model(spec: ModelSpec, model) -> None:
@@ -122,7 +124,8 @@ def process(task: Task, spec: ModelSpec) -> Outcome:
     collect = _Collect()
     logger.addHandler(collect)
     manifest = store.read_manifest(task.folder) or {}
-    manifest.update({"file": task.file, "recording": task.entry.name, "failure": None})
+    manifest.update({"file": task.file, "recording": task.entry.name, "failure": None,
+                     "slurm_job": os.environ.get("SLURM_JOB_ID")})  # the job that ran it, if SLURM's
     steps = manifest.setdefault("steps", {})
     for step in task.todo:
         steps.pop(step, None)  # its old results no longer count

@@ -8,9 +8,12 @@ constraint-mode segmentation of each production (§5) and, with ``--steps
 ``DIR/recordings/`` as it finishes, then gathered into ``DIR/energy.parquet``
 (the columns of ``tonguevis energy``), ``productions``, ``simulation``,
 ``segmentation`` and ``validation.parquet`` (``--csv``: CSV too).  A rerun
-skips what is done with the same inputs and settings.  A recording that fails
+skips what is done with the same inputs and settings.  ``--jobs N`` runs N
+worker processes here, ``--scheduler`` on a Dask cluster, ``--slurm`` on SLURM
+jobs (dask-jobqueue; a recording in flight on a job that ends is listed as
+lost, and the rerun does it).  A recording that fails
 is listed in ``DIR/failures.csv`` and the others go on; the exit status is 1
-when any failed, else 0.
+when any failed or was lost, else 0.
 """
 
 from __future__ import annotations
@@ -33,6 +36,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="run on a Dask distributed cluster, e.g. tcp://10.0.0.5:8786 (DIR and the corpus "
                             "must be visible to its workers at the same paths)")
+    where.add_argument("--slurm", action="store_true",
+                       help="submit SLURM jobs of one-thread Dask workers (dask-jobqueue) and run there; this "
+                            "process holds the scheduler: run it on a submit host, with DIR and the corpus on a "
+                            "file system the nodes share")
+    slurm = parser.add_argument_group("SLURM (with --slurm; the options override the profile's)")
+    slurm.add_argument("--slurm-profile", type=Path, metavar="TOML",
+                       help="a [slurm] table of jobs, cores, memory, walltime, queue, account, interface, "
+                            "job_extra, prologue, python, local_directory (see the README)")
+    slurm.add_argument("--slurm-jobs", type=int, metavar="N", help="SLURM jobs (default 1)")
+    slurm.add_argument("--slurm-cores", type=int, metavar="N",
+                       help="cores per job, one one-thread worker each (default 1)")
+    slurm.add_argument("--slurm-memory", metavar="SIZE", help="memory per job, e.g. 8GB (default 2GB per core)")
+    slurm.add_argument("--slurm-walltime", metavar="TIME", help="time limit per job, e.g. 02:00:00 (default 1 h)")
+    slurm.add_argument("--slurm-queue", metavar="PARTITION", help="partition (default: the cluster's)")
+    slurm.add_argument("--slurm-account", metavar="ACCOUNT", help="account to charge (default: yours)")
     parser.add_argument("--steps", default=",".join(DEFAULT_STEPS),
                         help=f"comma-separated steps from {','.join(STEPS)} (default {','.join(DEFAULT_STEPS)})")
     parser.add_argument("--csv", action="store_true", help="CSV beside every Parquet table")
@@ -60,6 +78,30 @@ def load_model(args):
     return None
 
 
+SLURM_OPTIONS = ("jobs", "cores", "memory", "walltime", "queue", "account")
+
+
+def slurm_options(args: argparse.Namespace):
+    """The :class:`~tonguevis.batch.slurm.SlurmOptions` of ``--slurm`` (profile, then options), or None."""
+    given = {name: getattr(args, f"slurm_{name}") for name in SLURM_OPTIONS}
+    if not args.slurm:
+        named = [f"--slurm-{n}" for n, v in given.items() if v is not None] + (
+            ["--slurm-profile"] if args.slurm_profile is not None else [])
+        if named:
+            from tonguevis.batch import BatchError
+
+            raise BatchError(f"{', '.join(named)} without --slurm")
+        return None
+    from tonguevis.batch.api import require
+
+    require("distributed", "dask_jobqueue")
+    from tonguevis.batch.slurm import SlurmOptions
+
+    if args.slurm_profile is not None:
+        return SlurmOptions.from_profile(args.slurm_profile, **given)
+    return SlurmOptions(**{k: v for k, v in given.items() if v is not None})
+
+
 def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
     from tonguevis.batch import BatchSettings, run as run_batch
@@ -79,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
         read_options=parse_options(args.option), keep=None if args.all else (2, 3, 4), window=args.window,
         tier=args.productions_from, segment_first=args.segment_first, quasi_static=not args.no_static, csv=args.csv)
     model = load_model(args)
+    slurm = slurm_options(args)
     client = None
     if args.scheduler is not None:
         from tonguevis.batch.api import require
@@ -90,7 +133,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         with tqdm_progress("batch", disable=args.quiet, unit="recording") as progress:
             result = run_batch(args.paths, args.out, jobs=args.jobs, client=client, model=model,
-                               labels=args.labels, settings=settings, force=args.force, progress=progress)
+                               labels=args.labels, settings=settings, force=args.force, progress=progress,
+                               slurm=slurm, notify=None if args.quiet else _say)
     except KeyboardInterrupt:
         print(f"the recordings finished are kept in {args.out}: run the same command again to resume",
               file=sys.stderr)
@@ -99,6 +143,13 @@ def run(args: argparse.Namespace) -> int:
         if client is not None:
             client.close()
     for file, step, error in result.failures:
-        print(f"failed: {file} ({step}): {error}")
+        print(f"lost: {file}: {error}" if step == "lost" else f"failed: {file} ({step}): {error}")
     print(result.summary())
     return 0 if result.ok else 1
+
+
+def _say(line: str) -> None:
+    """A line above the progress bar (the SLURM jobs' starts and ends)."""
+    from tqdm import tqdm
+
+    tqdm.write(f"batch: {line}", file=sys.stderr)
