@@ -12,8 +12,13 @@ scaling is the ratio of recordings per minute, 2 workers over 1. From the
 measured parts it projects a corpus of 10,000 recordings on a 100-core cluster
 and says what bounds it. Speed goals are checked here, never in timed tests.
 
+With ``--slurm N`` it also runs the corpus on N single-core SLURM jobs (``tonguevis batch --slurm
+--slurm-jobs N``; a running SLURM: ``scripts/slurm_local.sh start``) and compares it with the local
+run of as many workers.
+
     python scripts/bench_batch.py --json bench_batch.json
     python scripts/bench_batch.py --speakers 25 --steps simulate,energy --json bench_energy.json
+    python scripts/bench_batch.py --workers 2 --slurm 2 --json bench_slurm.json
 """
 
 from __future__ import annotations
@@ -83,6 +88,8 @@ def main(argv=None) -> int:
     parser.add_argument("--segment-first", type=int, default=1, help="productions segmented per recording")
     parser.add_argument("--modes", type=int, default=100)
     parser.add_argument("--workers", default="1,2", help="worker counts to compare (default 1,2)")
+    parser.add_argument("--slurm", type=int, metavar="N", help="also on N single-core SLURM jobs")
+    parser.add_argument("--slurm-profile", type=Path, metavar="TOML", help="the SLURM jobs' profile (--slurm)")
     parser.add_argument("--json", type=Path, help="write the figures here")
     args = parser.parse_args(argv)
 
@@ -97,9 +104,16 @@ def main(argv=None) -> int:
     from tonguevis.batch import run
 
     counts = [int(w) for w in args.workers.split(",")]
+    plans = [(jobs, f"out-{jobs}", {"jobs": jobs}) for jobs in counts]
+    if args.slurm:
+        from tonguevis.batch.slurm import SlurmOptions
+
+        slurm = (SlurmOptions.from_profile(args.slurm_profile, jobs=args.slurm, cores=1) if args.slurm_profile
+                 else SlurmOptions(jobs=args.slurm, cores=1))
+        plans.append((args.slurm, "out-slurm", {"slurm": slurm}))
     runs = []
-    for jobs in counts:
-        out = workdir / f"out-{jobs}"
+    for jobs, folder, where in plans:
+        out = workdir / folder
         load = os.getloadavg()
         finished: list[float] = []
 
@@ -107,7 +121,7 @@ def main(argv=None) -> int:
             finished.append(time.perf_counter())
 
         started = time.perf_counter()
-        result = run(corpus, out, jobs=jobs, steps=args.steps, modes=args.modes, segment_first=args.segment_first,
+        result = run(corpus, out, **where, steps=args.steps, modes=args.modes, segment_first=args.segment_first,
                      progress=progress)
         if not result.ok:
             print(f"{len(result.failures)} recording(s) failed: {result.failures[:3]}", file=sys.stderr)
@@ -121,7 +135,8 @@ def main(argv=None) -> int:
         startup = max(0.0, first - sum(steps.values())) if jobs > 1 else 0.0
         figures = {
             "workers": jobs,
-            "runner": "in process" if jobs == 1 else f"loky, {jobs} processes",
+            "runner": ("in process" if jobs == 1 else f"loky, {jobs} processes") if "jobs" in where
+            else f"SLURM, {jobs} single-core jobs (dask-jobqueue)",
             "recordings": n,
             "recordings_per_minute": 60.0 * n / result.seconds,
             "recordings_per_minute_steady": 60.0 * n / (worker_s - startup) if worker_s > startup else None,
@@ -138,11 +153,14 @@ def main(argv=None) -> int:
             "load_average_before": load[0],
             "load_average_after": os.getloadavg()[0],
         }
+        if "slurm" in where:
+            figures["slurm"] = json.loads((out / "batch.json").read_text())["slurm"]
         runs.append(figures)
-        print(f"{jobs} worker(s): {n} recordings in {result.seconds:.1f} s = {figures['recordings_per_minute']:.1f} "
+        print(f"{figures['runner']}: {n} recordings in {result.seconds:.1f} s = {figures['recordings_per_minute']:.1f} "
               f"recordings/min; CPU {figures['cpu_s_per_recording']:.2f} s per recording; workers' CPU share "
               f"of the running time {figures['cpu_share_of_wall']:.2f}; max RSS per worker "
               f"{', '.join(f'{m:.0f}' for m in figures['max_rss_mb_per_worker'])} MiB; load {load[0]:.1f}")
+    slurm_run = runs.pop() if args.slurm else None
     report = {
         "corpus": {"path": str(corpus), "recordings": runs[0]["recordings"], "generated": args.corpus is None,
                    "speakers": args.speakers, "trains": args.trains},
@@ -163,6 +181,15 @@ def main(argv=None) -> int:
               f"({report['ratio_steady']:.2f} once the workers have started; goal >= 1.8); cores used "
               f"{runs[0]['cores_used']:.2f} vs {two['cores_used']:.2f}; with a free core per worker "
               f"~{report['estimated_ratio_free_cores']:.2f}")
+    if slurm_run is not None:
+        report["slurm"] = slurm_run
+        local = next((r for r in runs if r["workers"] == args.slurm), None)
+        if local is not None:
+            report["slurm_vs_local"] = slurm_run["recordings_per_minute"] / local["recordings_per_minute"]
+            print(f"SLURM, {args.slurm} single-core jobs vs {args.slurm} local workers: "
+                  f"{slurm_run['recordings_per_minute']:.1f} vs {local['recordings_per_minute']:.1f} recordings/min "
+                  f"({report['slurm_vs_local']:.2f}); SLURM's workers started "
+                  f"{slurm_run['worker_startup_s']:.1f} s after the run began ({slurm_run['slurm']['version']})")
     report["projection"] = projection(runs)
     p = report["projection"]
     print(f"projection: {p['recordings']} recordings on {p['cores']} cores ~ {p['estimated_s'] / 60:.0f} min, "

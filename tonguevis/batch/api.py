@@ -66,9 +66,9 @@ class BatchResult:
                 f"tables in {self.out}")
 
 
-def _counts(done: int, failed: int, fresh: int, total: int) -> str:
-    return f"{done} done, {failed} failed, {total - done - failed - fresh} remaining" + (
-        f" ({fresh} up to date)" if fresh else "")
+def _counts(done: int, failed: int, fresh: int, total: int, lost: int = 0) -> str:
+    return (f"{done} done, {failed - lost} failed, " + (f"{lost} lost, " if lost else "")
+            + f"{total - done - failed - fresh} remaining" + (f" ({fresh} up to date)" if fresh else ""))
 
 
 @verbose
@@ -152,17 +152,20 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
     failed: dict[str, tuple[str, str]] = {}
     total = len(names)
     slurm_jobs: dict = {}
+    lost = [0]  # of the failures, the recordings lost with their worker
 
     def on_done(outcome) -> None:
         if outcome.failure:
             failed[outcome.file] = outcome.failure
+            lost[0] += outcome.failure[0] == "lost"
             logger.info("%s failed at %s: %s", outcome.file, *outcome.failure)
         else:
             result.done.append(outcome.file)
         result.workers[outcome.pid] = max(result.workers.get(outcome.pid, 0.0), outcome.max_rss_mb)
         result.cpu_seconds += outcome.cpu_seconds
         finished = len(result.done) + len(failed) + len(result.up_to_date)
-        report(progress, finished, total, _counts(len(result.done), len(failed), len(result.up_to_date), total))
+        report(progress, finished, total,
+               _counts(len(result.done), len(failed), len(result.up_to_date), total, lost[0]))
 
     report(progress, len(result.up_to_date), total, _counts(0, 0, len(result.up_to_date), total))
     result.timings["prepare"] = _prepare(built, settings) if tasks else 0.0

@@ -57,24 +57,25 @@ def run_dask(tasks: list[Task], spec: ModelSpec, client, on_done: OnDone, watch=
     # Scattered data lives on the workers it was sent to; SLURM jobs end (scancel, walltime) and take theirs
     # with them, so there the (small) spec goes with each task instead.
     shared = spec if watch is not None else client.scatter(spec, broadcast=True)
-    futures = {client.submit(process, task, shared, key=f"tonguevis-{run}-{k}-{task.file}"): task
+    # Each future is let go once its outcome is here: a result kept on a worker whose job then ends would be
+    # computed again elsewhere (Dask recomputes what its client still holds), and counted twice.
+    pending = {client.submit(process, task, shared, key=f"tonguevis-{run}-{k}-{task.file}"): task
                for k, task in enumerate(tasks)}
     try:
-        completed = as_completed(futures)
-        while not completed.is_empty():
+        completed = as_completed(pending)
+        while pending:
             finished = completed.next_batch(block=watch is None)
             if watch is not None:
                 ended = watch.poll()
                 if not finished and ended:
-                    for future, task in futures.items():
-                        if not future.done():
-                            on_done(Outcome(task.file, failure=("lost", f"not started: {ended}; run the same "
-                                                                        "command again to resume")))
+                    for task in pending.values():
+                        on_done(Outcome(task.file, failure=("lost", f"not started: {ended}; run the same "
+                                                                    "command again to resume")))
                     return
                 if not finished:
                     time.sleep(POLL_SECONDS)
             for future in finished:
-                task = futures[future]
+                task = pending.pop(future)
                 try:
                     outcome = future.result()
                 except Exception as exc:  # noqa: BLE001 - the worker died or the task could not run there
@@ -85,6 +86,8 @@ def run_dask(tasks: list[Task], spec: ModelSpec, client, on_done: OnDone, watch=
                 else:
                     if watch is not None:
                         watch.done(outcome.file, outcome.slurm_job)
+                finally:
+                    future.release()
                 on_done(outcome)
     finally:
-        client.cancel(list(futures))
+        client.cancel(list(pending))

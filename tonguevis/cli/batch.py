@@ -142,8 +142,16 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if client is not None:
             client.close()
+    lost: dict[str, list[str]] = {}
     for file, step, error in result.failures:
-        print(f"lost: {file}: {error}" if step == "lost" else f"failed: {file} ({step}): {error}")
+        if step == "lost":
+            lost.setdefault(error, []).append(file)
+        else:
+            print(f"failed: {file} ({step}): {error}")
+    for error, files in lost.items():  # those not started share one reason: one line (failures.csv has each)
+        named = files[0] if len(files) == 1 else f"{len(files)} recordings ({', '.join(files[:3])}" + (
+            ", ...)" if len(files) > 3 else ")")
+        print(f"lost: {named}: {error}")
     print(result.summary())
     return 0 if result.ok else 1
 
