@@ -318,7 +318,7 @@ def test_job_of_a_worker():
     """dask-jobqueue names a job's workers after the job: NAME with one worker per job, NAME-k with more."""
     from types import SimpleNamespace
 
-    from tonguevis.batch.slurm import JobWatch
+    from tonguevis.batch.slurm_jobs import JobWatch
 
     cluster = SimpleNamespace(workers={"SLURMCluster-0": SimpleNamespace(job_id="41"),
                                        "SLURMCluster-1": SimpleNamespace(job_id="42")})
@@ -332,3 +332,22 @@ def test_job_of_a_worker():
     assert watch.job_of("SLURMCluster-7") is None and watch.job_of(None) is None
     cluster.workers.clear()  # the jobs are gone; their names still map
     assert watch.job_of("SLURMCluster-1") == "42"
+
+
+def test_the_batch_stops_only_when_slurm_says_every_job_ended(monkeypatch):
+    """No worker and SLURM not answering is not an end (the jobs may be waiting); SLURM forgetting them is."""
+    from types import SimpleNamespace
+
+    from tonguevis.batch import slurm_jobs
+
+    cluster = SimpleNamespace(workers={"SLURMCluster-0": SimpleNamespace(job_id="41")})
+    client = SimpleNamespace(scheduler_info=lambda: {"workers": {}})
+    said = []
+    watch = slurm_jobs.JobWatch(cluster, client, Path("logs"), notify=said.append, every=0.0)
+    answers = iter([None, {"41": ("PENDING", "", "Priority")}, None, {"41": ("TIMEOUT", "node7", "")}])
+    monkeypatch.setattr(slurm_jobs, "squeue", lambda ids: next(answers))
+    assert watch.poll() is None and watch.jobs["41"].state == "PENDING"  # no answer: nothing known
+    assert watch.poll() is None and said[-1] == "SLURM job 41 pending (Priority)"
+    assert watch.poll() is None
+    assert watch.poll() == "every SLURM job of the batch has ended (41: TIMEOUT)"
+    assert said[-1] == "SLURM job 41 ended: TIMEOUT on node7 after 0 recording(s)"

@@ -1,8 +1,8 @@
 """A whole corpus at once: simulate, energy curves, segmentation and validation of every recording.
 
-``run(paths, out, jobs=..., client=...)`` (and ``tonguevis batch``) runs the
+``run(paths, out, jobs=..., client=..., slurm=...)`` (and ``tonguevis batch``) runs the
 single-file pipeline on every recording, on this machine (joblib/loky worker
-processes) or on a Dask distributed cluster, writes each recording's results
+processes), on a Dask distributed cluster or on SLURM jobs, writes each recording's results
 as it finishes, skips what an earlier run already did with the same inputs and
 settings, records failures without stopping, and gathers corpus tables
 (Parquet, optionally CSV) that R and pandas open directly.
@@ -12,6 +12,8 @@ settings, records failures without stopping, and gathers corpus tables
 * :mod:`~tonguevis.batch.tables`: the tables' schemas and rows.
 * :mod:`~tonguevis.batch.store`: the output folder, what is up to date, gathering.
 * :mod:`~tonguevis.batch.runners`: in process, loky, Dask.
+* :mod:`~tonguevis.batch.slurm`: SLURM jobs of Dask workers (dask-jobqueue), their options and profile;
+  :mod:`~tonguevis.batch.slurm_jobs` follows the jobs as they run.
 """
 
 from __future__ import annotations
