@@ -21,9 +21,11 @@ PARTITION=debug
 say() { echo "slurm_local: $*" >&2; }
 die() { say "$*"; exit 1; }
 
-alive() {  # alive NAME: the daemon this script started is running
-    local pidfile="$STATE/$1.pid"
-    [[ -f "$pidfile" ]] && kill -0 "$(cat "$pidfile")" 2>/dev/null
+alive() {  # alive NAME: the daemon this script started is running (its pid, not a process that took it over since)
+    local pidfile="$STATE/$1.pid" pid
+    [[ -f "$pidfile" ]] || return 1
+    pid="$(cat "$pidfile")"
+    [[ "$(cat "/proc/$pid/comm" 2>/dev/null)" == "$1" ]]
 }
 
 install_packages() {
@@ -50,8 +52,9 @@ start_munge() {
     fi
     chown munge:munge /etc/munge/munge.key
     chmod 0400 /etc/munge/munge.key
-    # -F: in the foreground (here: a background process of ours); --force: a stale socket of a dead munged
-    runuser -u munge -- munged -F --force >"$STATE/munged.log" 2>&1 &
+    # -F: in the foreground (here: a background process of ours); --force: a stale socket of a dead munged;
+    # setpriv executes it as the munge user in place, so $! is munged itself
+    setpriv --reuid=munge --regid=munge --init-groups munged -F --force >"$STATE/munged.log" 2>&1 &
     echo $! >"$STATE/munged.pid"
     for _ in $(seq 50); do
         munge -n 2>/dev/null | unmunge >/dev/null 2>&1 && return

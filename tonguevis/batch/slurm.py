@@ -42,7 +42,7 @@ class SlurmOptions:
 
     jobs : SLURM jobs submitted.  cores : CPU cores per job, each running one
     one-thread worker process.  memory : per job (``"8GB"``; default 2 GB per
-    core: a worker takes 0.4-0.6 GB, Dask restarts one past its share).
+    core: a worker took 0.55-0.7 GB on the shipped tongue; Dask restarts one past its share).
     walltime : per job, SLURM's ``--time`` (``"02:00:00"``).  queue : partition
     (``-p``; None: the cluster's default).  account : ``-A`` (None: the user's
     default).  interface : network interface the workers reach this process on
