@@ -51,21 +51,23 @@ def draw_averages(figure, repetitions, sensors=None, columns: int = 3, zscores: 
             sd = values.std(axis=0, ddof=1) if len(values) > 1 else np.zeros_like(mean)
             sti = reps.sti.get(name, float("nan"))
             colour = cmap(g % 10)
-            label = f"{group + ': ' if group else ''}STI {sti:.1f}, n = {reps.n}" if np.isfinite(sti) \
-                else f"{group + ': ' if group else ''}n = {reps.n}"
+            figures = f"STI {sti:.1f}, n = {reps.n}" if np.isfinite(sti) else f"n = {reps.n}"
             ax.fill_between(PERCENT, mean - sd, mean + sd, color=colour, alpha=0.22, lw=0)
-            ax.plot(PERCENT, mean, color=colour, lw=1.6, label=label)
-        ax.set_title(name, fontsize=9, loc="left")
+            ax.plot(PERCENT, mean, color=colour, lw=1.6, label=f"{group}: {figures}" if group else figures)
+        if len(groups) == 1 and ax.get_lines():  # one set: its figures in the title, no legend over the curve
+            ax.set_title(f"{name}  {ax.get_lines()[0].get_label()}", fontsize=8, loc="left")
+        else:
+            ax.set_title(name, fontsize=8, loc="left")
+            ax.legend(fontsize=7, frameon=False, loc="best")
         ax.set_xlim(0, 100)
         ax.grid(True, alpha=0.3)
         ax.tick_params(labelsize=7)
-        ax.legend(fontsize=7, frameon=False, loc="best")
     for ax in axes[len(names):]:
         ax.set_axis_off()
-    for ax in axes[::columns]:
-        ax.set_ylabel("vertical position z (z-score)" if zscores else "vertical position z (mm)", fontsize=8)
-    for ax in axes[:len(names)][-columns:]:
-        ax.set_xlabel("normalised time (% of the production)", fontsize=8)
+    unit = "z-score" if zscores else "mm"
+    for ax in axes[:len(names):columns]:
+        ax.set_ylabel(f"height z ({unit})", fontsize=8)
+    axes[(rows - 1) * columns].set_xlabel("normalised time (%)", fontsize=8)
     return list(axes[:len(names)])
 
 

@@ -1,0 +1,92 @@
+"""The Measures tab (issue 35): the open recording's productions' measures, the STI of those selected."""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("PySide6")
+
+from tests.gui.conftest import demo_session  # noqa: E402
+
+pytestmark = [pytest.mark.gui, pytest.mark.timeout(120)]
+
+
+@pytest.fixture
+def tab(qtbot, window):
+    from tonguevis.gui.measures_tab import MeasuresTab
+
+    widget = MeasuresTab(window.state)
+    window.register_tab("Measures", widget)
+    window.state.set_session(demo_session(), "primary", window)
+    window.tabs.setCurrentWidget(widget)
+    qtbot.waitExposed(widget)
+    return widget
+
+
+def _column(tab, key):
+    from tonguevis.gui.measures_tab import COLUMNS
+
+    c = [k for k, _ in COLUMNS].index(key)
+    return [tab.table.item(r, c).text() for r in range(tab.table.rowCount())]
+
+
+def test_the_tab_shows_the_sessions_measures_and_follows_the_palate(qtbot, tab):
+    from tonguevis.workflows.measures import measure_table, measurement_palate
+
+    session = tab.session
+    assert tab.table.rowCount() == len(session.production_table) > 0
+    expected = measure_table(session.recording, session.production_table,
+                             measurement_palate(session.recording, "generic")).rows
+    shown = [float(t) for t in _column(tab, "constriction_degree_mm")]
+    assert shown == pytest.approx([row["constriction_degree_mm"] for row in expected], abs=1e-3)
+    assert all(d > 0 for d in shown)  # the demo's tip stays under the generic palate
+    assert "generic palate" in tab.palate_box.currentText()
+    tab.palate_box.setCurrentIndex(tab.palate_box.findData("none"))
+    assert set(_column(tab, "constriction_degree_mm")) == {"–"}
+    assert _column(tab, "peak_velocity_closing_mm_s")[0] != "–"  # the rest does not need a palate
+
+
+def test_selected_productions_give_their_sti_and_averages(qtbot, tab):
+    from PySide6.QtCore import QItemSelectionModel
+
+    every = tab.result.repetitions
+    assert "STI over all" in tab.sti_label.text() and f"{every.n} productions" in tab.sti_label.text()
+    model = tab.table.selectionModel()
+    for row in (0, 2):
+        model.select(tab.table.model().index(row, 0),
+                     QItemSelectionModel.SelectionFlag.Select | QItemSelectionModel.SelectionFlag.Rows)
+    assert tab.selected_rows() == [0, 2]
+    chosen = tab.selected_repetitions()
+    assert chosen.n == 2 and "the selected 2 productions" in tab.sti_label.text()
+    assert chosen.sti["TT"] == pytest.approx(every.subset([0, 2]).sti["TT"])
+    assert chosen.sti["TT"] != pytest.approx(every.sti["TT"])  # another set, another figure
+    assert f"TT {chosen.sti['TT']:.2f}" in tab.sti_label.text()
+    lines = [line for ax in tab.canvas.figure.axes for line in ax.get_lines()]
+    assert lines and np.allclose(lines[0].get_ydata(), chosen.records_mm[chosen.sensors[0]].mean(axis=0))
+
+
+def test_double_click_seeks_to_the_closure_and_save_writes_the_table(qtbot, tab, tmp_path, monkeypatch):
+    from PySide6.QtWidgets import QFileDialog
+
+    tab.table.cellDoubleClicked.emit(1, 0)
+    closure = tab.result.rows[1]["closure_s"]
+    assert math.isfinite(closure) and tab.state.time == pytest.approx(closure, abs=tab.state.frame_period)
+    out = tmp_path / "measures.csv"
+    monkeypatch.setattr(QFileDialog, "getSaveFileName", lambda *a, **k: (str(out), ""))
+    assert tab.ask_save() == out
+    rows = list(csv.DictReader(open(out)))
+    assert len(rows) == tab.table.rowCount()
+    assert [float(r["closure_s"]) for r in rows] == pytest.approx([r["closure_s"] for r in tab.result.rows], abs=1e-4)
+
+
+def test_the_apps_tabs_include_measures(qtbot, window):
+    from tonguevis.gui.tabs import add_feature_tabs
+
+    add_feature_tabs(window)
+    assert "Measures" in window.feature_tabs
+    window.state.set_session(demo_session(), "primary", window)
+    assert window.feature_tabs["Measures"].table.rowCount() == len(window.session.production_table)
