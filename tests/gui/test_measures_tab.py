@@ -41,8 +41,10 @@ def test_the_tab_shows_the_sessions_measures_and_follows_the_palate(qtbot, tab):
     assert tab.table.rowCount() == len(session.production_table) > 0
     expected = measure_table(session.recording, session.production_table,
                              measurement_palate(session.recording, "generic")).rows
+    degrees = [row["constriction_degree_mm"] for row in expected]
+    assert [row["constriction_degree_mm"] for row in tab.result.rows] == pytest.approx(degrees, abs=1e-9)
     shown = [float(t) for t in _column(tab, "constriction_degree_mm")]
-    assert shown == pytest.approx([row["constriction_degree_mm"] for row in expected], abs=1e-3)
+    assert shown == pytest.approx(degrees, abs=0.0051)  # shown to 0.01 mm
     assert all(d > 0 for d in shown)  # the demo's tip stays under the generic palate
     assert "generic palate" in tab.palate_box.currentText()
     tab.palate_box.setCurrentIndex(tab.palate_box.findData("none"))
