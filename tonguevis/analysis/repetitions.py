@@ -105,8 +105,10 @@ class Repetitions:
                 "notes": list(self.notes)}
 
     def average_rows(self) -> list[dict]:
-        """The mean ± SD trajectories: one row per sensor and percent of normalised time."""
+        """The mean ± SD trajectories: one row per sensor and percent of normalised time (none without productions)."""
         rows = []
+        if self.n == 0:
+            return rows
         for name in self.sensors:
             mm, z = self.records_mm[name], self.zscores[name]
             ddof = 1 if len(mm) > 1 else 0

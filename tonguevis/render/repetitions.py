@@ -30,9 +30,11 @@ def draw_averages(figure, repetitions, sensors=None, columns: int = 3, zscores: 
     """
     import matplotlib
 
-    groups = _groups(repetitions)
+    groups = [(group, reps) for group, reps in _groups(repetitions) if reps.n > 0]
     figure.clear()
     names = list(sensors) if sensors is not None else (groups[0][1].sensors if groups else [])
+    if not groups:
+        names = []
     if not names:
         ax = figure.add_subplot(1, 1, 1)
         ax.set_axis_off()
