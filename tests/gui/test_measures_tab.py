@@ -21,7 +21,9 @@ def tab(qtbot, window):
 
     widget = MeasuresTab(window.state)
     window.register_tab("Measures", widget)
-    window.state.set_session(demo_session(), "primary", window)
+    with qtbot.waitSignal(widget.measured, timeout=60000) as blocker:  # measured in the job runner
+        window.state.set_session(demo_session(), "primary", window)
+    assert blocker.args[0] is widget.result is not None
     window.tabs.setCurrentWidget(widget)
     qtbot.waitExposed(widget)
     return widget
@@ -47,7 +49,8 @@ def test_the_tab_shows_the_sessions_measures_and_follows_the_palate(qtbot, tab):
     assert shown == pytest.approx(degrees, abs=0.0051)  # shown to 0.01 mm
     assert all(d > 0 for d in shown)  # the demo's tip stays under the generic palate
     assert "generic palate" in tab.palate_box.currentText()
-    tab.palate_box.setCurrentIndex(tab.palate_box.findData("none"))
+    with qtbot.waitSignal(tab.measured, timeout=60000):
+        tab.palate_box.setCurrentIndex(tab.palate_box.findData("none"))
     assert set(_column(tab, "constriction_degree_mm")) == {"–"}
     assert _column(tab, "peak_velocity_closing_mm_s")[0] != "–"  # the rest does not need a palate
 
@@ -89,6 +92,25 @@ def test_the_apps_tabs_include_measures(qtbot, window):
     from tonguevis.gui.tabs import add_feature_tabs
 
     add_feature_tabs(window)
-    assert "Measures" in window.feature_tabs
-    window.state.set_session(demo_session(), "primary", window)
-    assert window.feature_tabs["Measures"].table.rowCount() == len(window.session.production_table)
+    tab = window.feature_tabs["Measures"]
+    with qtbot.waitSignal(tab.measured, timeout=60000):
+        window.state.set_session(demo_session(), "primary", window)
+    assert tab.table.rowCount() == len(window.session.production_table)
+
+
+def test_a_newer_request_wins_over_a_running_one(qtbot, tab):
+    """Switching the palate twice quickly shows the last choice's figures, never the first's."""
+    from PySide6.QtCore import QCoreApplication
+
+    generic = [row["constriction_degree_mm"] for row in tab.result.rows]
+    tab.palate_box.setCurrentIndex(tab.palate_box.findData("none"))
+    with qtbot.waitSignal(tab.measured, timeout=60000) as blocker:
+        tab.palate_box.setCurrentIndex(tab.palate_box.findData("generic"))
+    qtbot.wait(200)
+    QCoreApplication.processEvents()
+    assert blocker.args[0] is tab.result
+    assert [row["constriction_degree_mm"] for row in tab.result.rows] == pytest.approx(generic)
+    shown = tab.result
+    with qtbot.assertNotEmitted(tab.measured):  # a result for what was asked before is dropped
+        tab._on_measured(object(), ("an earlier request",))
+    assert tab.result is shown

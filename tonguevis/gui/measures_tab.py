@@ -6,7 +6,8 @@ the generic one placed in the speaker, or none) and Save table….  Middle: one 
 productions as they are edited; double-click a row to move the cursor to its closure.  Bottom: the
 STI of every sensor over the selected productions (all when none is selected) and their
 time-normalised mean ± SD trajectories (:mod:`tonguevis.render.repetitions`).  The tab only shows
-what :func:`tonguevis.workflows.measures.measure_table` computes (no simulation is needed).
+what :func:`tonguevis.workflows.measures.measure_table` computes (no simulation is needed), run through
+the app's job runner.
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ class MeasuresTab(QtWidgets.QWidget):
         self.session = None
         self.result = None
         self._key = None
+        self.worker = None  # the running measurement's Job
         self.palate_box = QtWidgets.QComboBox()
         self.palate_box.setSizeAdjustPolicy(QtWidgets.QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
         self.palate_box.setMinimumContentsLength(24)
@@ -107,6 +109,9 @@ class MeasuresTab(QtWidgets.QWidget):
             ]
             if state.session is not None:
                 self.set_session(state.session)
+        app = QtWidgets.QApplication.instance()
+        if app is not None:
+            app.aboutToQuit.connect(self.stop_worker)
 
     # ------------------------------------------------------------------ inputs
     def _fill_palates(self) -> None:
@@ -133,7 +138,9 @@ class MeasuresTab(QtWidgets.QWidget):
         self.refresh()
 
     def refresh(self) -> None:
-        """Recompute the measures when the recording, its productions or the palate changed."""
+        """Recompute the measures when the recording, its productions or the palate changed: in the job
+        runner (a long recording takes seconds: rest, head correction, the palate's placement), the
+        result shown when it is still the one asked for."""
         session = self.session
         table = None if session is None else getattr(session, "production_table", None)
         key = (id(session), id(table), len(table) if table is not None else 0, id(self.palate_box.currentData()))
@@ -141,28 +148,53 @@ class MeasuresTab(QtWidgets.QWidget):
             return
         self._key = key
         self.result = None
+        if self.worker is not None and self.worker.isRunning():
+            self.worker.cancel()  # its result would be stale
         if session is None or table is None or not len(table):
             self._show_rows([])
             self.status.setText("open a recording with productions" if session is None or table is None
                                 else "no productions in this recording")
             self.measured.emit(None)
             return
+        from tonguevis.gui.worker import run_job
         from tonguevis.workflows.measures import measure_table, measurement_palate
 
-        try:
-            palate = measurement_palate(session.recording, self.palate_box.currentData())
-            self.result = measure_table(session.recording, table, palate, rest=getattr(session, "given_rest", None))
-        except TonguevisError as exc:
-            logger.warning("measures of %s: %s", session.name, exc)
-            self._show_rows([])
-            self.status.setText(f"cannot measure: {exc}")
-            self.measured.emit(None)
+        recording, spec, rest = session.recording, self.palate_box.currentData(), getattr(session, "given_rest", None)
+
+        def work(progress):
+            progress(0, 2, "placing the palate")
+            palate = measurement_palate(recording, spec)
+            progress(1, 2, f"measuring {len(table)} productions")
+            return measure_table(recording, table, palate, rest=rest)
+
+        self.status.setText("measuring…")
+        self.worker = run_job(self, "Measures", work, lambda result: self._on_measured(result, key),
+                              label="Measuring the productions…", min_duration_ms=500,
+                              on_failed=lambda message: self._on_failed(message, key))
+
+    def _on_measured(self, result, key) -> None:
+        if key != self._key:  # another recording, productions or palate since
             return
-        self._show_rows(self.result.rows)
-        notes = self.result.notes + ([self.result.rest.describe()] if self.result.rest is not None else [])
-        self.status.setText(f"{session.name}: {len(table)} productions; head-corrected mm; speeds of the 12 Hz "
+        session = self.session
+        self.result = result
+        self._show_rows(result.rows)
+        notes = result.notes + ([result.rest.describe()] if result.rest is not None else [])
+        self.status.setText(f"{session.name}: {len(result.rows)} productions; head-corrected mm; speeds of the 12 Hz "
                             "low-passed sensor. " + " ".join(f"{n}." if not n.endswith(".") else n for n in notes))
-        self.measured.emit(self.result)
+        self.measured.emit(result)
+
+    def _on_failed(self, message: str, key) -> None:
+        if key != self._key:
+            return
+        logger.warning("measures: %s", message)
+        self._show_rows([])
+        self.status.setText(f"cannot measure: {message}")
+        self.measured.emit(None)
+
+    def stop_worker(self) -> None:
+        """Cancel a running measurement and wait for its thread (before closing)."""
+        if self.worker is not None:
+            self.worker.stop()
 
     # ------------------------------------------------------------------ showing
     def _show_rows(self, rows: list[dict]) -> None:
@@ -244,4 +276,5 @@ class MeasuresTab(QtWidgets.QWidget):
         for unsubscribe in self._subscriptions:
             unsubscribe()
         self._subscriptions = []
+        self.stop_worker()
         super().closeEvent(event)
