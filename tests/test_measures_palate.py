@@ -47,3 +47,11 @@ def test_generic_and_none(tmp_path):
     assert generic.label == "generic palate" and "estimate" in generic.notes[0]
     assert generic.surface.metadata.get("generic")
     assert measurement_palate(recording, "none").surface is None and measurement_palate(recording, None).label == ""
+
+
+def test_a_speaker_the_generic_palate_cannot_be_placed_in_gets_no_constriction():
+    times = np.arange(500) / 100.0
+    tip = np.column_stack([0 * times, 0 * times, 0.005 * np.sin(3 * times)])
+    recording = Recording(rate=100.0, times=times, sensors={"TT": tip})  # one tongue sensor: no alignment
+    measured = measurement_palate(recording, "generic")
+    assert measured.surface is None and "cannot be placed" in measured.notes[0] and "too few" in measured.notes[0]

@@ -56,7 +56,11 @@ def measurement_palate(recording, spec) -> MeasuredPalate:
         from tonguevis.sim.placement import ADULT
         from tonguevis.sim.simulate import placed_palate
 
-        placed, _ = placed_palate(recording, surface, frame="speaker", tongue_size=ADULT)
+        try:
+            placed, _ = placed_palate(recording, surface, frame="speaker", tongue_size=ADULT)
+        except TonguevisError as exc:  # the default: the other measures do not need it
+            return MeasuredPalate(None, "", [f"no constriction: the generic palate cannot be placed in this "
+                                             f"speaker ({exc})"])
         return MeasuredPalate(placed, "generic palate",
                               ["the generic palate, placed in the speaker by the rest sensors' fit onto the model: "
                                "an estimate, not this speaker's palate (give the speaker's with --palate)"])
