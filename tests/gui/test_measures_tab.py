@@ -70,6 +70,7 @@ def test_selected_productions_give_their_sti_and_averages(qtbot, tab):
     assert chosen.sti["TT"] == pytest.approx(every.subset([0, 2]).sti["TT"])
     assert chosen.sti["TT"] != pytest.approx(every.sti["TT"])  # another set, another figure
     assert f"TT {chosen.sti['TT']:.2f}" in tab.sti_label.text()
+    assert tab.isVisible() and not tab._figure_stale  # drawn while shown
     lines = [line for ax in tab.canvas.figure.axes for line in ax.get_lines()]
     assert lines and np.allclose(lines[0].get_ydata(), chosen.records_mm[chosen.sensors[0]].mean(axis=0))
 
@@ -96,6 +97,10 @@ def test_the_apps_tabs_include_measures(qtbot, window):
     with qtbot.waitSignal(tab.measured, timeout=60000):
         window.state.set_session(demo_session(), "primary", window)
     assert tab.table.rowCount() == len(window.session.production_table)
+    assert not tab.isVisible() and tab._figure_stale and not tab.canvas.figure.axes  # hidden: not drawn yet
+    window.tabs.setCurrentWidget(tab)
+    qtbot.waitExposed(tab)
+    assert not tab._figure_stale and tab.canvas.figure.axes  # drawn once shown
 
 
 def test_a_newer_request_wins_over_a_running_one(qtbot, tab):

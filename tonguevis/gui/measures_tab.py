@@ -61,6 +61,7 @@ class MeasuresTab(QtWidgets.QWidget):
         self.result = None
         self._key = None
         self.worker = None  # the running measurement's Job
+        self._figure_stale = False
         self.palate_box = QtWidgets.QComboBox()
         self.palate_box.setSizeAdjustPolicy(QtWidgets.QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
         self.palate_box.setMinimumContentsLength(24)
@@ -239,8 +240,17 @@ class MeasuresTab(QtWidgets.QWidget):
         self.sti_label.setText(f"STI over {which} {reps.n} productions (Smith et al. 2000; vertical position, "
                                f"time- and amplitude-normalised): {values}"
                                + (" (select two or more for an STI)" if reps.n < 2 else ""))
+        if not self.isVisible():  # drawn when the tab shows (a hidden canvas has no size to lay out)
+            self._figure_stale = True
+            return
+        self._figure_stale = False
         draw_averages(self.canvas.figure, reps, columns=min(4, max(len(reps.sensors), 1)))
         self.canvas.draw_idle()
+
+    def showEvent(self, event) -> None:
+        super().showEvent(event)
+        if self._figure_stale:
+            self._show_repetitions()
 
     def _seek(self, row: int, _column: int) -> None:
         if self.result is None or self.state is None or not 0 <= row < len(self.result.rows):
