@@ -20,7 +20,7 @@ from pathlib import Path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from tonguevis.cli._common import add_productions_from_argument, add_recording_arguments, add_rest_argument
+    from tonguevis.cli._common import add_productions_from_argument, add_recording_arguments
 
     add_recording_arguments(parser)
     parser.add_argument("--palate", default="generic", metavar="P",
@@ -48,7 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="every production; default: the 2nd to 4th of each train of three or more")
     parser.add_argument("--no-head-correction", action="store_true",
                         help="use the positions as recorded even when head references exist")
-    add_rest_argument(parser)
+    parser.add_argument("--rest", type=float, nargs=2, metavar=("START", "END"),
+                        help="the rest interval (s) the jaw opening and lip protrusion are measured from; default: "
+                             "the longest still interval of >= 1 s, else the stillest 0.2 s window (as every command)")
 
 
 def run(args: argparse.Namespace) -> int:
