@@ -52,6 +52,9 @@ def test_the_tab_shows_the_sessions_measures_and_follows_the_palate(qtbot, tab):
     with qtbot.waitSignal(tab.measured, timeout=60000):
         tab.palate_box.setCurrentIndex(tab.palate_box.findData("none"))
     assert set(_column(tab, "constriction_degree_mm")) == {"–"}
+    with qtbot.assertNotEmitted(tab.measured):  # new run settings keep the choice and measure nothing anew
+        tab.state.change_run_settings(modes=12)
+    assert tab.palate_box.currentData() == "none"
     assert _column(tab, "peak_velocity_closing_mm_s")[0] != "–"  # the rest does not need a palate
 
 

@@ -128,7 +128,8 @@ class MeasuresTab(QtWidgets.QWidget):
         self.palate_box.clear()
         for data, text in items:
             self.palate_box.addItem(text, data)
-        index = next((i for i, (data, _) in enumerate(items) if data is current), 0) if current is not None else 0
+        same = (lambda data: data == current) if isinstance(current, str) else (lambda data: data is current)
+        index = next((i for i, (data, _) in enumerate(items) if same(data)), 0) if current is not None else 0
         self.palate_box.setCurrentIndex(index)
         self.palate_box.blockSignals(False)
         self.refresh()
@@ -144,7 +145,9 @@ class MeasuresTab(QtWidgets.QWidget):
         result shown when it is still the one asked for."""
         session = self.session
         table = None if session is None else getattr(session, "production_table", None)
-        key = (id(session), id(table), len(table) if table is not None else 0, id(self.palate_box.currentData()))
+        chosen = self.palate_box.currentData()  # a str comes back as a new object each time: compared by value
+        key = (id(session), id(table), len(table) if table is not None else 0,
+               chosen if isinstance(chosen, str) or chosen is None else id(chosen))
         if key == self._key:
             return
         self._key = key
