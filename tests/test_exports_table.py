@@ -15,7 +15,7 @@ DEMO = DATA_DIR / "spk1_ta.tsv"
 
 def test_the_table_names_every_format_once():
     keys = [fmt.key for fmt in EXPORTS]
-    assert sorted(keys) == ["csv", "mp4", "png", "textgrid", "vtk", "xdmf"] and len(set(keys)) == len(keys)
+    assert sorted(keys) == ["csv", "mp4", "png", "textgrid", "vtk", "wav", "xdmf"] and len(set(keys)) == len(keys)
     text = exports_text()
     for fmt in EXPORTS:
         assert fmt.command in text and f"File ▸ Export ▸ {fmt.title}" in text

@@ -33,3 +33,23 @@ def test_the_export_menu_lists_the_table_and_writes_productions(qtbot, window, t
     monkeypatch.setattr(QFileDialog, "getSaveFileName", lambda *a, **k: (str(grid), ""))
     window.export_actions["textgrid"].trigger()
     assert "productions" in grid.read_text()
+
+
+def test_the_ema_for_praat_item_writes_the_wav_and_its_sidecar(qtbot, window, tmp_path, monkeypatch):
+    """Issue 35: File ▸ Export ▸ EMA for Praat writes what tonguevis export-wav writes."""
+    import json
+
+    from PySide6.QtWidgets import QFileDialog
+    from scipy.io import wavfile
+
+    from tests.gui.conftest import demo_session
+
+    session = demo_session()
+    window.state.set_session(session, "primary", window)
+    out = tmp_path / "ema.wav"
+    monkeypatch.setattr(QFileDialog, "getSaveFileName", lambda *a, **k: (str(out), ""))
+    window.export_actions["wav"].trigger()
+    rate, data = wavfile.read(out)
+    names = [c["name"] for c in json.loads(out.with_suffix(".json").read_text())["channels"]]
+    assert rate == 16000 and data.shape[1] == len(names) == 1 + 3 * len(session.recording.sensor_names)
+    assert window.state.status == f"saved {out}"

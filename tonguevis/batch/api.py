@@ -168,7 +168,8 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
                _counts(len(result.done), len(failed), len(result.up_to_date), total, lost[0]))
 
     report(progress, len(result.up_to_date), total, _counts(0, 0, len(result.up_to_date), total))
-    result.timings["prepare"] = _prepare(built, settings) if tasks else 0.0
+    simulating = any(step != "measures" for task in tasks for step in task.todo)  # the measures need no modes
+    result.timings["prepare"] = _prepare(built, settings) if simulating else 0.0
     t0 = time.perf_counter()
     if tasks:
         from tonguevis.batch import runners, tasks as task_module
@@ -189,6 +190,8 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
     result.timings["run"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     result.tables = store.gather(out_abs, folders, keys, settings.steps, settings.csv)
+    if "measures" in settings.steps:
+        result.tables.update(store.gather_repetitions(out_abs, settings.group_by, settings.csv))
     result.timings["gather"] = time.perf_counter() - t0
     result.failures = [(name, *failed[name]) for name in names if name in failed]
     store.write_failures(out_abs, result.failures)

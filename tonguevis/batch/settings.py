@@ -22,8 +22,8 @@ from typing import Any, Iterable
 from tonguevis.errors import TonguevisError
 from tonguevis.sim.settings import RunSettings, build_model
 
-#: The steps, in the order they run for a recording.
-STEPS = ("simulate", "energy", "segment", "validate")
+#: The steps, in the order they run for a recording ("measures" needs no simulation: the sensors and a palate).
+STEPS = ("simulate", "energy", "segment", "validate", "measures")
 #: What ``tonguevis batch`` runs unless told otherwise (validation is slow: asked for).
 DEFAULT_STEPS = ("simulate", "energy", "segment")
 
@@ -63,6 +63,10 @@ class BatchSettings(RunSettings):
     segment_first : segment only the first N productions of each recording (None: all).
     quasi_static : the quasi-static baseline of the validation (``tonguevis validate --no-static``).
     csv : write CSV beside every Parquet table.
+    measures_palate : the palate of the measures step ("generic": the shipped one placed in each speaker;
+        a palate file from ``tonguevis palate``; None: no constriction), as ``tonguevis measures --palate``.
+    group_by : the labels (speaker, syllable, trial, recording, train, index) whose productions the repetitions' STI
+        and averages pool (``DIR/repetitions.parquet``, ``DIR/averages.parquet``), as ``tonguevis energy --group-by``.
     """
 
     steps: tuple[str, ...] = DEFAULT_STEPS
@@ -74,6 +78,8 @@ class BatchSettings(RunSettings):
     segment_first: int | None = None
     quasi_static: bool = True
     csv: bool = False
+    measures_palate: Any = "generic"
+    group_by: tuple[str, ...] = ("speaker", "syllable")
 
     def __post_init__(self) -> None:
         if int(self.modes) < 1:
@@ -87,6 +93,13 @@ class BatchSettings(RunSettings):
             raise BatchError(f"window must be 'release' or 'vowel', got {self.window!r}")
         if self.segment_first is not None and int(self.segment_first) < 1:
             raise BatchError(f"segment_first must be at least 1, got {self.segment_first}")
+        by = tuple(k.strip() for k in (self.group_by.split(",") if isinstance(self.group_by, str) else self.group_by)
+                   if k.strip())
+        from tonguevis.analysis.energy import GROUP_KEYS  # the same labels as tonguevis energy --group-by
+
+        if not by or any(k not in GROUP_KEYS for k in by):
+            raise BatchError(f"group_by {','.join(by) or '(none)'}: choose from {', '.join(GROUP_KEYS)}")
+        object.__setattr__(self, "group_by", by)
 
     def run_settings(self) -> RunSettings:
         """How each recording is simulated, as a plain :class:`RunSettings`."""
@@ -104,6 +117,8 @@ class BatchSettings(RunSettings):
         if step == "segment":
             return {**sim, "keep": self.keep, "tier": self.tier, "segment_first": self.segment_first,
                     "mode": "constraint", "seeds": "auto", "threshold": 0.05, "adjust": False}
+        if step == "measures":
+            return {"keep": self.keep, "tier": self.tier, "palate": _palate_identity(self.measures_palate)}
         if step == "validate":
             return {**sim, "quasi_static": self.quasi_static}
         raise BatchError(f"unknown step {step!r}")
@@ -111,6 +126,8 @@ class BatchSettings(RunSettings):
     def as_dict(self) -> dict:
         out = asdict(self)
         out["sensor_map"] = _sensor_map_text(self.sensor_map)
+        out["measures_palate"] = None if self.measures_palate is None else os.fspath(self.measures_palate) \
+            if not hasattr(self.measures_palate, "metadata") else "given in Python"
         for name in ("mesh", "mesh_axes"):  # the model is the ModelSpec's
             out.pop(name, None)
         out["palate"] = None if self.palate is None else (self.palate if isinstance(self.palate, str)
@@ -118,6 +135,19 @@ class BatchSettings(RunSettings):
         if out.get("rest") is not None and hasattr(self.rest, "as_dict"):
             out["rest"] = self.rest.as_dict()
         return out
+
+
+def _palate_identity(palate) -> Any:
+    """What the measures depend on of a palate: "generic"/None as they are, a file by its grid's bytes."""
+    if palate is None or str(palate) in ("generic", "none"):
+        return None if palate is None else str(palate)
+    from tonguevis.palate import grid_path
+
+    h = hashlib.sha256()
+    for path in (Path(palate), grid_path(palate)):
+        if path.is_file():
+            _hash_file(h, path)
+    return {"file": os.fspath(palate), "sha256": h.hexdigest()}
 
 
 def _sensor_map_text(sensors) -> Any:

@@ -7,7 +7,9 @@ Layout of ``DIR``::
         motion.npz          (simulate) the motion, Motion.save
         simulation.parquet  energy.parquet  productions.parquet  segmentation.parquet (+ segmentation.npz: labels)
         validation.parquet (+ validation.json, as tonguevis validate --json)      [+ .csv of each with --csv]
+        measures.parquet  trajectories.parquet (measures: tonguevis measures, no simulation)
     simulation.parquet  energy.parquet  productions.parquet  segmentation.parquet  validation.parquet  [+ .csv]
+    measures.parquet  trajectories.parquet  repetitions.parquet  averages.parquet (STI and means per group)
     failures.csv        file, step, error (step "lost": its SLURM job ended while it ran; a rerun does it)
     batch.json          the settings, the model's key, the counts of the last run (with --slurm: its jobs)
     slurm/              with --slurm: the jobs' logs (tonguevis-batch-JOBID.out/.err)
@@ -131,6 +133,23 @@ def gather(out: Path, folders: list[Path], keys: list[dict], steps: Iterable[str
             if csv:
                 _concat_csv([p.with_suffix(".csv") for p in parts], out / f"{name}.csv", tables.columns(name))
                 written[f"{name}.csv"] = out / f"{name}.csv"
+    return written
+
+
+def gather_repetitions(out: Path, by, csv: bool) -> dict[str, Path]:
+    """``repetitions`` and ``averages`` of the corpus, pooled by the labels ``by``, from its gathered
+    ``trajectories.parquet`` (none when there is none)."""
+    import pyarrow.parquet as pq
+
+    from tonguevis.batch import tables
+
+    source = out / "trajectories.parquet"
+    if not source.is_file():
+        return {}
+    written = {}
+    for name, table in zip(("repetitions", "averages"), tables.repetition_tables(pq.read_table(source), by)):
+        for path in tables.write(table, out / f"{name}.parquet", csv):
+            written[path.name if path.suffix == ".csv" else name] = path
     return written
 
 

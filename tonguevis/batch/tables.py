@@ -12,6 +12,12 @@ Per recording and gathered for the corpus (``DIR/<table>.parquet``):
 * ``simulation``: one row per recording: rest, alignment, plausibility figures.
 * ``segmentation``: one row per partition of each segmented production.
 * ``validation``: one row per held-out sensor: RMSE (mm) and correlation per method.
+* ``measures``: one row per production: the columns of ``tonguevis measures --out``.
+* ``trajectories``: one row per production, sensor and percent of its normalised time: the vertical
+  position (mm) and its z-score, the records the STI is computed from.
+
+Gathered for the corpus only, from ``trajectories``: ``repetitions`` (the STI of each group of
+``group_by`` and sensor, with the count) and ``averages`` (each group's mean ± SD trajectories).
 
 Every table but ``energy`` has ``file`` (the recording's path relative to the
 corpus folder) besides ``recording`` (its stem, as ``tonguevis energy`` names it).
@@ -26,13 +32,17 @@ from typing import Any
 import numpy as np
 
 from tonguevis.analysis.energy import CSV_COLUMNS
+from tonguevis.analysis.measures import COLUMNS as MEASURE_COLUMNS
+from tonguevis.analysis.repetitions import AVERAGE_COLUMNS
 from tonguevis.preprocess.gesture_table import COLUMNS as GESTURE_COLUMNS
 from tonguevis.preprocess.gesture_table import gesture_rows
 
-TABLES = ("simulation", "energy", "productions", "segmentation", "validation")
+TABLES = ("simulation", "energy", "productions", "segmentation", "validation", "measures", "trajectories",
+          "repetitions", "averages")
 #: The table(s) each step writes.
 STEP_TABLES = {"simulate": ("simulation",), "energy": ("energy", "productions"), "segment": ("segmentation",),
-               "validate": ("validation",)}
+               "validate": ("validation",), "measures": ("measures", "trajectories")}
+_ARROW_KINDS = {"str": "string", "int": "int64", "float": "float64", "bool": "bool_"}
 VALIDATION_METHODS = ("model", "linear", "static", "kinematic")
 
 _LABELS = [("recording", "string"), ("file", "string"), ("speaker", "string"), ("syllable", "string"),
@@ -69,6 +79,14 @@ _COLUMNS: dict[str, list[tuple[str, str]]] = {
         ("measured_peak_mm", "float64"), ("outside_drivers", "bool_")]
         + [(f"{m}_{what}", kind) for m in VALIDATION_METHODS
            for what, kind in (("rmse_mm", "float64"), ("corr", "float64"), ("unconverged_frames", "int64"))],
+    "measures": _LABELS + [(c, _ARROW_KINDS[k]) for c, k in MEASURE_COLUMNS.items()],
+    "trajectories": _LABELS + [
+        ("production", "string"), ("train", "int64"), ("index", "int64"), ("label", "string"), ("start_s", "float64"),
+        ("end_s", "float64"), ("sensor", "string"), ("time_percent", "float64"), ("z_mm", "float64"),
+        ("zscore", "float64")],
+    "repetitions": [("group", "string"), ("by", "string"), ("sensor", "string"), ("n", "int64"),
+                    ("recordings", "int64"), ("sti", "float64"), ("signal", "string")],
+    "averages": [("group", "string"), ("by", "string")] + [(c, _ARROW_KINDS[k]) for c, k in AVERAGE_COLUMNS.items()],
 }
 
 
@@ -216,3 +234,68 @@ def validation_rows(entry, file: str, document: dict) -> list[dict]:
                 row[f"{m}_{what}"] = s.get(f"{m}_{what}")
         rows.append(row)
     return rows
+
+
+def measures_rows(entry, file: str, rows: list[dict]) -> list[dict]:
+    """The rows of ``tonguevis measures`` with the recording's labels."""
+    return [{**row, **_labels(entry, file)} for row in rows]
+
+
+def trajectories_table(entry, file: str, table, repetitions):
+    """The trajectories table of one recording: its productions' time-normalised records, per sensor."""
+    import pyarrow as pa
+
+    from tonguevis.analysis.repetitions import PERCENT
+
+    k, names = len(PERCENT), repetitions.sensors
+    count = len(table.productions) * len(names) * k
+    productions = [p for p in table.productions for _ in names for _ in range(k)]
+    data = {**{key: [value] * count for key, value in _labels(entry, file).items()},
+            "production": [f"{p.train}.{p.index}" for p in productions], "train": [p.train for p in productions],
+            "index": [p.index for p in productions], "label": [p.label for p in productions],
+            "start_s": [p.start for p in productions], "end_s": [p.end for p in productions],
+            "sensor": [name for _ in table.productions for name in names for _ in range(k)],
+            "time_percent": np.tile(PERCENT, len(table.productions) * len(names)),
+            "z_mm": np.stack([repetitions.records_mm[n] for n in names], axis=1).ravel() if names else [],
+            "zscore": np.stack([repetitions.zscores[n] for n in names], axis=1).ravel() if names else []}
+    s = schema("trajectories")
+    return pa.Table.from_pydict({c: pa.array(data[c], type=s.field(c).type) for c in columns("trajectories")}, schema=s)
+
+
+def repetition_tables(trajectories, by) -> tuple:
+    """(repetitions, averages) Arrow tables of a gathered trajectories table, pooled by the labels ``by``.
+
+    Per group and sensor, the stored z-scored records of every production in the group give its STI
+    (:func:`tonguevis.analysis.repetitions.sti_of`: the same figure as ``tonguevis measures`` on the one
+    recording of a group of one), and the mm records its mean ± SD trajectories.
+    """
+    from tonguevis.analysis.repetitions import PERCENT, SIGNAL, Repetitions
+
+    k = len(PERCENT)
+    data = {c: trajectories.column(c).to_pylist() for c in ("file", "production", "sensor", "label", *by)}
+    z_mm = np.asarray(trajectories.column("z_mm").to_numpy(zero_copy_only=False), dtype=np.float64)
+    zscore = np.asarray(trajectories.column("zscore").to_numpy(zero_copy_only=False), dtype=np.float64)
+    starts = np.asarray(trajectories.column("start_s").to_numpy(zero_copy_only=False), dtype=np.float64)
+    ends = np.asarray(trajectories.column("end_s").to_numpy(zero_copy_only=False), dtype=np.float64)
+    # Rows come in blocks of k (one record of one production and sensor), in the order each recording wrote them.
+    groups: dict[tuple, dict] = {}
+    for first in range(0, len(z_mm), k):
+        key = tuple("" if data[b][first] is None else str(data[b][first]) for b in by)
+        sensor = data["sensor"][first]
+        members = groups.setdefault(key, {}).setdefault(sensor, {"mm": [], "z": [], "files": set(), "spans": [],
+                                                                  "labels": []})
+        members["mm"].append(z_mm[first:first + k])
+        members["z"].append(zscore[first:first + k])
+        members["files"].add(data["file"][first])
+        members["spans"].append((starts[first], ends[first]))
+        members["labels"].append(data["label"][first])
+    repetition_rows, average_rows = [], []
+    for key, sensors in groups.items():
+        group = " ".join(key) or "all"
+        for sensor, m in sensors.items():
+            reps = Repetitions(np.array(m["spans"]), m["labels"], {sensor: np.array(m["mm"])},
+                               {sensor: np.array(m["z"])})
+            repetition_rows.append({"group": group, "by": ",".join(by), "sensor": sensor, "n": reps.n,
+                                    "recordings": len(m["files"]), "sti": reps.sti[sensor], "signal": SIGNAL})
+            average_rows += [{"group": group, "by": ",".join(by), **row} for row in reps.average_rows()]
+    return to_arrow("repetitions", repetition_rows), to_arrow("averages", average_rows)

@@ -6,8 +6,9 @@ Every step goes through the same functions as the single-file commands:
 :func:`~tonguevis.workflows.corpus.entry_curves` (``tonguevis energy``),
 :func:`~tonguevis.analysis.segmentation.production_target` and
 :func:`~tonguevis.analysis.segmentation.segment` with the §5 defaults
-(``tonguevis segment --production K``), and
-:func:`~tonguevis.analysis.validation.validate` (``tonguevis validate``).
+(``tonguevis segment --production K``),
+:func:`~tonguevis.analysis.validation.validate` (``tonguevis validate``) and
+:func:`~tonguevis.workflows.measures.measure_recording` (``tonguevis measures``).
 A failing step is recorded in the recording's manifest with its message; the
 worker then moves on to the next recording.
 """
@@ -245,4 +246,18 @@ def _validate(task, entry, rec, model, motion, seconds):
     return ["validation.json"] + [p.name for p in written]
 
 
-_STEPS = {"simulate": _simulate, "energy": _energy, "segment": _segment, "validate": _validate}
+def _measures(task, entry, rec, model, motion, seconds):
+    """``tonguevis measures`` of the recording (no simulation): its table and its productions' records."""
+    from tonguevis.workflows.measures import measure_recording
+
+    s = task.settings
+    result = measure_recording(rec, s.measures_palate, tier=s.tier, keep=s.keep)
+    rows = tables.measures_rows(entry, task.file, result.rows)
+    written = tables.write(tables.to_arrow("measures", rows), task.folder / "measures.parquet", s.csv)
+    written += tables.write(tables.trajectories_table(entry, task.file, result.table, result.repetitions),
+                            task.folder / "trajectories.parquet", s.csv)
+    return [p.name for p in written]
+
+
+_STEPS = {"simulate": _simulate, "energy": _energy, "segment": _segment, "validate": _validate,
+          "measures": _measures}

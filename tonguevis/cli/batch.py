@@ -63,6 +63,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--window", choices=("release", "vowel"), default="release",
                         help="energy curve span, as tonguevis energy --window (default: release)")
     add_productions_from_argument(parser)
+    parser.add_argument("--measures-palate", metavar="P",
+                        help="the palate of the measures step (as tonguevis measures --palate: a palate file, "
+                             "'generic' or 'none'); default: --palate's file when given, else 'generic'")
+    parser.add_argument("--group-by", default="speaker,syllable",
+                        help="the labels the measures step pools repetitions by for the STI and the averages, from "
+                             "speaker,syllable,trial,recording,train,index (default: speaker,syllable)")
     parser.add_argument("--segment-first", type=int, metavar="N",
                         help="segment only the first N productions of each recording (default: every one; "
                              "segmentation takes several seconds per production)")
@@ -76,6 +82,17 @@ def load_model(args):
     """The tongue model given in Python (None: the settings' ``--mesh``, read by each worker, else the shipped
     tongue).  A hook the tests replace."""
     return None
+
+
+def measures_palate(args: argparse.Namespace):
+    """The measures step's palate: ``--measures-palate`` (None for 'none'), else ``--palate``'s file, else "generic"."""
+    import os
+
+    chosen = args.measures_palate
+    if chosen is None:
+        given = getattr(args, "palate", None)
+        return "generic" if given in (None, "generic") else os.path.abspath(given)
+    return None if chosen == "none" else chosen if chosen == "generic" else os.path.abspath(chosen)
 
 
 SLURM_OPTIONS = ("jobs", "cores", "memory", "walltime", "queue", "account")
@@ -119,7 +136,8 @@ def run(args: argparse.Namespace) -> int:
         **{name: getattr(run_settings, name) for name in run_settings.names()},
         steps=args.steps, sensor_map=args.sensors,
         read_options=parse_options(args.option), keep=None if args.all else (2, 3, 4), window=args.window,
-        tier=args.productions_from, segment_first=args.segment_first, quasi_static=not args.no_static, csv=args.csv)
+        tier=args.productions_from, segment_first=args.segment_first, quasi_static=not args.no_static, csv=args.csv,
+        measures_palate=measures_palate(args), group_by=args.group_by)
     model = load_model(args)
     slurm = slurm_options(args)
     client = None

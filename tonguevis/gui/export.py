@@ -180,15 +180,17 @@ def ask_paraview(window):
 
 def ask_productions(window, key: str):
     """File ▸ Export ▸ Productions (CSV) or (TextGrid): the primary recording's productions as they are
-    now (corrected ones included) into a file the user names.  Returns the path written, or None."""
+    now (corrected ones included) into a file the user names; EMA for Praat (``wav``): its sound and
+    sensors.  Returns the path written, or None."""
     from tonguevis.workflows.exports import export_format, write_export
 
     fmt = export_format(key)
     session = window.session
-    if session is None or getattr(session, "production_table", None) is None:
-        window.show_error("Nothing to export", "open a recording with productions first")
+    if session is None or (key != "wav" and getattr(session, "production_table", None) is None):
+        window.show_error("Nothing to export", "open a recording with productions first" if session is not None
+                          else "open a recording first")
         return None
-    default = f"{Path(session.name).stem}_productions{fmt.suffix}"
+    default = f"{Path(session.name).stem}{'_ema' if key == 'wav' else '_productions'}{fmt.suffix}"
     path, _ = QFileDialog.getSaveFileName(window, f"Save the {fmt.title}", default, f"{fmt.title} (*{fmt.suffix})")
     if not path:
         return None

@@ -163,7 +163,8 @@ class MenusMixin:
         handlers = {"png": self.ask_export_screenshot, "mp4": self.ask_export_video,
                     "xdmf": self.ask_export_paraview, "vtk": self.ask_export_vtk,
                     "csv": lambda: self.ask_export_productions("csv"),
-                    "textgrid": lambda: self.ask_export_productions("textgrid")}
+                    "textgrid": lambda: self.ask_export_productions("textgrid"),
+                    "wav": lambda: self.ask_export_productions("wav")}
         self.export_actions = {}
         for fmt in EXPORTS:
             action = self._action(menu, f"{fmt.title}…", handlers[fmt.key])

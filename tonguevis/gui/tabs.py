@@ -1,4 +1,4 @@
-"""The feature tabs (Energy, Morph, Segmentation) and how they join the main window.
+"""The feature tabs (Energy, Morph, Segmentation, Measures) and how they join the main window.
 
 Each feature tab is added here (:func:`add_feature_tabs`).  The tabs talk only to the app model (``window.state``), never to
 each other nor to the window:
@@ -7,7 +7,8 @@ each other nor to the window:
   added) and writes ``add_motions`` (the motions its curves come from) and
   ``set_morph_end`` (a picked frame sent to the morph);
 - Morph hears ``motions`` (the recordings its ends can come from) and ``morph_ends``;
-- Segmentation follows the primary session (``session`` and ``motion``) and the time.
+- Segmentation follows the primary session (``session`` and ``motion``) and the time;
+- Measures follows the primary session and its ``productions``, and writes the time (a double-clicked closure).
 """
 
 from __future__ import annotations
@@ -28,3 +29,6 @@ def add_feature_tabs(window) -> None:
     window.register_tab("Energy", EnergyTab(state))
     window.register_tab("Morph", MorphTab(state))
     window.register_tab("Segmentation", SegmentationTab(state))
+    from tonguevis.gui.measures_tab import MeasuresTab
+
+    window.register_tab("Measures", MeasuresTab(state))

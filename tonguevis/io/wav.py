@@ -5,7 +5,8 @@ width (8-bit unsigned, 16 to 64-bit signed, WAVE_FORMAT_EXTENSIBLE too) is
 divided by its container's full scale, IEEE float is taken as is; several
 channels are averaged.  A file cut short keeps the samples present, with a
 warning; one that cannot be read raises :class:`RecordingError` naming it.
-Writing is mono int16 PCM.
+Writing is mono int16 PCM (:func:`write_wav`), or any number of IEEE float32 channels
+(:func:`write_wav_channels`: the EMA beside the sound, as ``tonguevis export-wav`` writes it).
 """
 
 from __future__ import annotations
@@ -103,3 +104,19 @@ def write_wav(audio: Audio, path: str | os.PathLike) -> None:
     # Same full scale as the reader (32768) so a write-read round trip is exact to half a step.
     ints = np.clip(np.round(samples * 32768.0), -32768, 32767).astype("<i2")
     atomic_write(path, lambda tmp: wavfile.write(tmp, rate, ints))
+
+
+def write_wav_channels(channels: np.ndarray, rate: float, path: str | os.PathLike) -> None:
+    """Write (n, c) samples as a c-channel IEEE float32 WAV (values as they are, not clipped: Praat and
+    scipy read them back unchanged) through a temporary file."""
+    from scipy.io import wavfile
+
+    rate_hz = int(round(rate))
+    data = np.asarray(channels, dtype="<f4")
+    if rate_hz <= 0 or abs(rate_hz - rate) > 1e-6 * rate:
+        raise RecordingError(f"cannot write a WAV at {rate} Hz (a whole number of samples per second)", path)
+    if data.ndim != 2 or data.shape[1] < 1:
+        raise RecordingError(f"a multichannel WAV needs (samples, channels) data, got shape {data.shape}", path)
+    if not np.isfinite(data).all():
+        raise RecordingError("a WAV cannot hold NaN or infinite samples (fill the gaps first)", path)
+    atomic_write(path, lambda tmp: wavfile.write(tmp, rate_hz, data))

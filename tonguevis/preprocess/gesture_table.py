@@ -50,42 +50,51 @@ def gesture_rows(table) -> list[dict]:
 
 def _text(value, kind: str) -> str:
     if kind == "str":
-        return str(value)
+        return "" if value is None else str(value)
     if kind == "int":
         return str(int(value))
+    if kind == "bool":
+        return "" if value is None else ("true" if value else "false")
     return "" if value is None or math.isnan(float(value)) else f"{float(value):.4f}"
 
 
-def to_arrow(rows: list[dict]):
-    """An Arrow table of :func:`gesture_rows` (NaN floats become nulls)."""
+def to_arrow(rows: list[dict], columns: dict[str, str] | None = None):
+    """An Arrow table of ``rows`` (dicts) with ``columns`` (name -> "str", "int", "float" or "bool";
+    default: :data:`COLUMNS`, the rows of :func:`gesture_rows`); NaN floats become nulls."""
     import pyarrow as pa
 
-    types = {"str": pa.string(), "int": pa.int64(), "float": pa.float64()}
+    columns = COLUMNS if columns is None else columns
+    types = {"str": pa.string(), "int": pa.int64(), "float": pa.float64(), "bool": pa.bool_()}
     data = {}
-    for column, kind in COLUMNS.items():
+    for column, kind in columns.items():
         values = [row.get(column) for row in rows]
         if kind == "float":
             values = [None if v is None or math.isnan(float(v)) else float(v) for v in values]
         data[column] = values
-    return pa.Table.from_pydict(data, schema=pa.schema([(c, types[k]) for c, k in COLUMNS.items()]))
+    return pa.Table.from_pydict(data, schema=pa.schema([(c, types[k]) for c, k in columns.items()]))
 
 
-def write_gestures(table, path: str | os.PathLike) -> Path:
-    """Write the gesture landmarks of ``table``: Parquet for ``.parquet``, else CSV; atomically."""
+def write_rows(rows: list[dict], columns: dict[str, str], path: str | os.PathLike) -> Path:
+    """Write ``rows`` with ``columns`` (as :func:`to_arrow`): Parquet for ``.parquet``, else CSV (NaN: an
+    empty cell, floats to 4 decimals); atomically."""
     from tonguevis._files import atomic_write, atomic_write_text
 
     path = Path(path)
-    rows = gesture_rows(table)
     if path.suffix.lower() == ".parquet":
         import pyarrow.parquet as pq
 
-        arrow = to_arrow(rows)
+        arrow = to_arrow(rows, columns)
         atomic_write(path, lambda tmp: pq.write_table(arrow, tmp))
         return path
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(COLUMNS)
+    writer.writerow(columns)
     for row in rows:
-        writer.writerow([_text(row[c], k) for c, k in COLUMNS.items()])
+        writer.writerow([_text(row.get(c), k) for c, k in columns.items()])
     atomic_write_text(path, buffer.getvalue())
     return path
+
+
+def write_gestures(table, path: str | os.PathLike) -> Path:
+    """Write the gesture landmarks of ``table``: Parquet for ``.parquet``, else CSV; atomically."""
+    return write_rows(gesture_rows(table), COLUMNS, path)

@@ -11,6 +11,8 @@ apart).  No Qt here.
   choose the rest, prepare the targets and simulate (the motion carries the placed palate).
 * :class:`Session`, :func:`load_session` (:mod:`.session`): what the app has open.
 * :func:`palate_from_traces` (:mod:`.palate`): the speaker's palate from trace recordings.
+* :func:`~tonguevis.workflows.measures.measure_recording` (:mod:`.measures`): the productions' measures
+  (constriction, kinematics) and the repetitions' STI; :mod:`.ema_wav`: the EMA as a WAV for Praat.
 """
 
 from __future__ import annotations

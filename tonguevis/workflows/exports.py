@@ -3,7 +3,7 @@
 Each :class:`ExportFormat` says what a file holds (units, frame of reference), which command
 writes it and where the app does; :func:`write_export` writes the formats that need only a
 simulated session (no window, no Qt): the MP4, the VTK series, the XDMF, the productions as
-CSV and as a TextGrid.  The PNG of the app is a picture of its window (the app writes it);
+CSV and as a TextGrid, the EMA as a multichannel WAV for Praat.  The PNG of the app is a picture of its window (the app writes it);
 ``tonguevis view --screenshot`` writes the same from the command line.
 """
 
@@ -58,6 +58,10 @@ EXPORTS: tuple[ExportFormat, ...] = (
                  "the productions as an interval tier and their landmarks as point tiers, with the recording's "
                  "own label tiers",
                  "tonguevis syllables FILE --textgrid OUT.TextGrid", needs_motion=False),
+    ExportFormat("wav", "EMA for Praat (multichannel WAV)", ".wav",
+                 "the sound and every sensor's x, y, z (mm, head-corrected) as float32 channels at the sound's rate "
+                 "(16 kHz without one); OUT.json beside it names each channel and its scale",
+                 "tonguevis export-wav FILE --out OUT.wav", needs_motion=False),
 )
 
 
@@ -107,6 +111,10 @@ def write_export(key: str, session, out: str | os.PathLike, progress: ProgressCa
         table = _production_table(session)
         table.to_csv(out)
         return Path(out)
+    if key == "wav":
+        from tonguevis.workflows.ema_wav import write_ema_wav
+
+        return write_ema_wav(session.recording, out)[0]
     if key == "textgrid":
         from tonguevis.preprocess.labelled import write_productions_textgrid
 
