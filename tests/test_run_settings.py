@@ -47,6 +47,7 @@ OPTIONS = [
     (["--model-frame"], {"frame": "model"}),
     (["--tongue-size", "1.3"], {"tongue_size": 1.3}),
     (["--tongue-size", "alignment"], {"tongue_size": None}),
+    (["--no-closures"], {"closures": False}),
 ]
 
 #: What the live view cannot do frame by frame: it refuses them, by name (tonguevis.live.simulator).

@@ -50,6 +50,12 @@ SEAM = 3e-3
 FEATHER = 10e-3
 #: Grid cells where a traced and the generic palate must both lie before they are joined.
 MIN_OVERLAP_CELLS = 20
+#: m: a grid cell's support is the count of trace points (as traced, not mirrored) within this distance of it
+SUPPORT_RADIUS = 2.5e-3
+#: Trace points within SUPPORT_RADIUS that make a cell traced: a probe drawn past it at a clinician's pace leaves
+#: 30-50 at 100 Hz (OSN12's midsagittal trace: 14 a mm); the scribble's few strokes behind the traced hard palate
+#: leave 0-18, too few to say where the soft palate is (it also lifts in speech).
+MIN_SUPPORT = 20
 
 
 class PalateError(TonguevisError):
@@ -78,6 +84,11 @@ class PalateSurface:
     ``translation`` (3,) map its frame into the frame queries are made in:
     p_query = scale · R p_own + t (identity by default).  ``metadata``: fit
     figures (``rms_m``, point counts, sources).
+    support : (ny, nx) the trace points within :data:`SUPPORT_RADIUS` of each cell (a fitted palate; None
+        for a mesh read as it is): where it is at least :data:`MIN_SUPPORT` the palate was traced.
+    traced : (ny, nx) bool, the cells traced (a speaker's palate placed for a simulation; None: unknown).
+    lift_shape : (ny, nx) how much of a velum lift each cell takes (0 in front of the soft palate, 1 on it;
+        None: a rigid palate): :meth:`clearance` and :meth:`lifted` add ``lift`` times it to the heights.
     """
 
     x: np.ndarray
@@ -87,6 +98,9 @@ class PalateSurface:
     scale: float = 1.0
     translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
     metadata: dict[str, Any] = field(default_factory=dict)
+    support: np.ndarray | None = None
+    traced: np.ndarray | None = None
+    lift_shape: np.ndarray | None = None
 
     # ---------------------------------------------------------------- frames
     def transformed(self, rotation: np.ndarray, scale: float, translation: np.ndarray) -> "PalateSurface":
@@ -94,7 +108,20 @@ class PalateSurface:
         rot = np.asarray(rotation, dtype=np.float64)
         return PalateSurface(self.x, self.y, self.z, rot @ self.rotation, float(scale) * self.scale,
                              float(scale) * rot @ self.translation + np.asarray(translation, dtype=np.float64),
-                             dict(self.metadata))
+                             dict(self.metadata), self.support, self.traced, self.lift_shape)
+
+    def with_grid(self, z: np.ndarray, **fields) -> "PalateSurface":
+        """The same palate (grid, placement) with heights ``z`` (ny, nx) and ``fields`` (``traced=``,
+        ``lift_shape=``, ``metadata=``...) replaced."""
+        import dataclasses
+
+        return dataclasses.replace(self, z=np.asarray(z, dtype=np.float64), **fields)
+
+    def lifted(self, lift: float) -> "PalateSurface":
+        """The palate with its velum lifted by ``lift`` m (times :attr:`lift_shape`); itself when nothing lifts."""
+        if self.lift_shape is None or not lift:
+            return self
+        return self.with_grid(self.z + float(lift) * self.lift_shape / self.scale)
 
     def _to_own(self, points: np.ndarray) -> np.ndarray:
         return ((np.asarray(points, dtype=np.float64) - self.translation) @ self.rotation) / self.scale
@@ -103,9 +130,10 @@ class PalateSurface:
         return self.scale * np.asarray(points) @ self.rotation.T + self.translation
 
     # ---------------------------------------------------------------- queries
-    def _interp(self, xy: np.ndarray):
-        """Height (k,) and slopes (k, 2) of the own-frame (k, 2) points (bilinear; NaN outside)."""
-        x, y, z = self.x, self.y, self.z
+    def _interp(self, xy: np.ndarray, grid: np.ndarray | None = None):
+        """Height (k,) and slopes (k, 2) of the own-frame (k, 2) points (bilinear; NaN outside) of ``grid``
+        (default: the heights ``z``; the same interpolation for any field on the grid)."""
+        x, y, z = self.x, self.y, (self.z if grid is None else grid)
         fx = (xy[:, 0] - x[0]) / (x[1] - x[0])
         fy = (xy[:, 1] - y[0]) / (y[1] - y[0])
         inside = (fx >= 0) & (fx <= len(x) - 1) & (fy >= 0) & (fy <= len(y) - 1)
@@ -120,16 +148,23 @@ class PalateSurface:
         h = np.where(inside, h, np.nan)
         return h, np.column_stack([dx, dy])
 
-    def clearance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def clearance(self, points: np.ndarray, lift=None) -> tuple[np.ndarray, np.ndarray]:
         """Signed distance (k,) below the palate, m (negative: inside it), and outward normals (k, 3).
 
         points : (k, 3) in the query frame.  The distance is the vertical gap
         times the cosine of the palate's slope there (exact for a plane); NaN
         where the point lies outside the palate's footprint.  Normals point
         down, away from the palate into the mouth, in the query frame.
+        lift : the velum's lift, m in the query frame (a number, or (k,) one per point: each point's frame's);
+        None or 0: the palate at rest.
         """
         own = self._to_own(points)
         h, grad = self._interp(own[:, :2])
+        if lift is not None and self.lift_shape is not None:
+            g, g_grad = self._interp(own[:, :2], self.lift_shape)
+            amount = np.asarray(lift, dtype=np.float64) / self.scale
+            h = h + amount * g
+            grad = grad + np.asarray(amount)[..., None] * g_grad
         normal_own = np.column_stack([grad, -np.ones(len(own))])
         norm = np.linalg.norm(normal_own, axis=1)
         gap = (h - own[:, 2]) / norm * self.scale
@@ -163,9 +198,11 @@ class PalateSurface:
         pts, tris = self.triangles()
         atomic_write(path, lambda tmp: meshio.write(tmp, meshio.Mesh(pts, [("triangle", tris)])))
         meta = json.dumps(self.metadata, default=float)
+        extra = {name: np.asarray(getattr(self, name)) for name in ("support", "traced", "lift_shape")
+                 if getattr(self, name) is not None}
         atomic_write(grid_path(path), lambda tmp: np.savez_compressed(
             tmp, x=self.x, y=self.y, z=self.z, rotation=self.rotation, scale=self.scale,
-            translation=self.translation, meta=np.array(meta)))
+            translation=self.translation, meta=np.array(meta), **extra))
 
     @classmethod
     def load(cls, path) -> "PalateSurface":
@@ -177,8 +214,9 @@ class PalateSurface:
 
             try:
                 with np.load(grid, allow_pickle=False) as d:
+                    extra = {name: np.array(d[name]) for name in ("support", "traced", "lift_shape") if name in d}
                     surface = cls(d["x"], d["y"], d["z"], d["rotation"], float(d["scale"]), d["translation"],
-                                  json.loads(str(d["meta"])))
+                                  json.loads(str(d["meta"])), **extra)
             except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
                 raise PalateError(f"cannot read the palate grid: {exc}", grid) from exc
             return _checked(surface, grid)
@@ -388,9 +426,11 @@ def _fit_palate(points: np.ndarray, midline_y: float | None, smoothing: float, s
 
     near = cKDTree(kept[:, :2]).query(grid, distance_upper_bound=FOOTPRINT_MARGIN)[0] <= FOOTPRINT_MARGIN
     z = np.where(near, z, np.nan).reshape(len(y), len(x))
+    # where the probe went (not its mirror image: the mirrored side is the fit's estimate)
+    support = cKDTree(pts[keep, :2]).query_ball_point(grid, SUPPORT_RADIUS, return_length=True).reshape(len(y), len(x))
     surface = PalateSurface(x, y, z, metadata={"points": int(len(pts)), "kept": int(keep.sum()),
                                                "midline_y": y0, "smoothing": smoothing,
-                                               "source": list(sources or [])})
+                                               "source": list(sources or [])}, support=support.astype(np.int32))
     gap, _ = surface.clearance(pts[keep])
     surface.metadata["rms_m"] = float(np.sqrt(np.nanmean(gap ** 2)))
     return surface

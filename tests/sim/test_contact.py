@@ -207,6 +207,7 @@ def test_simulate_keeps_the_demo_tongue_below_the_generic_palate(capsys):
     assert before.max() > 1e-3
     held = simulate(rec, model, sensor_stiffness=None, palate="generic")
     assert held.penetration.max() < 5e-4 and held.metadata["contact"]["frames_in_contact"] > 10
+    assert held.metadata["contact"]["closures"]["closures"] > 10  # the tip pressed on it at the closures, still out
     assert held.contact_area.max() > 0 and np.all(held.contact_area[held.penetration > 0] >= 0)
     assert held.metadata["plausibility"]["volume_change_max_percent"] < 2.0
     assert main(["simulate", str(DATA_DIR / "spk1_ta.tsv"), "--palate", "generic", "--sensor-stiffness", "hard",
@@ -243,9 +244,10 @@ def test_a_sensor_above_the_palate_is_counted_as_penetration():
     assert motion.palate is not None  # the placed palate comes with the motion: no second preparation
 
 
-def test_a_raised_palate_is_reported_once_with_its_reason(caplog, tmp_path):
-    """A speaker's palate 8 mm too low: simulate() raises it and says so once; the views then draw
-    the surface it placed (no second preparation, no second warning), and the summary says why."""
+def test_a_palate_too_low_is_raised_where_the_sensors_go_and_said_once(caplog, tmp_path):
+    """A speaker's palate 8 mm too low: simulate() raises it where the sensors went above it (the speech wins
+    over the trace there) and says so once, in one line; the views then draw the surface it placed (no second
+    preparation, nothing said again), and the summary says how far and where."""
     import logging
 
     from tonguevis.workflows.simulation import shown_palate
@@ -258,19 +260,27 @@ def test_a_raised_palate_is_reported_once_with_its_reason(caplog, tmp_path):
     rec = read_recording(DATA_DIR / "spk1_ta.tsv", sensor_map=DATA_DIR / "sensor_map.json")
     tip = rec.sensors["TT"]
     centre = np.nanmean(tip, axis=0)
-    xs, ys = np.meshgrid(np.linspace(-0.03, 0.03, 25), np.linspace(-0.02, 0.02, 17))
+    xs, ys = np.meshgrid(np.linspace(-0.03, 0.03, 121), np.linspace(-0.02, 0.02, 81))  # traced densely
     roof = np.column_stack([xs.ravel() + centre[0], ys.ravel() + centre[1], np.full(xs.size, np.nanmax(tip[:, 2]))])
     palate = fit_palate(roof - [0.0, 0.0, 0.008])
     path = tmp_path / "low.stl"
     palate.save(path)
     model = TongueModel.default()
-    with caplog.at_level(logging.WARNING, logger="tonguevis"):
+    with caplog.at_level(logging.INFO, logger="tonguevis"):
         motion = simulate(rec, model, modes=40, palate=path)
         shown = shown_palate(rec, motion, model, path)
-    raised = [r for r in caplog.records if "the palate lies" in r.getMessage()]
-    assert len(raised) == 1
-    assert shown.surface is motion.palate and shown.raised_mm > 3  # model millimetres (the alignment scales)
-    assert "palate raised" in contact_line(motion.metadata) and "another sitting" in contact_line(motion.metadata)
+    said = [r for r in caplog.records if r.getMessage().startswith("palate: traced part kept")]
+    assert len(said) == 1 and "raised where the sensors went above it: up to" in said[0].getMessage()
+    info = motion.metadata["contact"]["palate"]["speaker_palate"]
+    assert 7.0 < info["traced_raised_mm"] < 9.5  # 8 mm and the coil's half, where the tip went highest
+    assert shown.surface is motion.palate and shown.raised_mm == pytest.approx(info["traced_raised_mm"])
+    line = contact_line(motion.metadata)
+    assert f"raised up to {info['traced_raised_mm']:.1f} mm" in line and "where the sensors went above it" in line
+    # the palate is under no sensor: each sensor's node, where measured, is below the surface simulated against
+    lift = np.zeros(motion.n_frames) if motion.velum_lift is None else motion.velum_lift
+    sensors = motion.targets + motion.jaw_offset[:, None]
+    gap = motion.palate.clearance(sensors.reshape(-1, 3), lift=np.repeat(lift, sensors.shape[1]))[0]
+    assert np.nanmin(gap) > -0.5e-3
 
 
 def test_a_fitted_palate_has_no_fold_and_says_its_bound():

@@ -123,7 +123,7 @@ def test_a_palate_the_tongue_never_reaches_costs_no_solve(demo):
     either stage (the fast path's empty cases), nothing in contact."""
     from tonguevis.sim import simulate
 
-    held = simulate(demo[0], modes=40, palate="generic")
+    held = simulate(demo[0], modes=40, palate="generic", closures=False)  # the closures would press the tip on it
     c = held.metadata["contact"]
     assert c["frames_with_contact_forces"] == 0 and c["frames_corrected_after_the_dynamics"] == 0
     assert held.penetration.max() == 0 and held.contact_area.max() == 0

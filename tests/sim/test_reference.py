@@ -53,7 +53,7 @@ def test_the_views_palate_is_the_one_simulate_used(model, monkeypatch):  # noqa:
     from tonguevis.palate import PalateSurface
     from tonguevis.workflows import rest_of
 
-    module = importlib.import_module("tonguevis.sim.simulate")
+    module = importlib.import_module("tonguevis.sim.palate_placement")  # where the simulation places it
     rec = _recording(model, raise_m=0.004, jaw_m=0.003)
     tt = rec.sensors["TT"]
     x = np.arange(-0.2, 0.2, 0.002)
@@ -62,18 +62,19 @@ def test_the_views_palate_is_the_one_simulate_used(model, monkeypatch):  # noqa:
     original = module.place_palate
     monkeypatch.setattr(module, "place_palate", lambda *a, **k: used.append(original(*a, **k)) or used[-1])
     motion = simulate(rec, model, modes=20, landmarks="rule", palate=palate)
-    placed, raised = module.placed_palate(rec, palate, model, landmarks="rule", rest=rest_of(motion))
-    (surface, shift), _ = used
-    for name in ("rotation", "translation", "z"):
+    placed, lift, info = module.placed_palate(rec, palate, model, landmarks="rule", rest=rest_of(motion))
+    (surface, used_lift, used_info), _ = used
+    for name in ("rotation", "translation", "z", "lift_shape"):
         np.testing.assert_allclose(getattr(placed, name), getattr(surface, name), atol=1e-15)
-    assert placed.scale == surface.scale and raised == shift
-    assert motion.metadata["contact"]["palate_raised_mm"] == pytest.approx(1e3 * raised)
+    assert placed.scale == surface.scale and info == used_info
+    np.testing.assert_array_equal(lift, used_lift)
+    assert motion.metadata["contact"]["palate_raised_mm"] == pytest.approx(info["traced_raised_mm"])
     # A palate already in the model frame (the generic one) is used as is there, and placed with the model in
     # the speaker frame (the default).
     as_is = PalateSurface(x, x.copy(), palate.z, metadata={"frame": "model"})
-    same, none = module.placed_palate(rec, as_is, model, landmarks="rule", rest=rest_of(motion), frame="model")
-    assert same is as_is and none == 0.0
-    moved, none = module.placed_palate(rec, as_is, model, landmarks="rule", rest=rest_of(motion))
+    same, none, _ = module.placed_palate(rec, as_is, model, landmarks="rule", rest=rest_of(motion), frame="model")
+    assert same is as_is and none is None
+    moved, none, _ = module.placed_palate(rec, as_is, model, landmarks="rule", rest=rest_of(motion))
     placement = motion.model.placement
-    assert none == 0.0 and moved.scale == pytest.approx(placement.scale)
+    assert none is None and moved.scale == pytest.approx(placement.scale)
     np.testing.assert_allclose(moved.rotation, placement.rotation, atol=1e-12)

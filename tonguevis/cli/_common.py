@@ -163,6 +163,10 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, every: bool = False, m
                        help=f"the speaker's palate{which} (a file made by `tonguevis palate` from trace "
                             "recordings) or 'generic': the tongue is kept below it and the contact is reported; "
                             "default: no contact (the generic palate is drawn only)")
+    group.add_argument("--no-closures", dest="closures", action="store_false",
+                       help="with --palate: do not press the tongue tip and blade onto the palate at each stop "
+                            "closure found on the recording (by default a /t/ closure closes: the tip coil sits "
+                            "some 10 mm behind the tip that makes it)")
     group.add_argument("--model-frame", dest="model_frame", action="store_const", const="model",
                        default=defaults.frame,
                        help="simulate in the generic tongue's frame and millimetres, the speaker scaled onto it "
@@ -270,7 +274,7 @@ def run_settings_of(args, **changes):
         mesh=args.mesh, mesh_axes=args.mesh_axes, modes=args.modes, method=method, landmarks=args.landmarks,
         sensor_stiffness=args.sensor_stiffness, sensor_patches=args.sensor_patches, rest=rest_arg(args),
         palate=palate, frame=args.model_frame, tongue_size=args.tongue_size, keep_volume=args.keep_volume,
-        rest_fit=args.rest_fit).replace(**changes)
+        rest_fit=args.rest_fit, closures=args.closures).replace(**changes)
 
 
 def load_model_args(args):

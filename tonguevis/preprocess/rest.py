@@ -200,6 +200,39 @@ def choose_rest_interval(recording: Recording, sensors=None, given=None) -> Rest
     return RestChoice(interval, "stillest window", reason)
 
 
+def rest_candidates(recording: Recording, sensors=None, count: int = 6) -> list[RestChoice]:
+    """The rests :func:`choose_rest_interval` would take, best first, then the next stillest windows: the
+    longest still interval of at least 1 s when there is one, then up to ``count`` stillest windows of
+    :data:`STILLEST_WINDOW_S`, none overlapping another (for a caller that must reject some: a palate that
+    cuts through the tongue there, :func:`tonguevis.sim.simulate.simulate`)."""
+    names = _default_sensors(recording) if sensors is None else list(sensors)
+    out: list[RestChoice] = []
+    try:
+        out.append(RestChoice(find_rest_interval(recording, sensors=names), "detected"))
+    except RecordingError:
+        pass
+    stacked = np.stack([recording.sensors[n] for n in names], axis=1)  # (N, S, 3)
+    step = np.linalg.norm(np.diff(stacked, axis=0), axis=2).max(axis=1)
+    width = max(1, int(round(STILLEST_WINDOW_S * recording.rate)))
+    if len(step) < width:
+        return out
+    csum = np.concatenate([[0.0], np.cumsum(np.where(np.isfinite(step), step, 1e9))])
+    means = (csum[width:] - csum[:-width]) / width
+    taken = [choice.interval for choice in out]
+    reason = "the next stillest window" if out else "no still second in the recording"
+    windows = 0
+    for start in np.argsort(means, kind="stable"):
+        if windows >= count or means[start] >= 1e8:  # 1e9 marks a missing sample: not still
+            break
+        t0, t1 = float(recording.times[start]), float(recording.times[start + width])
+        if any(t0 < b + STILLEST_WINDOW_S and t1 > a - STILLEST_WINDOW_S for a, b in taken):  # apart from each
+            continue
+        taken.append((t0, t1))
+        out.append(RestChoice((t0, t1), "stillest window", reason))
+        windows += 1
+    return out
+
+
 def check_rest_interval(recording: Recording, interval, sensors=None) -> tuple[float, float]:
     """``interval`` as (start_s, end_s) floats if it can serve as a rest interval, else RecordingError.
 

@@ -57,6 +57,12 @@ class PreparedTargets:
         return self.rest.interval
 
 
+def driving_sensors(recording: Recording, model) -> list[str]:
+    """The tongue sensors that drive ``model`` in :func:`prepare_targets` (working, with a landmark on it)."""
+    present = [n for n in TONGUE_SENSORS if n in recording.sensors and recording.valid(n).any()]
+    return [n for n in present if n in model.landmarks.sensors]
+
+
 def prepare_targets(
     recording: Recording,
     model,

@@ -41,7 +41,9 @@ class ShownPalate:
     points : (k, 3) float32 and faces : (f, 3) int, the mesh drawn.
     label : what it is, for captions ("generic palate", "speaker's palate osn12.stl").
     simulated : whether the motion was simulated against it (contact kept).
-    raised_mm : how far the placement raised it to lie above the sensors.
+    raised_mm : how far the placement raised its traced part to lie above the sensors.
+    lift : (F,) m, the velum's lift per frame (None: a rigid palate); ``share`` (k,) how much of a lift
+        each drawn point takes (:meth:`points_at`).
     """
 
     surface: object
@@ -51,6 +53,22 @@ class ShownPalate:
     simulated: bool = False
     raised_mm: float = 0.0
     generic: bool = False
+    lift: np.ndarray | None = None
+    share: np.ndarray | None = None
+
+    def points_at(self, index: int) -> np.ndarray:
+        """(k, 3) float32: the drawn points at frame ``index`` (the velum lifted; ``points`` when rigid)."""
+        if self.lift is None or self.share is None:
+            return self.points
+        out = self.points.copy()
+        out[:, 2] += np.float32(self.lift[min(max(int(index), 0), len(self.lift) - 1)]) * self.share
+        return out
+
+    def surface_at(self, index: int):
+        """The surface at frame ``index`` (the velum lifted) for distances."""
+        if self.lift is None:
+            return self.surface
+        return self.surface.lifted(float(self.lift[min(max(int(index), 0), len(self.lift) - 1)]))
 
     def clearance_mm(self, points: np.ndarray) -> np.ndarray:
         """(k,) float32 distance (mm) of head-frame ``points`` (k, 3) below the palate; negative inside, NaN off it."""
@@ -96,16 +114,21 @@ def smooth_outline_triangles(surface, blur_cells: float = 2.5) -> tuple[np.ndarr
     return surface._from_own(np.asarray(cut.points)), faces
 
 
-def speaker_palate(surface, label: str, simulated: bool = True, raised_mm: float = 0.0) -> ShownPalate:
+def speaker_palate(surface, label: str, simulated: bool = True, raised_mm: float = 0.0, lift=None) -> ShownPalate:
     """A placed palate (model frame) drawn as its own height field, its outline smoothed
-    (:func:`smooth_outline_triangles`)."""
+    (:func:`smooth_outline_triangles`); ``lift`` (F,) m: its velum's lift per frame."""
     try:
         points, faces = smooth_outline_triangles(surface)
     except Exception as exc:  # drawing only: the cells' own triangles will do
         logger.info("palate drawn without a smoothed outline: %s", exc)
         points, faces = surface.triangles()
+    share = None
+    if lift is not None and getattr(surface, "lift_shape", None) is not None:
+        own = surface._to_own(np.asarray(points, dtype=np.float64))
+        share = np.nan_to_num(surface._interp(own[:, :2], surface.lift_shape)[0]).astype(np.float32) * surface.scale
     return ShownPalate(surface, np.asarray(points, dtype=np.float32), np.asarray(faces), label, simulated,
-                       float(raised_mm), bool(surface.metadata.get("generic", False)))
+                       float(raised_mm), bool(surface.metadata.get("generic", False)),
+                       None if share is None else np.asarray(lift, dtype=np.float64), share)
 
 
 def generic_shown(simulated: bool = False, model=None) -> ShownPalate | None:

@@ -10,7 +10,8 @@ as springs of compliance C (0 = hard),
 for the candidate surface nodes i (upward-facing, the ones that can meet the
 palate), clearance being the node's signed distance below the palate
 (:meth:`tonguevis.palate.PalateSurface.clearance`, with the palate carried by
-the jaw's motion into the jaw's frame the tongue is simulated in).  An active
+the jaw's motion into the jaw's frame the tongue is simulated in, its velum lifted
+frame by frame: every ``jaw_offset`` here is (F, 3), or (F, 4) with the lift, :func:`palate_offsets`).  An active
 set on the linearised clearances, in force form: q = Λ⁻¹(Φ_sᵀμ - Aᵀλ) with the
 sensor forces μ and contact forces λ >= 0, re-linearised after each pass.
 The contact forces -Aᵀλ are then applied as external modal forces in the
@@ -48,8 +49,37 @@ from tonguevis._backend import check_backend
 
 MARGIN = 1e-4  # m: clearance the solve keeps, so that warping's small rotations do not cross the palate
 CONFLICT_RADIUS = 10e-3  # m: nodes this close to a sensor above the palate are left to that sensor
+#: m: a sensor is above the palate (and wins) only by more than this: the NDI Wave's stated accuracy.  Closer,
+#: the contact keeps its neighbourhood below the palate and the sensor's spring gives (a misfit of less than it).
+CONFLICT_TOLERANCE = 0.5e-3
 MAX_PASSES = 8
 BAND = 2e-3  # m: candidates this close to the margin join each pass's linearisation
+
+
+def palate_offsets(jaw_offset: np.ndarray, lift: np.ndarray | None = None) -> np.ndarray:
+    """(F, 4) per frame: the jaw's translation (m, carrying the tongue into the palate's frame) and the velum's
+    lift (m; :mod:`tonguevis.sim.speaker_palate`), what every function here takes as ``jaw_offset``
+    ((F, 3) alone: a rigid palate)."""
+    jaw = np.asarray(jaw_offset, dtype=np.float64).reshape(-1, 3)
+    lift = np.zeros(len(jaw)) if lift is None else np.asarray(lift, dtype=np.float64).reshape(-1)
+    return np.column_stack([jaw, lift])
+
+
+def clearance_at(palate, points: np.ndarray, offset: np.ndarray):
+    """:meth:`~tonguevis.palate.PalateSurface.clearance` of the tongue's ``points`` (k, 3) in one frame whose
+    ``offset`` is (3,) or (4,), or (F, k, 3) in F frames with offsets (F, 3) or (F, 4) (:func:`palate_offsets`):
+    (gap, normal) shaped as the points' leading axes."""
+    points = np.asarray(points, dtype=np.float64)
+    offset = np.asarray(offset, dtype=np.float64)
+    shape = points.shape[:-1]
+    if offset.ndim == 1:
+        moved = points + offset[:3]
+        lift = offset[3] if len(offset) > 3 else None
+    else:
+        moved = points + offset[:, None, :3]
+        lift = np.repeat(offset[:, 3], points.shape[1]) if offset.shape[1] > 3 else None
+    gap, normal = palate.clearance(moved.reshape(-1, 3), lift=lift)
+    return gap.reshape(shape), normal.reshape(*shape, 3)
 
 
 def solve_contact(eigenvalues, phi_nodes, phi_s, targets, compliance, points, sensor_nodes, candidates, palate,
@@ -110,14 +140,11 @@ def _solve_contact(eigenvalues, phi_nodes, phi_s, targets, compliance, points, s
                            active_count, conflicts)
         return {"targets": out_targets, "external": external, "active": active_count, "conflicts": conflicts}
     u = np.einsum("kcm,fm->fkc", phi_nodes, q_all)
-    gap, _ = palate.clearance((cand_pts[None] + u + jaw_offset[:, None]).reshape(-1, 3))
-    gap = gap.reshape(n_frames, -1)
+    gap, _ = clearance_at(palate, cand_pts[None] + u, jaw_offset)
     # Sensors above the palate: their neighbourhoods are left to them.
-    sensor_gap, _ = palate.clearance((points[sensor_nodes][None] + np.nan_to_num(targets)
-                                      + jaw_offset[:, None]).reshape(-1, 3))
-    sensor_gap = sensor_gap.reshape(n_frames, n_s)
+    sensor_gap, _ = clearance_at(palate, points[sensor_nodes][None] + np.nan_to_num(targets), jaw_offset)
     for f in np.flatnonzero(np.nanmin(np.where(np.isfinite(gap), gap, np.inf), axis=1) < margin):
-        above = np.flatnonzero((sensor_gap[f] < 0) & np.all(np.isfinite(targets[f]), axis=1))
+        above = np.flatnonzero((sensor_gap[f] < -CONFLICT_TOLERANCE) & np.all(np.isfinite(targets[f]), axis=1))
         conflicts.extend((int(f), int(s)) for s in above)
         allowed = ~near_sensor[:, above].any(axis=1) if len(above) else np.ones(len(candidates), bool)
         q, lam_f, rows = _active_set(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset[f], c_all[f],
@@ -146,7 +173,7 @@ def _active_set(lam, P, gram, phi_nodes, cand_pts, palate, offset, c, comp, acti
     q, lam_a, rows = q0, None, None
     for _ in range(MAX_PASSES):
         u = np.einsum("kcm,m->kc", phi_nodes, q)
-        gap, normal = palate.clearance(cand_pts + u + offset)
+        gap, normal = clearance_at(palate, cand_pts + u, offset)
         ok = allowed & np.isfinite(gap)
         if not np.any(ok & (gap < margin - 1e-7)):
             break
@@ -156,7 +183,7 @@ def _active_set(lam, P, gram, phi_nodes, cand_pts, palate, offset, c, comp, acti
     # A contact push moves the surface about as far as it was inside the palate: a solve that moves it
     # much further has failed (near-singular rows), and the frame keeps its contact-free shape.
     u0 = np.einsum("kcm,m->kc", phi_nodes[allowed], q0)
-    depth = max(0.0, -float(np.nanmin(palate.clearance(cand_pts[allowed] + u0 + offset)[0])))
+    depth = max(0.0, -float(np.nanmin(clearance_at(palate, cand_pts[allowed] + u0, offset)[0])))
     moved = float(np.abs(np.einsum("kcm,m->kc", phi_nodes[allowed], q - q0)).max())
     if not np.isfinite(moved) or moved > 2 * depth + 2e-3:
         return q0, None, None
@@ -463,7 +490,7 @@ def _solve_frames_fast(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset, c_
     u = (q_all @ phi_flat.T).reshape(n_frames, k, 3)
     gap, _ = query(u, jaw_offset)
     sensor_gap, _ = clearances(palate, sensor_pts, np.nan_to_num(targets), jaw_offset)
-    above_all = (sensor_gap < 0) & np.all(np.isfinite(targets), axis=2)  # (F, S)
+    above_all = (sensor_gap < -CONFLICT_TOLERANCE) & np.all(np.isfinite(targets), axis=2)  # (F, S)
     low = np.flatnonzero(np.fmin.reduce(gap, axis=1, initial=np.inf) < margin)  # fmin: NaN (off the palate) ignored
     allowed = ~((above_all[low].astype(np.int64) @ near_sensor.T.astype(np.int64)) > 0)  # (len(low), k)
     at, sensor = np.nonzero(above_all[low])  # frame by frame, each frame's sensors in order: the reference's order
@@ -533,8 +560,7 @@ def correct_frames(eigenvalues, phi_nodes, phi_s, q, points, candidates, palate,
             return _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offset, allowed, margin,
                                         compliance)
     u = np.einsum("kcm,fm->fkc", phi_nodes, q)
-    gap, _ = palate.clearance((cand_pts[None] + u + jaw_offset[:, None]).reshape(-1, 3))
-    gap = gap.reshape(len(q), -1)
+    gap, _ = clearance_at(palate, cand_pts[None] + u, jaw_offset)
     if allowed is not None:
         gap = np.where(allowed, gap, np.nan)
     out = np.array(q, copy=True)
@@ -577,9 +603,7 @@ def penetration(displacements: np.ndarray, points: np.ndarray, nodes: np.ndarray
 
     displacements : (F, n, 3); exclude : (F, len(nodes)) bool, nodes not to count (sensor conflicts).
     """
-    pts = points[nodes][None] + displacements[:, nodes] + jaw_offset[:, None]
-    gap, _ = palate.clearance(pts.reshape(-1, 3))
-    gap = gap.reshape(len(displacements), -1)
+    gap, _ = clearance_at(palate, points[nodes][None] + displacements[:, nodes], jaw_offset)
     if exclude is not None:
         gap = np.where(exclude, np.nan, gap)
     deepest = np.nanmin(np.where(np.isfinite(gap), gap, np.inf), axis=1)
@@ -618,7 +642,6 @@ def contact_frames(displacements: np.ndarray, points: np.ndarray, candidates: np
     so a long motion is measured chunk by chunk (:func:`tonguevis.sim.figures.frame_figures`).
     backend : "numpy" (default) or "warp" (the clearances in one compiled pass, the same to 1e-12 m).
     """
-    n_frames = displacements.shape[0]
     if check_backend(backend) == "warp":
         from tonguevis.sim.contact_kernel import clearances
 
@@ -626,9 +649,7 @@ def contact_frames(displacements: np.ndarray, points: np.ndarray, candidates: np
         gap, _ = clearances(palate, points[candidates], displacements if every else displacements[:, candidates],
                             jaw_offset)  # (the figures pass the candidates' displacements alone: no copy)
     else:
-        pts = points[candidates][None] + displacements[:, candidates] + jaw_offset[:, None]
-        gap, _ = palate.clearance(pts.reshape(-1, 3))
-        gap = gap.reshape(n_frames, -1)
+        gap, _ = clearance_at(palate, points[candidates][None] + displacements[:, candidates], jaw_offset)
     counted = gap if exclude is None else np.where(exclude, np.nan, gap)
     deepest = np.fmin.reduce(counted, axis=1, initial=np.inf)  # NaN (off the palate, excluded) ignored
     pen = np.maximum(0.0, -np.where(np.isfinite(deepest), deepest, 0.0))

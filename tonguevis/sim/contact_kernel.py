@@ -44,6 +44,7 @@ def _build():
         def clearance(base: wp.array(dtype=wp.vec3d), disp: wp.array2d(dtype=wp.vec3d),
                       offset: wp.array(dtype=wp.vec3d), z: wp.array2d(dtype=f64), rot: wp.mat33d, scale: f64,
                       shift: wp.vec3d, x0: f64, x1: f64, y0: f64, y1: f64, want_normal: int,
+                      lift: wp.array(dtype=f64), g: wp.array2d(dtype=f64), has_lift: int,
                       gap: wp.array2d(dtype=f64), normal: wp.array2d(dtype=wp.vec3d)):
             f, k = wp.tid()
             p = (base[k] + disp[f, k]) + offset[f] - shift
@@ -76,6 +77,16 @@ def _build():
             h = (f64(1.0) - ty) * ((f64(1.0) - tx) * z00 + tx * z10) + ty * ((f64(1.0) - tx) * z01 + tx * z11)
             dx = ((f64(1.0) - ty) * (z10 - z00) + ty * (z11 - z01)) * inv_dx
             dy = ((f64(1.0) - tx) * (z01 - z00) + tx * (z11 - z10)) * inv_dy
+            if has_lift != 0:  # the velum lifted by lift[f] times its share g, in the palate's own units
+                a = lift[f] * inv_scale
+                g00 = g[j, i]
+                g10 = g[j, i + 1]
+                g01 = g[j + 1, i]
+                g11 = g[j + 1, i + 1]
+                h = h + a * ((f64(1.0) - ty) * ((f64(1.0) - tx) * g00 + tx * g10)
+                             + ty * ((f64(1.0) - tx) * g01 + tx * g11))
+                dx = dx + a * ((f64(1.0) - ty) * (g10 - g00) + ty * (g11 - g01)) * inv_dx
+                dy = dy + a * ((f64(1.0) - tx) * (g01 - g00) + tx * (g11 - g10)) * inv_dy
             if not inside:
                 h = f64(wp.nan)
             inv_norm = f64(1.0) / wp.sqrt(dx * dx + dy * dy + f64(1.0))
@@ -110,13 +121,21 @@ class Clearance:
                         wp.vec3d(*np.asarray(palate.translation, dtype=np.float64)),
                         float(x[0]), float(x[1]), float(y[0]), float(y[1])]
         self._no_normal = wp.empty((1, 1), dtype=wp.vec3d, device="cpu")
+        shape = getattr(palate, "lift_shape", None)
+        self._g_np = np.ascontiguousarray(shape if shape is not None else np.zeros((1, 1)), dtype=np.float64)
+        self._g = wp.array(self._g_np, dtype=wp.float64, device="cpu", copy=False)
+        self._liftable = shape is not None
 
     def __call__(self, disp: np.ndarray, offset: np.ndarray,
                  normals: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """(gap (F, k) m, normals (F, k, 3) or None) of base[k] + disp[f, k] + offset[f];
-        disp : (F, k, 3) m, offset : (F, 3) m; see :func:`clearances`."""
+        disp : (F, k, 3) m, offset : (F, 3) m, or (F, 4) with the velum's lift; see :func:`clearances`."""
         wp = _wp
-        offset = np.ascontiguousarray(offset, dtype=np.float64).reshape(-1, 3)
+        offset = np.asarray(offset, dtype=np.float64)
+        offset = offset.reshape(-1, offset.shape[-1] if offset.ndim > 1 else len(offset))
+        lift = np.ascontiguousarray(offset[:, 3]) if offset.shape[1] > 3 else np.zeros(len(offset))
+        has_lift = int(self._liftable and bool(np.any(lift)))
+        offset = np.ascontiguousarray(offset[:, :3])
         n_frames = len(offset)
         disp = np.ascontiguousarray(disp, dtype=np.float64).reshape(n_frames, self.k, 3)
         gap = np.empty((n_frames, self.k))
@@ -130,7 +149,9 @@ class Clearance:
             wp.launch(_kernel, dim=(len(gap[rows]), self.k), device="cpu",
                       inputs=[self._base, wp.array(disp[rows], dtype=wp.vec3d, device="cpu", copy=False),
                               wp.array(offset[rows], dtype=wp.vec3d, device="cpu", copy=False), self._z,
-                              *self._params, int(normals)], outputs=outs)
+                              *self._params, int(normals),
+                              wp.array(lift[rows], dtype=wp.float64, device="cpu", copy=False), self._g, has_lift],
+                      outputs=outs)
             wp.synchronize_device("cpu")
 
         workers = min(PARALLEL_WORKERS, os.cpu_count() or 1, n_frames * self.k // PARALLEL_POINTS)
@@ -162,7 +183,8 @@ def clearances(palate, base: np.ndarray, disp: np.ndarray, offset: np.ndarray,
     """Clearance below ``palate`` (a PalateSurface) of the points base[k] + disp[f, k] + offset[f].
 
     base : (k, 3) rest positions, m; disp : (F, k, 3) displacements, m; offset : (F, 3), m
-    (the jaw's offset carrying the tongue into the palate's frame).  Returns (gap (F, k) m,
+    (the jaw's offset carrying the tongue into the palate's frame), or (F, 4) with the velum's lift
+    (:func:`tonguevis.sim.contact.palate_offsets`).  Returns (gap (F, k) m,
     NaN outside the palate's footprint, negative inside it; normals (F, k, 3) or None), as
     :meth:`~tonguevis.palate.PalateSurface.clearance` of the (F·k, 3) points.
     """

@@ -50,9 +50,11 @@ class Motion:
     jaw_offset : (F, 3) metres, the jaw's translation from rest in the model
         frame (what carries the tongue from the jaw's frame, where it is
         simulated, into the head's frame, where the palate is), or None.
-    palate : the palate as the simulation placed it in the model frame (raised where
-        the sensors went above it), or None; kept in memory only: a loaded motion
-        has none (:func:`tonguevis.sim.simulate.placed_palate` places it again).
+    palate : the palate as the simulation placed it, at rest (velum down), in the simulation's frame, or
+        None; kept in memory only: a loaded motion has none (:func:`tonguevis.sim.simulate.placed_palate`
+        places it again).  :meth:`palate_at` gives it at a frame.
+    velum_lift : (F,) metres, the velum's lift per frame (:mod:`tonguevis.sim.speaker_palate`), or None (a
+        rigid palate, or none).
     """
 
     times: np.ndarray
@@ -72,6 +74,16 @@ class Motion:
     jaw_offset: np.ndarray | None = None
     #: the palate as the simulation placed it (model frame; a PalateSurface), in memory only (not saved)
     palate: Any = field(default=None, repr=False, compare=False)
+    velum_lift: np.ndarray | None = None
+
+    def palate_at(self, index: int):
+        """The palate at frame ``index`` (a PalateSurface in the simulation's head frame: the velum lifted as
+        the simulation lifted it), or None without one; ``palate_at(i).clearance(points)`` measures against it."""
+        if self.palate is None:
+            return None
+        if self.velum_lift is None:
+            return self.palate
+        return self.palate.lifted(float(self.velum_lift[int(index)]))
 
     @property
     def n_frames(self) -> int:
@@ -175,7 +187,8 @@ class Motion:
                     volume_change=self.volume_change,
                     converged=self.converged,
                     **{k: v for k, v in (("penetration", self.penetration), ("contact_area", self.contact_area),
-                                         ("jaw_offset", self.jaw_offset)) if v is not None},
+                                         ("jaw_offset", self.jaw_offset),
+                                         ("velum_lift", self.velum_lift)) if v is not None},
                     points=model.mesh.points,
                     tets=model.mesh.tets,
                     anchors=model.anchors,
@@ -254,7 +267,7 @@ class Motion:
             energy=arrays["energy"], volume_change=arrays["volume_change"],
             converged=arrays["converged"].astype(bool), metadata=meta["metadata"],
             penetration=arrays.get("penetration"), contact_area=arrays.get("contact_area"),
-            jaw_offset=arrays.get("jaw_offset"),
+            jaw_offset=arrays.get("jaw_offset"), velum_lift=arrays.get("velum_lift"),
         )
 
     def to_vtk_series(self, folder, frames=None, progress=None, frame: str = "head"):

@@ -73,6 +73,39 @@ class MotionBuilder:
             return drive
         return np.where(np.isnan(drive), anchored[frames], drive)
 
+    def _contact_places(self, q, contact_area, contact, warping) -> dict:
+        """Where the tongue touches the palate (:func:`tonguevis.sim.palate_regions.place_of`): at the frame of the
+        largest contact area ("largest_contact_where") and at each closure's maximum constriction, the place
+        said most ("closures_where", with "closures_touching": how many closures touch at all)."""
+        from tonguevis.sim.contact import TOUCH, node_areas
+        from tonguevis.sim.palate_regions import palate_frame, place_of
+
+        model, palate = self.model, contact["palate"]
+        frame = palate_frame(palate)
+        cand = np.asarray(contact["candidates"])
+        areas = node_areas(model.mesh.points, np.asarray(model.surface_faces))[cand]
+        lift = contact.get("lift")
+
+        def place(f: int) -> str:
+            u = model.displacements(q[f:f + 1], warping=warping, nodes=cand)[0]
+            points = model.mesh.points[cand] + u + contact["jaw_offset"][f, :3]
+            at = palate.lifted(float(lift[f])) if lift is not None else palate
+            gap = at.clearance(points)[0]
+            touching = np.isfinite(gap) & (gap < TOUCH)
+            return place_of(frame, points[touching], areas[touching])
+
+        out: dict = {}
+        if len(contact_area) and np.max(contact_area) > 0:
+            out["largest_contact_where"] = place(int(np.argmax(contact_area)))
+        closures = contact.get("closures") or {}
+        frames = [f for f in closures.get("maximum_constriction_frames", []) if f < len(q)]
+        if frames:
+            places = [place(f) for f in frames]
+            named = [p for p in places if p]
+            out["closures_touching"] = len(named)
+            out["closures_where"] = max(set(named), key=named.count) if named else ""
+        return out
+
     def motion(self, result, figures, n: int) -> Motion:
         """The :class:`Motion` of frames 0..n-1 (``n`` = all: the simulation's result, made from ``result``
         and ``figures`` in place; fewer: a preview on copies, ``metadata["preview"]`` saying how many frames
@@ -140,6 +173,7 @@ class MotionBuilder:
             sensors = model.mesh.points[prep.nodes][None] + measured  # as drawn: each on its node's rest
             contact_figures = contact_report(penetration, contact_area, contact, schedule, times,
                                               sensor_depth(contact, sensors, cut), prep.names)
+            contact_figures.update(self._contact_places(q, contact_area, contact, warping))
         stiffness = self.sensor_stiffness
         metadata = {
             "recording": dict(self.recording.metadata),
@@ -185,6 +219,7 @@ class MotionBuilder:
             jaw_offset=None if prep.jaw_offset is None else prep.jaw_offset[cut],
             metadata=metadata,
             palate=None if contact is None else contact["palate"],
+            velum_lift=None if contact is None or contact.get("lift") is None else contact["lift"][cut].copy(),
         )
 
 

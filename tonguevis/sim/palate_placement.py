@@ -13,43 +13,66 @@ from tonguevis.io.recording import Recording
 from tonguevis.preprocess.rest import RestChoice
 from tonguevis.preprocess.targets import PreparedTargets
 from tonguevis.sim.model import TongueModel
-from tonguevis.sim.plausibility import raise_spread
 
 
 def place_palate(palate, prep: PreparedTargets, quiet: bool = False, model: TongueModel | None = None,
                  speech_references: dict | None = None):
-    """The palate in the model frame, where the contact solve and the app's views use it: (surface, raised by m).
+    """The palate in the simulation's frame, where the contact solve and the app's views use it:
+    (surface at rest, velum lift (F,) m or None, info).
 
     palate : a :class:`~tonguevis.palate.PalateSurface`, a palate file or "generic"
     (:func:`tonguevis.palate.load_palate`).  A speaker's palate (the recording's frame,
-    from ``tonguevis palate``) is carried onto the model by the recording's alignment
-    ``prep.transform``, then raised where the tongue sensors went above it
-    (:func:`_register_palate`) and, on the shipped tongue (``model`` None or it), joined to the
-    generic palate behind and beside it (:func:`tonguevis.palate.joined_palate`); one whose
-    metadata say ``frame == "model"`` (the generic one) is used as is.
+    from ``tonguevis palate``) is carried onto the model by the recording's alignment ``prep.transform``
+    and made whole from the speech (:func:`tonguevis.sim.speaker_palate.speaker_palate`): the traced part
+    kept where it was traced (moved up by at most a coil's thickness), the rest estimated from the
+    sensors and the tongue at rest, joined to the generic roof on the shipped tongue (``model`` None or it),
+    the velum lifting frame by frame.  One whose metadata say ``frame == "model"`` (the generic one) is
+    used as is, rigid (lift None).
 
     speech_references : the speech's head references where its head correction holds them
     (:func:`tonguevis.preprocess.correction.reference_pose`); a palate fitted from traces with the
     same references (``metadata["head_references"]``) is first carried into the speech's head
-    frame by them (:func:`_by_head_references`), so only what they cannot tell is left to the raise.
+    frame by them (:func:`_by_head_references`).
     """
     from tonguevis.palate import load_palate
 
     from tonguevis.sim.placement import in_model_frame
+    from tonguevis.sim.speaker_palate import speaker_palate
 
     palate = load_palate(palate)
     if palate.metadata.get("frame") == "model":  # the generic palate: placed with the model
-        return palate if model is None else in_model_frame(palate, model), 0.0
-    from tonguevis.palate import generic_palate, joined_palate
+        return (palate if model is None else in_model_frame(palate, model)), None, {}
+    from tonguevis.palate import generic_palate
 
     palate = _by_head_references(palate, speech_references, quiet)
     t = prep.transform
-    placed, shift = _register_palate(palate.transformed(t.rotation, t.scale, t.translation), prep, quiet=quiet)
-    if model is not None and not shipped_tongue(model):  # the generic palate is our tongue's roof, not this mesh's
-        return placed, shift
-    # A traced palate covers the front of the roof: the generic one, moved to meet it, completes it.
-    generic = generic_palate() if model is None else in_model_frame(generic_palate(), model)
-    return joined_palate(placed, generic), shift
+    placed = palate.transformed(t.rotation, t.scale, t.translation)
+    generic = None
+    if model is None or shipped_tongue(model):  # the generic palate is our tongue's roof, not another mesh's
+        generic = generic_palate() if model is None else in_model_frame(generic_palate(), model)
+    # The sensors where the simulation has them (each on its node's rest, as drawn and held to the palate), in
+    # the palate's (head) frame; without the model, where the alignment put them.
+    at_rest = prep.aligned_rest if model is None else model.mesh.points[np.asarray(prep.nodes)]
+    sensors = at_rest[None] + prep.displacement + prep.jaw_offset[:, None]
+    rest = None if model is None else model.mesh.points[np.asarray(model.dorsal_nodes)]
+    surface, lift, info = speaker_palate(placed, generic, sensors, rest)
+    if not quiet:
+        _say_palate(info)
+    return surface, lift, info
+
+
+def _say_palate(info: dict) -> None:
+    """One line in the log: how the speaker's palate was completed and moved."""
+    parts = [f"traced part kept ({100 * info['traced_share']:.0f} % of the roof)"]
+    if info.get("traced_raised_mm", 0.0) > 0.05:
+        parts.append(f"raised where the sensors went above it: up to {info['traced_raised_mm']:.1f} mm at x "
+                     f"{info['traced_raised_at_mm'][0]:.0f} mm ({100 * info['traced_raised_share']:.0f} % of it over "
+                     "0.5 mm)")
+    if info.get("estimated_raised_mm", 0.0) > 0.05:
+        parts.append(f"the estimated part raised up to {info['estimated_raised_mm']:.1f} mm to the speech")
+    if info.get("velum_lifted_frames"):
+        parts.append(f"the velum lifts up to {info['velum_lift_max_mm']:.1f} mm with the dorsum")
+    logger.info("palate: %s", "; ".join(parts))
 
 
 def _by_head_references(palate, speech_references: dict | None, quiet: bool = False):
@@ -107,7 +130,7 @@ def placed_palate(recording: Recording, palate, model: TongueModel | None = None
                   rest: RestChoice | tuple[float, float] | None = None, smooth_window: int | None = None,
                   frame: str = "speaker", tongue_size: float | str | None = None):
     """The palate as :func:`simulate` places it for ``recording`` on ``model`` (unplaced, as given to
-    :func:`simulate`): (surface in the motion's ``frame``, raised by m).
+    :func:`simulate`): (surface at rest in the motion's ``frame``, velum lift (F,) m or None, info).
 
     For drawing a motion against its palate: pass the motion's landmarks, rest and frame
     (``motion.metadata["landmarks"]``, :func:`tonguevis.workflows.rest_of`,
@@ -122,23 +145,40 @@ def placed_palate(recording: Recording, palate, model: TongueModel | None = None
                         speech_references=_speech_references(recording, prep, palate))
 
 
+#: A rest whose tongue this share of the upper surface lies more than REST_CUT_DEPTH inside the palate is not
+#: a rest with this palate (the tongue pressed into the vault: the generic tongue, placed there, crosses it).
+REST_CUT_SHARE, REST_CUT_DEPTH = 0.2, 1e-3
+
+
+class PalateCutsTheRest(SimulationError):
+    """The palate cuts through the tongue at the rest chosen (another still stretch may do)."""
+
+
 def contact_context(palate, prep, model, basis, recording) -> dict:
-    """What the contact solve needs: the palate in the model frame, candidate nodes and their modes."""
-    palate, shift = place_palate(palate, prep, model=model,
-                                 speech_references=_speech_references(recording, prep, palate))
+    """What the contact solve needs: the palate in the simulation's frame (at rest and its velum's lift per
+    frame, in ``jaw_offset`` (F, 4): :func:`tonguevis.sim.contact.palate_offsets`), candidate nodes and their
+    modes.  :class:`PalateCutsTheRest` when the palate cuts through the tongue at this rest."""
+    from tonguevis.sim.contact import palate_offsets
+
+    surface, lift, info = place_palate(palate, prep, model=model,
+                                       speech_references=_speech_references(recording, prep, palate))
     candidates = np.asarray(model.dorsal_nodes)
-    gap, _ = palate.clearance(model.mesh.points[candidates])
-    inside = np.nanmean(gap < -1e-3) if np.isfinite(gap).any() else 0.0
-    if inside > 0.2:
-        raise SimulationError(
-            f"the palate cuts through the tongue at rest ({100 * inside:.0f} % of its upper surface more than 1 mm "
-            f"inside it, up to {-1e3 * np.nanmin(gap):.0f} mm): is it this speaker's palate, from this session?",
-            recording.metadata.get("file"))
+    jaw = prep.jaw_offset if prep.jaw_offset is not None else np.zeros((recording.n_samples, 3))
+    offsets = palate_offsets(jaw, lift)
+    rest_frame = int(np.argmin(np.abs(recording.times - prep.rest.interval[0])))
+    from tonguevis.sim.contact import clearance_at
+
+    gap, _ = clearance_at(surface, model.mesh.points[candidates], offsets[min(rest_frame, len(offsets) - 1)])
+    inside = np.nanmean(gap < -REST_CUT_DEPTH) if np.isfinite(gap).any() else 0.0
+    if inside > REST_CUT_SHARE:
+        raise PalateCutsTheRest(
+            f"the palate cuts through the tongue at the rest {prep.rest.interval[0]:.2f}-{prep.rest.interval[1]:.2f} s "
+            f"({100 * inside:.0f} % of its upper surface more than 1 mm inside it, up to {-1e3 * np.nanmin(gap):.0f} "
+            "mm): the tongue is pressed up there", recording.metadata.get("file"))
     dofs = (3 * candidates[:, None] + np.arange(3)).ravel()
-    return {"palate": palate, "candidates": candidates, "points": model.mesh.points,
+    return {"palate": surface, "candidates": candidates, "points": model.mesh.points,
             "phi_nodes": basis.phi[dofs].reshape(len(candidates), 3, -1), "sensor_nodes": np.asarray(prep.nodes),
-            "jaw_offset": prep.jaw_offset if prep.jaw_offset is not None else np.zeros((recording.n_samples, 3)),
-            "registration_shift_m": shift}
+            "jaw_offset": offsets, "lift": lift, "palate_info": info}
 
 
 def keep_below_palate(q, contact, schedule, basis, phi_s, compliance: float):
@@ -185,25 +225,33 @@ def held_to_palate(contact: dict, rest: np.ndarray, displacement: np.ndarray, re
     Returns ((F, S, 3) displacements, {"reach_mm", "frames": {name: frames held}, "largest_move_mm"}).
     Sensors above the palate, far below it or outside its footprint are left as measured.
     """
-    frames, sensors = displacement.shape[:2]
-    where = rest[None] + displacement + contact["jaw_offset"][:frames, None]
-    gap, normal = contact["palate"].clearance(where.reshape(-1, 3))
-    gap, normal = gap.reshape(frames, sensors), normal.reshape(frames, sensors, 3)
-    near = np.isfinite(gap) & (gap > 0) & (gap <= reach)
+    from tonguevis.sim.contact import MARGIN, clearance_at
+
+    frames = displacement.shape[0]
+    offsets = contact["jaw_offset"][:frames]
+    gap, normal = clearance_at(contact["palate"], rest[None] + displacement, offsets)
+    near = np.isfinite(gap) & (gap > MARGIN) & (gap <= reach)
     held = displacement.copy()
-    held[near] -= normal[near] * gap[near][:, None]  # the normal points down, away from the palate
+    first = gap.copy()
+    for _ in range(2):  # onto the palate, the contact's margin below it (again: the palate is curved)
+        held[near] -= normal[near] * (gap[near] - MARGIN)[:, None]  # the normal points down, away from the palate
+        gap, normal = clearance_at(contact["palate"], rest[None] + held, offsets)
+        near &= np.isfinite(gap)
+    moved = np.linalg.norm(held - displacement, axis=2)  # never further than the reach (a steep velum's normals)
+    far = near & (moved > reach)
+    held[far] = displacement[far] + (held[far] - displacement[far]) * (reach / moved[far])[:, None]
     info = {"reach_mm": 1e3 * reach,
             "frames": {name: int(near[:, k].sum()) for k, name in enumerate(names) if near[:, k].any()},
-            "largest_move_mm": float(1e3 * gap[near].max()) if near.any() else 0.0}
+            "largest_move_mm": float(1e3 * first[near].max()) if near.any() else 0.0}
     return held, info
 
 
 def sensor_depth(contact, sensors: np.ndarray, cut: slice) -> np.ndarray:
     """(F, S) how far (m, >= 0) each sensor (F, S, 3, model frame, jaw's frame) lies above the palate;
     0 below it, NaN where not measured or no palate lies above."""
-    offset = contact["jaw_offset"][cut]
-    gap, _ = contact["palate"].clearance((sensors + offset[:, None]).reshape(-1, 3))
-    gap = gap.reshape(sensors.shape[:2])
+    from tonguevis.sim.contact import clearance_at
+
+    gap, _ = clearance_at(contact["palate"], sensors, contact["jaw_offset"][cut])
     return np.where(np.isfinite(gap), np.maximum(0.0, -gap), np.nan)
 
 
@@ -234,45 +282,9 @@ def contact_report(pen, contact_area, contact, schedule, times, sensor_depth, na
                       "first_s": float(times[schedule["conflicts"][0][0]]) if schedule["conflicts"] else None},
         "palate": {k: v for k, v in contact["palate"].metadata.items()
                    if k in ("rms_m", "source", "frame", "kept", "joined", "min_bend_radius_m", "bend_radius_m",
-                            "head_registration", "raise_by_sensor_mm")},
-        "palate_raised_mm": float(1e3 * contact.get("registration_shift_m", 0.0)),
+                            "head_registration", "speaker_palate")},
+        "palate_raised_mm": float(contact.get("palate_info", {}).get("traced_raised_mm", 0.0)),  # the traced part
         **({"sensors_held_to_palate": contact["held_to_palate"]} if "held_to_palate" in contact else {}),
+        **({"closures": contact["closures"]} if "closures" in contact else {}),
     }
     return figures
-
-
-def _register_palate(palate, prep, percentile: float = 1.0, quiet: bool = False):
-    """The palate raised, if need be, until the tongue sensors stay below it; (palate, shift in m).
-
-    A palate traced in another sitting than the speech (no head references to
-    relate the two, as in Opti-Speech exports) can sit millimetres too low: on
-    the real /ta/ and /ka/ the dorsum sensor read 5-11 mm above the traced
-    palate, which no tongue does.  The sensors' positions over the whole
-    recording (head frame) are the evidence: the palate is moved up along
-    the model's z until all but ``percentile`` % of them are below it.
-
-    What each sensor alone would call for (its own ``percentile``, in mm; sensors with under 5 % of their
-    samples under the palate left out) goes into the palate's ``metadata["raise_by_sensor_mm"]``: a
-    raise set by one sensor while another needs far less (on OSN12: TD 9.6 mm, TT 1.8 mm) is a tilt
-    between the sittings or a soft palate the dorsum lifts, which a rigid raise cannot undo and which
-    leaves the front of the roof too high for the tip.
-    """
-    head = prep.aligned_rest[None] + prep.displacement + prep.jaw_offset[:, None]
-    gap, _ = palate.clearance(head.reshape(-1, 3))
-    gap = gap.reshape(head.shape[:2])
-    needs = {}
-    for k, name in enumerate(prep.names):
-        own = gap[:, k][np.isfinite(gap[:, k])]
-        if len(own) >= 0.05 * len(gap) and len(own):
-            needs[name] = round(1e3 * max(0.0, -float(np.percentile(own, percentile))), 2)
-    gap = gap[np.isfinite(gap)]
-    if len(gap) == 0:
-        return palate, 0.0
-    shift = max(0.0, -float(np.percentile(gap, percentile)))
-    if shift > 0:
-        if not quiet:
-            logger.warning("the palate lies %.1f mm below where the tongue sensors went: raised by that much "
-                           "(traced in another sitting?)%s", 1e3 * shift, raise_spread(needs))
-        palate = palate.transformed(np.eye(3), 1.0, np.array([0.0, 0.0, shift]))
-    palate.metadata["raise_by_sensor_mm"] = needs
-    return palate, shift

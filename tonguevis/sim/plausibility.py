@@ -101,27 +101,33 @@ def contact_line(metadata: dict) -> str:
         text += "; above the palate (the tongue follows them there): " + ", ".join(
             f"{name} in {v['frames']} frames" + (f" (up to {v['deepest_mm']:.1f} mm)" if v["deepest_mm"] == v["deepest_mm"]
                                                  else "") for name, v in above.items())
-    joined = (c.get("palate") or {}).get("joined")
-    if joined:
-        text += (f"; traced palate joined to the generic one behind it (moved {joined['generic_shift_mm']:+.1f} mm to "
-                 "meet it)")
+    if c.get("largest_contact_where"):
+        text += f" ({c['largest_contact_where']})"
+    closures = c.get("closures")
+    if closures:
+        where = c.get("closures_where")
+        text += (f"; {c.get('closures_touching', 0)} of {closures['closures']} stop closures touch"
+                 + (f" ({where})" if where else "") + ", the tip pressed on the palate there")
     registered = (c.get("palate") or {}).get("head_registration")
     if registered:
         text += (f"; palate registered into the speech's head frame by {', '.join(registered['references'])} "
                  f"(moved {registered['moved_mm']:.1f} mm, residual {registered['residual_mm']:.2f} mm)")
-    if c.get("palate_raised_mm", 0.0) > 0.05:
-        why = ("after the head references' registration" if registered else
-               "no head references relate the traces to the speech: traced in another sitting?")
-        text += f"; palate raised {c['palate_raised_mm']:.1f} mm to sit above where the sensors went ({why})"
-        text += raise_spread((c.get("palate") or {}).get("raise_by_sensor_mm") or {})
+    text += speaker_palate_words((c.get("palate") or {}).get("speaker_palate"))
     return text
 
 
-def raise_spread(needs: dict) -> str:
-    """"; each sensor alone would call for ..." when the sensors disagree by over 3 mm, else ""."""
-    if len(needs) < 2 or max(needs.values()) - min(needs.values()) <= 3.0:
+def speaker_palate_words(info: dict | None) -> str:
+    """"; the speaker's palate: ..." (what was traced, how far the speech moved it, the velum), or ""."""
+    if not info:
         return ""
-    most, least = max(needs, key=needs.get), min(needs, key=needs.get)
-    return (f"; the sensors disagree: {most} alone calls for {needs[most]:.1f} mm, {least} for {needs[least]:.1f} mm "
-            "(a tilt between the sittings, or a soft palate the tongue lifts), so the roof is left too high where "
-            f"{least} is")
+    text = f"; the speaker's palate: {100 * info['traced_share']:.0f} % of the roof as traced"
+    if info.get("traced_raised_mm", 0.0) > 0.05:
+        x, _ = info["traced_raised_at_mm"]
+        text += (f", raised up to {info['traced_raised_mm']:.1f} mm (at x {x:.0f} mm; "
+                 f"{100 * info['traced_raised_share']:.0f} % of it over 0.5 mm) where the sensors went above it")
+    if info.get("estimated_raised_mm", 0.0) > 0.05:
+        text += f", the rest estimated from the speech (raised up to {info['estimated_raised_mm']:.1f} mm)"
+    if info.get("velum_lifted_frames"):
+        text += (f", the velum lifting up to {info['velum_lift_max_mm']:.1f} mm with the dorsum "
+                 f"({info['velum_lifted_frames']} frames)")
+    return text

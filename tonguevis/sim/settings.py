@@ -71,6 +71,8 @@ class RunSettings:
     smooth_window : Savitzky-Golay window (samples) of the sensor trajectories, None: not smoothed.
     tolerance : the Newton tolerance of the constraint solve (m); None: the method's own (1e-8 modal,
         1e-7 domains).
+    closures : with a palate, at each stop's closure found on the recording the tip and blade are pressed onto
+        the palate (:mod:`tonguevis.sim.closures`); False: only the sensors and the contact.
     """
 
     mesh: str | None = None
@@ -90,6 +92,7 @@ class RunSettings:
     rest_fit: bool = False
     smooth_window: int | None = None
     tolerance: float | None = None
+    closures: bool = True
 
     def __post_init__(self) -> None:
         from tonguevis.sensor_stiffness import sensor_stiffness_value
@@ -128,7 +131,7 @@ class RunSettings:
             raise SimulationError(f"smooth_window must be at least 3 samples or None, got {self.smooth_window}")
         if self.tolerance is not None and not float(self.tolerance) > 0:
             raise SimulationError(f"tolerance must be a positive length in metres or None, got {self.tolerance}")
-        for name in ("keep_volume", "rest_fit"):
+        for name in ("keep_volume", "rest_fit", "closures"):
             object.__setattr__(self, name, bool(getattr(self, name)))
 
     @classmethod

@@ -16,7 +16,7 @@ from tonguevis.sim.figures import frame_figures
 from tonguevis.sim.newmark import NewmarkSettings, integrate
 from tonguevis.sim.drive import drive_schedule
 from tonguevis.sim.motion_builder import MotionBuilder
-from tonguevis.sim.palate_placement import (TOUCH_REACH, _by_head_references, _register_palate,  # noqa: F401
+from tonguevis.sim.palate_placement import (TOUCH_REACH, _by_head_references,  # noqa: F401 (re-exported)
                                             contact_context, contact_probe, held_to_palate, keep_below_palate,
                                             place_palate, placed_palate)
 from tonguevis.sim.settings import (DEFAULT_SENSOR_STIFFNESS, METHODS, RunSettings,  # noqa: F401 (re-exported)
@@ -141,16 +141,10 @@ def simulate(
                                   "rest_fit (--fit-rest), or with method 'warped'", file)
         motion = simulate_domains(recording, settings, model, progress=progress)
         return _kept(motion, settings.backend) if settings.keep_volume else motion
-    sensor_stiffness, backend, palate, frame = (settings.sensor_stiffness_value, settings.backend,
-                                                settings.palate, settings.frame)
+    sensor_stiffness, backend, frame = settings.sensor_stiffness_value, settings.backend, settings.frame
     # Frames the recorder dropped come back as missing samples: every step is 1/rate apart.
     recording = recording.on_uniform_grid()
-    from tonguevis.sim.placement import targets_in_frame
-
-    model, prep, fit = targets_in_frame(recording, model, frame, settings.landmarks, settings.rest,
-                                        settings.smooth_window, tongue_size=settings.tongue_size,
-                                        rest_fit=settings.rest_fit)
-    basis = model.basis(settings.modes, progress=_stage(progress, 0, 3))
+    model, prep, fit, basis, contact = placed_at_rest(recording, model, settings, progress)
     w_full = model.rotation_matrix(basis)
     dofs = (3 * prep.nodes[:, None] + np.arange(3)).ravel()
     s = len(prep.nodes)
@@ -162,20 +156,23 @@ def simulate(
         tolerance=settings.newton_tolerance, warping=warping,
     )
     k_ref = point_stiffness(basis.eigenvalues, phi_s)
-    contact = None
-    if palate is not None:
-        contact = contact_context(palate, prep, model, basis, recording)
-        contact["backend"] = backend  # its clearances and solves: compiled, or the NumPy reference
     drive = prep.displacement  # what the tongue follows; the sensors are drawn and scored where measured
+    # What the projection pulls on: the sensors, then (with a palate) the closures' pulls (forces, not held).
+    held_rows, held_drive = (phi_s, w_s), drive
     if contact is not None:
         reach = TOUCH_REACH * (1.0 if frame == "speaker" else fit["scale"])  # the speaker's mm in this frame
         drive, contact["held_to_palate"] = held_to_palate(contact, model.mesh.points[prep.nodes], drive, reach,
                                                           prep.names)
-    targets, compliance, schedule = drive_schedule(drive, recording.rate, basis.eigenvalues, phi_s,
-                                                   sensor_stiffness, contact=contact)
+        if settings.closures:
+            held_rows, held_drive = _with_closures(recording, prep, model, basis, w_full, contact, phi_s, w_s,
+                                                   drive)
+    targets, compliance, schedule = drive_schedule(held_drive, recording.rate, basis.eigenvalues, held_rows[0],
+                                                   sensor_stiffness, contact=contact,
+                                                   pulls=held_drive.shape[1] - drive.shape[1])
     release_freed_memory()  # the preparation's temporaries: 150 MB kept for 30 minutes otherwise
     report(progress, 1, 3, "integrating")
-    run = MotionBuilder(settings, model, recording, prep, basis, (phi_s, w_s), (targets, compliance, schedule), k_ref, contact)
+    run = MotionBuilder(settings, model, recording, prep, basis, (phi_s, w_s), (targets, compliance, schedule), k_ref,
+                        contact)
     run.fit = fit
     run.drive = drive
     from tonguevis.sim.patches import PATCH_RADIUS, PATCH_REACH
@@ -215,10 +212,12 @@ def simulate(
         else:
             result = integrate(basis.eigenvalues, phi_s, w_s, targets, newmark, compliance=compliance,
                                external=schedule.get("external"), progress=_stage(progress, 1, 3))
+        if "pull_targets" in schedule:
+            result.q = static_at_closures(result.q, basis.eigenvalues, held_rows[0], targets, schedule)
         if contact is not None:
             base = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * k_ref)
             result.q, corrected = keep_below_palate(result.q, contact, schedule, basis, phi_s, base)
-            schedule["corrected_frames"] = corrected
+            schedule["corrected_frames"] = run.schedule["corrected_frames"] = corrected
         if run.patches:
             result.q = np.hstack([result.q, run.patch_coordinates(result.q, 0, len(result.q))])
         report(progress, 2, 3, "reconstructing the mesh")
@@ -231,6 +230,103 @@ def simulate(
     release_freed_memory()
     report(progress, 3, 3, "done")
     return motion
+
+
+def _with_closures(recording, prep, model, basis, w_full, contact, phi_s, w_s, drive):
+    """((rows of Φ, rows of W), drive (F, S + V, 3)): the sensors' and, after them, the closures' pulls
+    (:func:`tonguevis.sim.closures.closure_contacts`, :func:`drive_schedule`'s ``pulls``);
+    ``contact["sensor_nodes"]`` and ``contact["closures"]`` say them.  As given when the recording shows no
+    closure."""
+    from tonguevis.sim.closures import closure_contacts
+
+    closures = closure_contacts(recording, prep, model, contact)
+    if closures is None:
+        return (phi_s, w_s), drive
+    dofs = (3 * closures.nodes[:, None] + np.arange(3)).ravel()
+    v = len(closures.nodes)
+    phi_v = basis.phi[dofs].reshape(v, 3, -1)
+    w_v = w_full[dofs].reshape(v, 3, -1)
+    contact["sensor_nodes"] = np.concatenate([np.asarray(prep.nodes), closures.nodes])
+    contact["closures"] = closures.info
+    return ((np.concatenate([phi_s, phi_v]), np.concatenate([w_s, w_v])),
+            np.concatenate([drive, closures.displacement], axis=1))
+
+
+def static_at_closures(q: np.ndarray, eigenvalues: np.ndarray, rows: np.ndarray, targets: np.ndarray,
+                       schedule: dict) -> np.ndarray:
+    """(F, m) the dynamic shapes ``q`` with, where a closure's pull acts, the static shape that holds the
+    sensors at their targets and the pulled nodes where the projection put them, blended in by the pull's
+    engagement (its weight: 0 to 1 over the ramp into a closure, 1 through it, back to 0 after).
+
+    A force on free nodes lags in the dynamics (a few frames of closure went by before the tip rose onto the
+    palate on the real /ta/); at a closure the tongue is pressed and nearly still (the maximum constriction is
+    a speed minimum), where the static shape is the dynamic one's limit.  rows : (S + V, 3, m) the sensors' and
+    the pulls' rows; targets : (F, S, 3) the sensors'."""
+    from tonguevis.sim.constrained import compliant_shapes
+
+    weight = schedule["pull_weight"].max(axis=1)
+    frames = np.flatnonzero(weight > 0)
+    if len(frames) == 0:
+        return q
+    both = np.concatenate([targets[frames], schedule["pull_targets"][frames]], axis=1)
+    acting = np.all(np.isfinite(both), axis=2)
+    static = compliant_shapes(eigenvalues, rows, both, np.where(acting, 0.0, np.inf))
+    out = np.array(q, copy=True)
+    w = weight[frames, None]
+    out[frames] = (1.0 - w) * q[frames] + w * static
+    return out
+
+
+def placed_at_rest(recording: Recording, model: TongueModel, settings: RunSettings, progress=None):
+    """(model placed in the settings' frame, prepared targets, fit, modal basis, contact context or None) of a
+    recording on the uniform grid.
+
+    With a palate and no rest given, the rest candidates are tried in order (the rest every front end finds,
+    then the next stillest windows: :func:`tonguevis.preprocess.rest.rest_candidates`) until one whose tongue
+    the palate does not cut through (:class:`~tonguevis.sim.palate_placement.PalateCutsTheRest`: the tongue
+    pressed up into the vault there); the rest taken says why in its reason.  None left, or a rest given
+    that the palate cuts: SimulationError naming the file, the stillest candidates and ``--rest``."""
+    from tonguevis.preprocess.rest import HOW_TO_GIVE_REST, RestChoice, rest_candidates
+    from tonguevis.preprocess.targets import driving_sensors
+    from tonguevis.sim.palate_placement import PalateCutsTheRest
+    from tonguevis.sim.placement import targets_in_frame
+
+    palate = settings.palate
+    rests = [settings.rest]
+    if palate is not None and settings.rest is None:
+        rests = rest_candidates(recording, driving_sensors(recording, model)) or [None]
+    cut = []
+    for k, rest in enumerate(rests):
+        placed, prep, fit = targets_in_frame(recording, model, settings.frame, settings.landmarks, rest,
+                                             settings.smooth_window, tongue_size=settings.tongue_size,
+                                             rest_fit=settings.rest_fit)
+        if k == 0:  # the modes once (a placed model's are the source's, moved; a fitted one solves its own)
+            report(progress, 0, 3, "modal basis")
+        basis = placed.basis(settings.modes, progress=_stage(progress, 0, 3))
+        if palate is None:
+            return placed, prep, fit, basis, None
+        try:
+            contact = contact_context(palate, prep, placed, basis, recording)
+        except PalateCutsTheRest as exc:
+            cut.append((prep.rest, exc))
+            continue
+        contact["backend"] = settings.backend  # its clearances and solves: compiled, or the NumPy reference
+        if cut:
+            why = (f"the palate cuts through the tongue at the stiller rest{'s' if len(cut) > 1 else ''} "
+                   + ", ".join(f"{r.interval[0]:.2f}-{r.interval[1]:.2f} s" for r, _ in cut)
+                   + " (the tongue pressed up into the vault)")
+            prep.rest = RestChoice(prep.rest.interval, prep.rest.how, why)
+            logger.warning("%s: rest %.2f-%.2f s: %s", recording.metadata.get("file", "the recording"),
+                           *prep.rest.interval, why)
+        return placed, prep, fit, basis, contact
+    tried = ", ".join(f"{r.interval[0]:.2f}-{r.interval[1]:.2f} s" for r, _ in cut)
+    first = str(cut[0][1]).split(": ", 1)[-1] if cut else ""
+    raise SimulationError(
+        (f"{first}; " if settings.rest is not None else
+         f"the palate cuts through the tongue at every still stretch tried ({tried}); ")
+        + "is it this speaker's palate, from this session?  If it is, "
+        + HOW_TO_GIVE_REST.replace("give one", "give a rest where the tongue is down, not pressed into the vault,"),
+        recording.metadata.get("file"))
 
 
 def _kept(motion: Motion, backend: str) -> Motion:

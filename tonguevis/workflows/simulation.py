@@ -140,11 +140,13 @@ def shown_palate(recording, motion, model, palate):
     if surface.metadata.get("generic"):
         return generic_shown(simulated=True, model=motion.model)
     if getattr(motion, "palate", None) is not None:  # as the simulation placed it: no second preparation
-        placed, raised = motion.palate, 1e-3 * motion.metadata.get("contact", {}).get("palate_raised_mm", 0.0)
+        placed, lift = motion.palate, motion.velum_lift
     else:  # a motion loaded from a file
         fit = motion.metadata.get("fit", {})  # none: saved before the speaker frame, in the model's
-        placed, raised = placed_palate(recording, surface, model, landmarks=motion.metadata.get("landmarks", "speaker"),
-                                       rest=rest_of(motion), frame=fit.get("frame", "model"),
-                                       tongue_size=fit.get("tongue_size") if fit.get("fitted_to") == "upper surface"
-                                       else None)  # placed by the alignment: its size is recorded, not asked for
-    return speaker_palate(placed, palate_label(surface), simulated=True, raised_mm=1e3 * raised)
+        placed, lift, _ = placed_palate(recording, surface, model, landmarks=motion.metadata.get("landmarks", "speaker"),
+                                        rest=rest_of(motion), frame=fit.get("frame", "model"),
+                                        tongue_size=fit.get("tongue_size") if fit.get("fitted_to") == "upper surface"
+                                        else None)  # placed by the alignment: its size is recorded, not asked for
+        lift = motion.velum_lift if motion.velum_lift is not None else lift
+    raised = motion.metadata.get("contact", {}).get("palate_raised_mm", 0.0)
+    return speaker_palate(placed, palate_label(surface), simulated=True, raised_mm=raised, lift=lift)

@@ -1,0 +1,103 @@
+"""A stop is a closure (issue 36): the tip pressed on the palate at each /t/ closure found; a rest the palate
+cuts through is passed over for the next still stretch."""
+
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+import pytest
+
+from tonguevis.io import read_recording
+from tonguevis.paths import DATA_DIR
+
+
+@pytest.fixture(scope="module")
+def ta():
+    return read_recording(DATA_DIR / "spk1_ta.tsv")
+
+
+def _closure_gaps(motion, frames):
+    from tonguevis.sim.closures import constricting_region
+
+    node = motion.sensor_nodes[motion.sensor_names.index("TT")]
+    region = constricting_region(motion.model, int(node), "TT")
+    out = []
+    for f in frames:
+        points = motion.model.mesh.points + motion.displacement(f) + motion.jaw_offset[f]
+        out.append(np.nanmin(motion.palate_at(f).clearance(points[region])[0]))
+    return np.array(out)
+
+
+def test_the_tip_is_pressed_on_the_palate_at_each_closure_and_stays_out_of_it(ta):
+    from tonguevis.sim import simulate
+
+    pressed = simulate(ta, modes=60, palate="generic")
+    closures = pressed.metadata["contact"]["closures"]
+    frames = closures["maximum_constriction_frames"]
+    assert closures["articulator"] == "TT" and closures["closures"] == len(frames) >= 20  # five trains of five
+    free = simulate(ta, modes=60, palate="generic", closures=False)
+    assert "closures" not in free.metadata["contact"]
+    with_pull, without = _closure_gaps(pressed, frames), _closure_gaps(free, frames)
+    assert np.median(with_pull) < 1e-3 and np.median(with_pull) < 0.4 * np.median(without)
+    assert pressed.penetration.max() < 5e-4  # pressed on it, kept out of it
+    assert not pressed.metadata["recovered_frames"]
+    assert pressed.metadata["plausibility"]["amplification"] < 2.0
+
+
+def test_no_closure_is_pressed_without_a_palate_or_on_a_dorsal_stop():
+    from tonguevis.sim import simulate
+
+    ka = read_recording(DATA_DIR / "spk1_ka.tsv")
+    motion = simulate(ka, modes=40, palate="generic")
+    assert "closures" not in motion.metadata["contact"]  # the dorsum's closure is its own node's, on the velum
+    assert "contact" not in simulate(ka, modes=40).metadata
+
+
+def test_a_rest_the_palate_cuts_is_passed_over_for_the_next_still_stretch(ta, monkeypatch, caplog):
+    """The first rest candidate refused (the palate cutting through the tongue there): the next one is used, and
+    its reason says why; every candidate refused: one error naming the file, the stretches tried and --rest."""
+    import logging
+
+    from tonguevis.errors import SimulationError
+    from tonguevis.preprocess.rest import rest_candidates
+    from tonguevis.sim import simulate
+    from tonguevis.sim.palate_placement import PalateCutsTheRest
+
+    placement = importlib.import_module("tonguevis.sim.palate_placement")
+    simulate_module = importlib.import_module("tonguevis.sim.simulate")
+    original = placement.contact_context
+    candidates = rest_candidates(ta.on_uniform_grid())
+    assert candidates[0].how == "detected" and len(candidates) >= 3
+    first = candidates[0].interval
+
+    def refuse_first(palate, prep, model, basis, recording):
+        if prep.rest.interval == first:
+            raise PalateCutsTheRest("the palate cuts through the tongue at the rest (test)", "x")
+        return original(palate, prep, model, basis, recording)
+
+    monkeypatch.setattr(simulate_module, "contact_context", refuse_first)
+    with caplog.at_level(logging.WARNING, logger="tonguevis"):
+        motion = simulate(ta, modes=30, palate="generic", closures=False)
+    rest = motion.metadata["rest"]
+    assert tuple(rest["interval"]) == candidates[1].interval and "cuts through the tongue" in rest["reason"]
+    assert sum("cuts through the tongue" in r.getMessage() for r in caplog.records) == 1
+    monkeypatch.setattr(simulate_module, "contact_context",
+                        lambda *a: (_ for _ in ()).throw(PalateCutsTheRest("cut", "x")))
+    with pytest.raises(SimulationError, match=r"spk1_ta.tsv: .*every still stretch tried .*--rest START END"):
+        simulate(ta, modes=30, palate="generic")
+    with pytest.raises(SimulationError, match=r"spk1_ta.tsv: cut; is it this speaker's palate"):
+        simulate(ta, modes=30, palate="generic", rest=first)
+
+
+def test_rest_candidates_are_the_rest_found_then_still_windows_apart():
+    from tonguevis.preprocess.rest import STILLEST_WINDOW_S, choose_rest_interval, rest_candidates
+
+    rec = read_recording(DATA_DIR / "spk2_ka.tsv").on_uniform_grid()
+    candidates = rest_candidates(rec, count=5)
+    assert candidates[0].interval == choose_rest_interval(rec).interval
+    assert [c.how for c in candidates[1:]] == ["stillest window"] * 5
+    spans = [c.interval for c in candidates]
+    for i, (a0, a1) in enumerate(spans):
+        for b0, b1 in spans[i + 1:]:
+            assert b1 <= a0 - STILLEST_WINDOW_S + 1e-9 or b0 >= a1 + STILLEST_WINDOW_S - 1e-9
