@@ -31,3 +31,19 @@ def shared_file(*parts: str) -> Path:
 def shared():
     """``shared('ema', 'mview', 'F01...mat')`` -> Path, skipping when absent."""
     return shared_file
+
+
+#: The OSN12 palate traces (Opti-Speech): midsagittal, coronal, scribble.
+OSN12_TRACES = ("002_OSN12_Palate_MidSagital_HR.tsv", "003_OSN12_Palate_Coronal_HR.tsv",
+                "004_OSN12_Palate_Scribble_HR.tsv")
+
+
+@pytest.fixture(scope="session")
+def osn12_palate(tmp_path_factory):
+    """The OSN12 speaker's palate, fitted by ``tonguevis palate`` from the three traces (skips without them)."""
+    from tonguevis.cli import main
+
+    traces = [str(shared_file("ema", "optispeech", name)) for name in OSN12_TRACES]
+    out = tmp_path_factory.mktemp("palate") / "osn12.stl"
+    assert main(["palate", *traces, "--out", str(out)]) == 0
+    return out

@@ -269,7 +269,7 @@ def test_segment_counts_productions_in_the_tier(tmp_path, capsys, monkeypatch):
 
 
 def test_energy_reads_its_one_recording_with_the_given_sound(tmp_path, capsys, monkeypatch):
-    import tonguevis.workflows as workflows
+    import tonguevis.workflows.recording as workflows  # where the corpus opens each recording
     from tonguevis.errors import RecordingError
 
     if not DEMO.exists():

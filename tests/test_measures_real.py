@@ -29,16 +29,6 @@ trimesh = pytest.importorskip("trimesh")
 
 OSN = ("ema", "optispeech")
 TA, KA = "009_OSN12_Tah_withFb_natural_HR", "006_OSN12_Kah_nofb_natural_take2_HR"
-TRACES = ("002_OSN12_Palate_MidSagital_HR.tsv", "003_OSN12_Palate_Coronal_HR.tsv", "004_OSN12_Palate_Scribble_HR.tsv")
-
-
-@pytest.fixture(scope="module")
-def osn12_palate(tmp_path_factory):
-    """The speaker's palate, fitted by ``tonguevis palate`` from the three traces."""
-    traces = [str(shared_file(*OSN, name)) for name in TRACES]
-    out = tmp_path_factory.mktemp("palate") / "osn12.stl"
-    assert main(["palate", *traces, "--out", str(out)]) == 0
-    return out
 
 
 def _run(args, tmp_path, name="m"):

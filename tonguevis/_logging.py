@@ -79,3 +79,23 @@ def verbose(function: F) -> F:
         "\n\n    verbose : bool, level name or None: how much this call logs (see :mod:`tonguevis._logging`)."
         if not takes_it else "")
     return wrapper  # type: ignore[return-value]
+
+
+@contextlib.contextmanager
+def library_quieted(name: str, level: int = logging.WARNING,
+                    filters: dict[str, Callable[[logging.LogRecord], bool]] | None = None) -> Iterator[None]:
+    """Within the block, another library's logger ``name`` says ``level`` and above only, and each logger named
+    in ``filters`` (its children) drops the records its filter refuses.  The only place tonguevis touches loggers
+    other than its own."""
+    other = logging.getLogger(name)
+    old = other.level
+    other.setLevel(max(old, level))
+    filtered = [(logging.getLogger(child), check) for child, check in (filters or {}).items()]
+    for child, check in filtered:
+        child.addFilter(check)
+    try:
+        yield
+    finally:
+        for child, check in filtered:
+            child.removeFilter(check)
+        other.setLevel(old)

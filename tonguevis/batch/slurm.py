@@ -31,7 +31,7 @@ from typing import Iterator
 from tonguevis.batch.settings import BatchError
 from tonguevis.batch.slurm_jobs import JOB_NAME, JobWatch, Notify, slurm_version
 
-from tonguevis._logging import logger
+from tonguevis._logging import library_quieted, logger
 
 _WALLTIME = re.compile(r"^(\d+-)?\d+(:\d{1,2}){0,2}$")  # SLURM's forms: M, M:S, H:M:S, D-H, D-H:M, D-H:M:S
 
@@ -126,16 +126,8 @@ def _quiet_dask() -> Iterator[None]:
     runs (the batch says what matters: the jobs' starts and ends, the recordings lost)."""
     import distributed  # noqa: F401 - first: importing it sets its loggers' levels from its config
 
-    dask_logger = logging.getLogger("distributed")
-    level = dask_logger.level
-    dask_logger.setLevel(max(level, logging.WARNING))
-    scheduler = logging.getLogger("distributed.scheduler")
-    scheduler.addFilter(_said_by_the_batch)
-    try:
+    with library_quieted("distributed", filters={"distributed.scheduler": _said_by_the_batch}):
         yield
-    finally:
-        scheduler.removeFilter(_said_by_the_batch)
-        dask_logger.setLevel(level)
 
 
 def _said_by_the_batch(record: logging.LogRecord) -> bool:

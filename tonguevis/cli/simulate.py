@@ -27,6 +27,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --paraview: the tongue's surface triangles only (about 40 %% of the bytes)")
     parser.add_argument("--frame-stride", type=int, default=1, metavar="N",
                         help="ParaView/VTK exports: every N-th frame (default 1: all)")
+    parser.add_argument("--epg", type=Path, metavar="OUT",
+                        help="with --palate: the virtual electropalatogram of every frame (the Reading EPG's 62 "
+                             "electrodes on the palate, 1 where the tongue touches, and the percentage of contact, "
+                             "centre of gravity, anteriority and posteriority) as CSV, or Parquet for .parquet")
     parser.add_argument("--vtk-series", action="store_true",
                         help="with --out: also the old vtk/ series, one .vtu file per frame (about 210 KB a frame: "
                              "large for long recordings)")
@@ -80,6 +84,25 @@ def summary(motion) -> list[str]:
     return lines
 
 
+def epg_lines(motion, recording, out) -> list[str]:
+    """Write the motion's palatogram (every frame) to ``out``; the lines saying it and each production's at its
+    closure (the productions as every command finds them)."""
+    from tonguevis.analysis.epg import palatogram, production_epg, table_columns
+    from tonguevis.preprocess.gesture_table import write_rows
+    from tonguevis.workflows.recording import find_recording_productions
+
+    gram = palatogram(motion)
+    written = write_rows(gram.rows(), table_columns(), out)
+    lines = [f"wrote {written}: the palatogram of {len(gram.times)} frames (62 electrodes and the EPG indices)"]
+    table = find_recording_productions(recording, keep=None)
+    for production, epg in zip(table, production_epg(motion, table)):
+        if np.isfinite(epg["epg_frame_s"]):
+            lines.append(f"  {production.name:<10} at {epg['epg_frame_s']:.2f} s: contact "
+                         f"{epg['epg_percent_contact']:.0f} %, centre of gravity {epg['epg_cog']:.2f}, anteriority "
+                         f"{epg['epg_anteriority']:.2f}, posteriority {epg['epg_posteriority']:.2f}")
+    return lines
+
+
 def run(args: argparse.Namespace) -> int:
     from tonguevis.errors import TonguevisError
 
@@ -87,10 +110,15 @@ def run(args: argparse.Namespace) -> int:
         raise TonguevisError("--paraview and --vtk-series write into the folder given by --out DIR")
     if args.frame_stride < 1:
         raise TonguevisError(f"--frame-stride must be at least 1, got {args.frame_stride}")
+    if args.epg is not None and args.palate is None:
+        raise TonguevisError("--epg needs --palate: the palatogram is where the tongue touches the palate "
+                             "(the speaker's from `tonguevis palate`, or generic)")
     recording = read_recording_args(args)
     model = load_model_args(args)
     motion = simulate_args(args, recording, model)
     lines = summary(motion)
+    if args.epg is not None:
+        lines += epg_lines(motion, recording, args.epg)
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         motion.save(args.out / "motion.npz")

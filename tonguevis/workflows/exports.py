@@ -109,8 +109,20 @@ def write_export(key: str, session, out: str | os.PathLike, progress: ProgressCa
         return export_vtk_series(session, out, progress=progress, **options)
     if key == "csv":
         table = _production_table(session)
-        table.to_csv(out)
-        return Path(out)
+        motion = getattr(session, "motion", None)
+        if motion is None or getattr(motion, "palate", None) is None:
+            table.to_csv(out)
+            return Path(out)
+        # Simulated against a palate: each production's palatogram at its closure beside it (tonguevis.analysis.epg).
+        from tonguevis.analysis.epg import production_epg
+        from tonguevis.preprocess.gesture_table import write_rows
+        from tonguevis.preprocess.productions import CSV_COLUMNS
+
+        kinds = {"train": "int", "index": "int", "label": "str", "articulator": "str"}
+        rows = [{**dict(zip(CSV_COLUMNS, row)), **epg} for row, epg in zip(table.rows(), production_epg(motion, table))]
+        columns = {c: kinds.get(c, "float") for c in CSV_COLUMNS}
+        columns.update({c: "float" for c in rows[0] if c not in columns} if rows else {})
+        return write_rows(rows, columns, out)
     if key == "wav":
         from tonguevis.workflows.ema_wav import write_ema_wav
 

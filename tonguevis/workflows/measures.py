@@ -57,7 +57,7 @@ def measurement_palate(recording, spec) -> MeasuredPalate:
         from tonguevis.sim.simulate import placed_palate
 
         try:
-            placed, _ = placed_palate(recording, surface, frame="speaker", tongue_size=ADULT)
+            placed, _, _ = placed_palate(recording, surface, frame="speaker", tongue_size=ADULT)
         except TonguevisError as exc:  # the default: the other measures do not need it
             return MeasuredPalate(None, "", [f"no constriction: the generic palate cannot be placed in this "
                                              f"speaker ({exc})"])
