@@ -104,13 +104,13 @@ def main(argv=None) -> int:
     from tonguevis.batch import run
 
     counts = [int(w) for w in args.workers.split(",")]
-    plans = [(jobs, f"out-{jobs}", {"jobs": jobs}) for jobs in counts]
+    plans = [(jobs, f"out-{jobs}", {"workers": jobs}) for jobs in counts]
     if args.slurm:
         from tonguevis.batch.slurm import SlurmOptions
 
         slurm = (SlurmOptions.from_profile(args.slurm_profile, jobs=args.slurm, cores=1) if args.slurm_profile
                  else SlurmOptions(jobs=args.slurm, cores=1))
-        plans.append((args.slurm, "out-slurm", {"slurm": slurm}))
+        plans.append((args.slurm, "out-slurm", {"workers": slurm}))
     runs = []
     for jobs, folder, where in plans:
         out = workdir / folder

@@ -157,7 +157,7 @@ def test_motion_segmentation_validation_equal_the_commands(corpus, serial, tmp_p
 
 # ------------------------------------------------------------------ parallel runners
 def test_two_loky_workers_give_the_same_tables(corpus, serial, tmp_path):
-    result = run(corpus, tmp_path, jobs=2, model=box_tongue(), steps="simulate,energy,segment,validate",
+    result = run(corpus, tmp_path, workers=2, model=box_tongue(), steps="simulate,energy,segment,validate",
                  **SETTINGS)
     assert result.ok and len(result.done) == 3
     assert os.getpid() not in result.workers and 1 <= len(result.workers) <= 2
@@ -169,7 +169,7 @@ def test_dask_local_cluster_gives_the_same_tables(corpus, serial, tmp_path):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
-        result = run(corpus, tmp_path, client=client, model=box_tongue(),
+        result = run(corpus, tmp_path, workers=client, model=box_tongue(),
                      steps="simulate,energy,segment,validate", **SETTINGS)
     assert result.ok and len(result.done) == 3
     assert json.loads((tmp_path / "batch.json").read_text())["runner"] == "dask"

@@ -62,3 +62,28 @@ def test_bad_group_is_an_error(tmp_path, capsys):
     assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o"), "--steps", "measures",
                  "--group-by", "colour"]) == 2
     assert "group_by colour" in capsys.readouterr().err
+
+
+def test_the_label_table_is_a_setting_and_groups_by_its_speakers(corpus, tmp_path):  # noqa: F811
+    """``labels=`` (a BatchSettings field, as ``tonguevis batch --labels``) names the speakers: two recordings of
+    one speaker pool into one group; a changed row redoes that recording only."""
+    table = tmp_path / "labels.csv"
+    table.write_text("file,speaker\nspk1_ta.tsv,anna\nspk2_ka.tsv,anna\nspk3_la.tsv,ben\n")
+    out = tmp_path / "out"
+    result = run(corpus, out, steps="measures", group_by="speaker", labels=table)
+    assert result.ok and len(result.done) == 3
+    groups = set(_table(out / "repetitions.parquet")["group"])
+    assert groups == {"anna", "ben"}
+    assert json.loads((out / "batch.json").read_text())["settings"]["labels"] == str(table)
+    table.write_text("file,speaker\nspk1_ta.tsv,anna\nspk2_ka.tsv,anna\nspk3_la.tsv,carl\n")
+    again = run(corpus, out, steps="measures", group_by="speaker", labels=table)
+    assert len(again.done) == 1 and "spk3_la" in str(again.done[0]) and len(again.up_to_date) == 2
+    assert set(_table(out / "repetitions.parquet")["group"]) == {"anna", "carl"}
+
+
+def test_workers_are_a_count_a_client_or_slurm_options(corpus, tmp_path):  # noqa: F811
+    from tonguevis.batch import BatchError
+
+    for bad in (0, -1, "two", True, None):
+        with pytest.raises(BatchError, match="workers must"):
+            run(corpus, tmp_path / "out", steps="measures", workers=bad)

@@ -1,6 +1,6 @@
 """A whole corpus at once: simulate, energy curves, segmentation and validation of every recording.
 
-``run(paths, out, jobs=..., client=..., slurm=...)`` (and ``tonguevis batch``) runs the
+``run(paths, out, workers=...)`` (processes, a Dask client or SLURM options) (and ``tonguevis batch``) runs the
 single-file pipeline on every recording, on this machine (joblib/loky worker
 processes), on a Dask distributed cluster or on SLURM jobs, writes each recording's results
 as it finishes, skips what an earlier run already did with the same inputs and

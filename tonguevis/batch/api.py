@@ -1,4 +1,4 @@
-"""``run(paths, out, jobs=..., client=...)``: a whole corpus, resumable, on this machine or a Dask cluster."""
+"""``run(paths, out, workers=...)``: a whole corpus, resumable, on this machine or a Dask cluster."""
 
 from __future__ import annotations
 
@@ -72,23 +72,20 @@ def _counts(done: int, failed: int, fresh: int, total: int, lost: int = 0) -> st
 
 
 @verbose
-def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.PathLike, *, jobs: int = 1,
-        client=None, model=None,
-        labels: str | os.PathLike | None = None, settings: BatchSettings | None = None, force: bool = False,
-        progress: ProgressCallback | None = None, slurm=None, notify=None, **options) -> BatchResult:
+def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.PathLike, *, workers=1,
+        model=None, settings: BatchSettings | None = None, force: bool = False,
+        progress: ProgressCallback | None = None, **options) -> BatchResult:
     """Process every recording of ``paths`` (files, or folders walked recursively) into ``out``.
 
-    jobs : worker processes on this machine (1: in this process).
-    client : a ``distributed.Client``: run on its Dask cluster instead (``jobs`` unused).
-    slurm : a :class:`tonguevis.batch.slurm.SlurmOptions`: submit SLURM jobs of Dask workers and run
-        there (``jobs`` unused); their logs go to ``out/slurm/``, their ids to the manifests and batch.json.
-        A recording in flight on a job that ends is lost (``failures`` with step "lost"), the rest go on.
-    notify : ``notify(line)`` for each SLURM job event (submitted, running, ended); default: logged (info).
+    workers : where the recordings run: a number of worker processes on this machine (1: in this process), a
+        ``distributed.Client`` (its Dask cluster), or a :class:`tonguevis.batch.slurm.SlurmOptions` (SLURM
+        jobs of Dask workers submitted for this batch; their logs go to ``out/slurm/``, their ids to the
+        manifests and batch.json; a recording in flight on a job that ends is lost: ``failures`` with step
+        "lost", the rest go on; its ``notify`` hears of each job's events).
     model : a TongueModel; default the settings' ``mesh`` (a file, with ``mesh_axes``) read by each worker,
         else the shipped tongue.
-    labels : CSV table of speaker/syllable/trial per file (as ``tonguevis energy --labels``).
     settings / options : :class:`BatchSettings`, or its fields as keywords
-        (``steps="simulate,energy"``, ``modes=40``, ``csv=True``...).
+        (``steps="simulate,energy"``, ``modes=40``, ``csv=True``, ``labels="labels.csv"``...).
     force : redo every step even where the results are up to date.
     progress : ``progress(finished, total, "3 done, 1 failed, 6 remaining")`` after every recording.
 
@@ -101,13 +98,11 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
     from tonguevis.analysis.corpus import find_recordings, load_corpus
 
     started = time.perf_counter()
+    jobs, client, slurm = _workers(workers)
     require("pyarrow", *(["distributed"] if client is not None else ["distributed", "dask_jobqueue"]
                          if slurm is not None else ["joblib"] if jobs > 1 else []))
-    if client is not None and slurm is not None:
-        raise BatchError("give a Dask client or SLURM options, not both")
     settings = replace(settings or BatchSettings(), **options) if options else (settings or BatchSettings())
-    if jobs < 1:
-        raise BatchError(f"jobs must be at least 1, got {jobs}")
+    labels = settings.labels
     paths = [Path(paths)] if isinstance(paths, (str, os.PathLike)) else [Path(p) for p in paths]
     out = Path(out)
     out_abs = Path(os.path.abspath(out))
@@ -177,7 +172,7 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
         if slurm is not None:
             from tonguevis.batch.slurm import slurm_cluster
 
-            with slurm_cluster(slurm, out_abs / store.SLURM_LOGS, notify) as watch:
+            with slurm_cluster(slurm, out_abs / store.SLURM_LOGS) as watch:
                 runners.run_dask(tasks, spec, watch.client, on_done, watch)
                 slurm_jobs = watch.record()
         elif client is not None:
@@ -208,6 +203,23 @@ def run(paths: str | os.PathLike | Iterable[str | os.PathLike], out: str | os.Pa
                      "failed": len(result.failures), "seconds": result.seconds},
     })
     return result
+
+
+def _workers(workers) -> tuple[int, object, object]:
+    """(processes here, Dask client or None, SLURM options or None) of :func:`run`'s ``workers``."""
+    from numbers import Integral
+
+    if isinstance(workers, bool) or workers is None:
+        raise BatchError(f"workers must be a number of processes, a Dask client or SLURM options, got {workers!r}")
+    if isinstance(workers, Integral):
+        if workers < 1:
+            raise BatchError(f"workers must be at least 1, got {workers}")
+        return int(workers), None, None
+    if type(workers).__name__ == "SlurmOptions":
+        return 1, None, workers
+    if hasattr(workers, "submit") and hasattr(workers, "scheduler_info"):  # a distributed.Client
+        return 1, workers, None
+    raise BatchError(f"workers must be a number of processes, a Dask client or SLURM options, got {workers!r}")
 
 
 def _runner(jobs: int, client, slurm) -> str:

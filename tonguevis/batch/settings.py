@@ -55,6 +55,8 @@ class BatchSettings(RunSettings):
         recording, None to find it; ``palate`` a palate file for every recording).
     sensor_map : sensor map for every recording (preset name, JSON path or dict);
         None uses a ``sensor_map.json`` beside each recording.
+    labels : CSV table of speaker/syllable/trial per file (as ``tonguevis energy --labels``); None: from the
+        file names.  A recording's labels enter its own input hash, so a changed row redoes that recording only.
     read_options : reader options for every recording (``-O``: ``axes=``, ``audio=False`` ...), a dict
         or (key, value) pairs; kept as sorted pairs.
     keep : production positions kept per train (None: every production), as ``tonguevis energy --all``.
@@ -71,6 +73,7 @@ class BatchSettings(RunSettings):
 
     steps: tuple[str, ...] = DEFAULT_STEPS
     sensor_map: Any = None
+    labels: Any = None
     read_options: tuple = ()
     keep: tuple[int, ...] | None = (2, 3, 4)
     window: str = "release"
@@ -126,6 +129,7 @@ class BatchSettings(RunSettings):
     def as_dict(self) -> dict:
         out = asdict(self)
         out["sensor_map"] = _sensor_map_text(self.sensor_map)
+        out["labels"] = None if self.labels is None else os.fspath(self.labels)
         out["measures_palate"] = None if self.measures_palate is None else os.fspath(self.measures_palate) \
             if not hasattr(self.measures_palate, "metadata") else "given in Python"
         for name in ("mesh", "mesh_axes"):  # the model is the ModelSpec's

@@ -24,7 +24,7 @@ import tempfile
 import time
 import tomllib
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Iterator
 
@@ -50,7 +50,8 @@ class SlurmOptions:
     ``#SBATCH`` options (``["--qos=short"]``).  prologue : shell lines run before
     each worker starts (``["module load python/3.11", "source venv/bin/activate"]``).
     python : the workers' interpreter (default this one's).  local_directory :
-    the workers' scratch folder (node-local disk).
+    the workers' scratch folder (node-local disk).  notify : ``notify(line)`` for each job event (submitted,
+    running, ended); None: logged (info).  Not part of what is asked of SLURM (not in :meth:`as_dict`).
     """
 
     jobs: int = 1
@@ -64,6 +65,7 @@ class SlurmOptions:
     prologue: tuple[str, ...] = ()
     python: str | None = None
     local_directory: str | None = None
+    notify: Notify | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         from dask.utils import parse_bytes
@@ -95,7 +97,7 @@ class SlurmOptions:
         table = document.get("slurm")
         if not isinstance(table, dict):
             raise BatchError(f"{path}: no [slurm] table (see the README's Corpus section)")
-        known = {f.name for f in fields(cls)}
+        known = {f.name for f in fields(cls)} - {"notify"}
         unknown = sorted(set(table) - known)
         if unknown:
             raise BatchError(f"{path}: unknown key(s) {', '.join(unknown)} in [slurm]; known: {', '.join(sorted(known))}")
@@ -105,11 +107,13 @@ class SlurmOptions:
             raise BatchError(f"{path}: {exc}") from None
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        out = asdict(self)
+        out.pop("notify")
+        return out
 
 
 @contextmanager
-def slurm_cluster(options: SlurmOptions, log_directory: Path, notify: Notify | None = None) -> Iterator[JobWatch]:
+def slurm_cluster(options: SlurmOptions, log_directory: Path) -> Iterator[JobWatch]:
     """Submit ``options.jobs`` SLURM jobs of Dask workers; yield the :class:`JobWatch` (its ``client``); cancel
     the jobs on leaving.  A job SLURM refuses (partition, account, walltime over the limit) is a BatchError."""
     if slurm_version() is None:
@@ -117,7 +121,7 @@ def slurm_cluster(options: SlurmOptions, log_directory: Path, notify: Notify | N
                          "submit host of the cluster")
     log_directory.mkdir(parents=True, exist_ok=True)
     with _quiet_dask():
-        yield from _cluster(options, log_directory, notify)
+        yield from _cluster(options, log_directory, options.notify)
 
 
 @contextmanager

@@ -122,6 +122,7 @@ def slurm_options(args: argparse.Namespace):
 def run(args: argparse.Namespace) -> int:
     from tonguevis._progress import tqdm_progress
     from tonguevis.batch import BatchSettings, run as run_batch
+    import dataclasses
     import os
 
     from tonguevis.cli._common import parse_options, run_settings_of
@@ -134,12 +135,14 @@ def run(args: argparse.Namespace) -> int:
         run_settings = run_settings.replace(palate=os.path.abspath(args.palate))
     settings = BatchSettings(
         **{name: getattr(run_settings, name) for name in run_settings.names()},
-        steps=args.steps, sensor_map=args.sensors,
+        steps=args.steps, sensor_map=args.sensors, labels=args.labels,
         read_options=parse_options(args.option), keep=None if args.all else (2, 3, 4), window=args.window,
         tier=args.productions_from, segment_first=args.segment_first, quasi_static=not args.no_static, csv=args.csv,
         measures_palate=measures_palate(args), group_by=args.group_by)
     model = load_model(args)
     slurm = slurm_options(args)
+    if slurm is not None and not args.quiet:
+        slurm = dataclasses.replace(slurm, notify=_say)
     client = None
     if args.scheduler is not None:
         from tonguevis.batch.api import require
@@ -150,9 +153,8 @@ def run(args: argparse.Namespace) -> int:
         client = Client(args.scheduler)
     try:
         with tqdm_progress("batch", disable=args.quiet, unit="recording") as progress:
-            result = run_batch(args.paths, args.out, jobs=args.jobs, client=client, model=model,
-                               labels=args.labels, settings=settings, force=args.force, progress=progress,
-                               slurm=slurm, notify=None if args.quiet else _say)
+            result = run_batch(args.paths, args.out, workers=slurm or client or args.jobs, model=model,
+                               settings=settings, force=args.force, progress=progress)
     except KeyboardInterrupt:
         print(f"the recordings finished are kept in {args.out}: run the same command again to resume",
               file=sys.stderr)

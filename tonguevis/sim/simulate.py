@@ -164,7 +164,7 @@ def simulate(
         drive, contact["held_to_palate"] = held_to_palate(contact, model.mesh.points[prep.nodes], drive, reach,
                                                           prep.names)
         if settings.closures:
-            held_rows, held_drive = _with_closures(recording, prep, model, basis, w_full, contact, phi_s, w_s,
+            held_rows, held_drive = _with_closures(recording, prep, model, (basis, w_full), contact, held_rows,
                                                    drive)
     targets, compliance, schedule = drive_schedule(held_drive, recording.rate, basis.eigenvalues, held_rows[0],
                                                    sensor_stiffness, contact=contact,
@@ -232,8 +232,9 @@ def simulate(
     return motion
 
 
-def _with_closures(recording, prep, model, basis, w_full, contact, phi_s, w_s, drive):
-    """((rows of Φ, rows of W), drive (F, S + V, 3)): the sensors' and, after them, the closures' pulls
+def _with_closures(recording, prep, model, modes, contact, rows, drive):
+    """((rows of Φ, rows of W), drive (F, S + V, 3)): the sensors' ``rows`` (Φ_s, W_s) and, after them, the
+    closures' pulls, ``modes`` the (basis, full W)
     (:func:`tonguevis.sim.closures.closure_contacts`, :func:`drive_schedule`'s ``pulls``);
     ``contact["sensor_nodes"]`` and ``contact["closures"]`` say them.  As given when the recording shows no
     closure."""
@@ -241,7 +242,8 @@ def _with_closures(recording, prep, model, basis, w_full, contact, phi_s, w_s, d
 
     closures = closure_contacts(recording, prep, model, contact)
     if closures is None:
-        return (phi_s, w_s), drive
+        return rows, drive
+    (basis, w_full), (phi_s, w_s) = modes, rows
     dofs = (3 * closures.nodes[:, None] + np.arange(3)).ravel()
     v = len(closures.nodes)
     phi_v = basis.phi[dofs].reshape(v, 3, -1)
