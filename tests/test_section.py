@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from tonguevis.render.section import plane_section
+from tonguevis.analysis.section import plane_section
 
 
 def test_a_cube_cut_in_the_middle_is_a_square():

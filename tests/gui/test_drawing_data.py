@@ -240,7 +240,7 @@ def test_draw_frame_in_the_head_and_the_jaw_frame(fake):
 
 
 def test_midline_profile_runs_from_the_tip_back_along_the_mid_plane():
-    from tonguevis.render.drawing import MIDLINE_BIN_MM, MidlineProfile
+    from tonguevis.analysis.section import MIDLINE_BIN_MM, MidlineProfile
 
     model = FakeModel(box_mesh(8, 4, 3, size=(0.07, 0.04, 0.03)))
     model.dorsal_nodes = np.flatnonzero(np.isclose(model.mesh.points[:, 2], 0.03))

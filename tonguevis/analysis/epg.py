@@ -191,14 +191,15 @@ def surface_under(points: np.ndarray, triangles: np.ndarray, xy: np.ndarray,
     return out
 
 
-def palatogram(motion, frames=None, chunk: int = 64) -> Palatogram:
+def palatogram(motion, frames=None, chunk: int = 64, layout: EpgLayout | None = None) -> Palatogram:
     """The virtual EPG of a motion simulated against a palate (``motion.palate``), at ``frames`` (indices; None:
     every frame): an electrode is contacted where the tongue's upper surface right under it, or a node of it within
     the electrode's cell (:meth:`EpgLayout.cell_of`), is within :data:`ELECTRODE_TOUCH` of the palate of that
-    frame.  ValueError for a motion without a palate."""
+    frame.  ``layout``: the motion's palate's (:func:`epg_layout`), when already computed (a view showing frame
+    after frame).  ValueError for a motion without a palate."""
     if motion.palate is None:
         raise ValueError("the motion was simulated without a palate: no palatogram")
-    layout = epg_layout(motion.palate)
+    layout = layout if layout is not None else epg_layout(motion.palate)
     frames = np.arange(motion.n_frames) if frames is None else np.atleast_1d(np.asarray(frames, dtype=np.int64))
     model = motion.model
     nodes, triangles = upper_surface(model)

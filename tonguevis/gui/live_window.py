@@ -27,14 +27,15 @@ from collections import deque
 from pathlib import Path
 
 import numpy as np
-from PySide6.QtCore import QPointF, Qt, QTimer
-from PySide6.QtGui import QColor, QPainter, QPen
+from PySide6.QtCore import Qt, QTimer
+from PySide6.QtGui import QColor
 from PySide6.QtWidgets import (
     QCheckBox, QDoubleSpinBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit, QListWidget, QMainWindow,
     QMessageBox, QPushButton, QScrollArea, QSplitter, QVBoxLayout, QWidget,
 )
 
 from tonguevis.errors import TonguevisError
+from tonguevis.gui.midsagittal_view import BACKGROUND, GHOST_COLOUR, SENSOR_COLOUR, TONGUE_COLOUR, MidsagittalView
 from tonguevis.gui.qt_workarounds import keep_none_alive
 from tonguevis.live.simulator import REST_SEARCH_S, REST_WINDOW_S, LiveSimulationError, LiveSimulator
 from tonguevis.live.targets import (
@@ -51,10 +52,6 @@ AUTO_REST_S = REST_SEARCH_S
 HISTORY = 600
 #: Frames simulated in one tick at most: after a stall the older ones of a burst are skipped (and counted).
 MAX_BURST = 50
-TONGUE_COLOUR = "#d98a8a"
-SENSOR_COLOUR = "#2ecc71"
-BACKGROUND = "#2b303a"
-GHOST_COLOUR = "#9ecbff"
 DEFAULT_RADIUS_MM = 5.0
 
 
@@ -77,65 +74,6 @@ def parse_source(text: str, default_port: int = 3030) -> tuple[str, int]:
     if not 0 < number < 65536:
         raise TonguevisError(f"the live source's port must be 1-65535, got {number}")
     return host or "127.0.0.1", number
-
-
-class MidsagittalView(QWidget):
-    """The tongue's midsagittal section (x anterior to the right, z up), the sensors, targets and palate.
-
-    Painted with QPainter from the segments given (m): no OpenGL, a fraction of a millisecond."""
-
-    def __init__(self, parent=None):
-        super().__init__(parent)
-        self.setMinimumSize(220, 160)
-        self.segments = np.zeros((0, 2, 2))
-        self.palate = np.zeros((0, 2, 2))
-        self.sensors = np.zeros((0, 2))
-        self.targets: list[tuple[float, float, float, tuple]] = []  # x, z, radius (m), rgb
-        self.ghost = np.zeros((0, 2))
-        self.bounds: tuple[float, float, float, float] | None = None  # xmin, xmax, zmin, zmax (m)
-
-    def set_bounds(self, points_xz: np.ndarray, margin: float = 0.25) -> None:
-        lo, hi = np.nanmin(points_xz, axis=0), np.nanmax(points_xz, axis=0)
-        pad = margin * float(max(hi - lo))
-        self.bounds = (lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad)
-
-    def _mapper(self):
-        x0, x1, z0, z1 = self.bounds
-        w, h = max(self.width(), 1), max(self.height(), 1)
-        scale = min(w / (x1 - x0), h / (z1 - z0))
-        cx, cz = (x0 + x1) / 2, (z0 + z1) / 2
-        return scale, (lambda x, z: QPointF(w / 2 + scale * (x - cx), h / 2 - scale * (z - cz)))
-
-    def paintEvent(self, _event) -> None:  # noqa: N802 (Qt name)
-        painter = QPainter(self)
-        painter.fillRect(self.rect(), QColor(BACKGROUND))
-        painter.setPen(QColor("#cccccc"))
-        painter.drawText(6, 16, "midsagittal (anterior →)")
-        if self.bounds is None:
-            painter.end()
-            return
-        painter.setRenderHint(QPainter.RenderHint.Antialiasing)
-        scale, at = self._mapper()
-        for segments, colour, width in ((self.palate, "#8fc1e3", 2), (self.segments, TONGUE_COLOUR, 2.5)):
-            painter.setPen(QPen(QColor(colour), width))
-            for (xa, za), (xb, zb) in segments:
-                painter.drawLine(at(xa, za), at(xb, zb))
-        if len(self.ghost):
-            painter.setPen(QPen(QColor(GHOST_COLOUR), 1.5, Qt.PenStyle.DashLine))
-            ok = self.ghost[np.all(np.isfinite(self.ghost), axis=1)]
-            for a, b in zip(ok[:-1], ok[1:]):
-                painter.drawLine(at(*a), at(*b))
-        for x, z, r, rgb in self.targets:
-            if not (np.isfinite(x) and np.isfinite(z)):
-                continue
-            painter.setPen(QPen(QColor.fromRgbF(*rgb), 2))
-            painter.drawEllipse(at(x, z), scale * r, scale * r)
-        painter.setPen(Qt.PenStyle.NoPen)
-        painter.setBrush(QColor(SENSOR_COLOUR))
-        for x, z in self.sensors:
-            if np.isfinite(x) and np.isfinite(z):
-                painter.drawEllipse(at(x, z), 4, 4)
-        painter.end()
 
 
 #: The live 3D view renders at this share of its pixels in each direction and is drawn scaled up:
@@ -552,7 +490,7 @@ class LiveWindow(QMainWindow):
                 self.midsagittal.set_bounds(rest[:, [0, 2]], margin=0.35)
                 self._mid_y = float(np.median(rest[:, 1]))
                 if self.palate is not None:
-                    from tonguevis.render.section import plane_section
+                    from tonguevis.analysis.section import plane_section
 
                     self.midsagittal.palate = plane_section(self.palate.points, self.palate.faces, self._mid_y)
             else:
@@ -583,7 +521,7 @@ class LiveWindow(QMainWindow):
         self.plotter.render()
         t3 = time.perf_counter()
         if surface is not None:
-            from tonguevis.render.section import plane_section
+            from tonguevis.analysis.section import plane_section
 
             self.midsagittal.segments = plane_section(surface, sim.surface_faces, self._mid_y)
             self.midsagittal.sensors = np.asarray(drawn_sensors)[:, [0, 2]]

@@ -16,7 +16,8 @@ from matplotlib.figure import Figure
 from PySide6.QtWidgets import QLabel, QSizePolicy, QVBoxLayout, QWidget
 
 from tonguevis.appstate import AppState, connected
-from tonguevis.render.drawing import TOUCH_MM, MidlineProfile, head_points
+from tonguevis.analysis.section import MidlineProfile
+from tonguevis.render.drawing import TOUCH_MM, head_points
 from tonguevis.gui.timeplot import FACE, TimePlot
 
 PENETRATION_COLOUR = "#c0392b"

@@ -205,7 +205,7 @@ class View3D(QWidget):
         self.drawn = drawn
         self.scene.update(drawn.points, drawn.scalars, drawn.sensor_points, drawn.targets,
                           frame_text(frames, i, self.session.productions, drawn.caption), render=False,
-                          context_offsets=drawn.context_offsets)
+                          context_offsets=drawn.context_offsets, context_shapes=drawn.context_shapes)
         self.scene.set_view_labels(f" · {drawn.caption.split(':')[0]}")
         line = None
         if not pipelined:

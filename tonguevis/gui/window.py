@@ -30,6 +30,7 @@ from tonguevis.gui.palate_actions import PalateMixin
 from tonguevis.gui.palate_panel import PalatePanel
 from tonguevis.gui.playback import PlaybackController
 from tonguevis.gui.rest_dialog import RestMixin
+from tonguevis.gui.section_panel import SectionPanel
 from tonguevis.gui.sensor_panel import SensorPanel
 from tonguevis.workflows.session import Session, load_session, needs_sensor_map, remap_session
 from tonguevis.gui.transport import TransportBar
@@ -86,10 +87,12 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         self.sensor_panel = SensorPanel(self.state, self)
         self.modal_tab = ModalTab(self.state, self)
         self.palate_panel = PalatePanel(self.state, self)
+        self.section_panel = SectionPanel(self.state, self)
         self.tabs = QTabWidget()
         self.tabs.addTab(self.sensor_panel, "Sensors")
         self.tabs.addTab(self.modal_tab, "Modal q(t)")
         self.tabs.addTab(self.palate_panel, "Palate")
+        self.tabs.addTab(self.section_panel, "Midsagittal")
         self.audio = AudioPlot(self.state, self)
         self.transport = TransportBar(self.state, self)
         top = QSplitter(Qt.Orientation.Horizontal)
@@ -106,7 +109,7 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
         layout.addWidget(vertical, 1)
         layout.addWidget(self.transport)
         self.setCentralWidget(central)
-        for view in (self.view3d, self.sensor_panel, self.modal_tab, self.palate_panel):
+        for view in (self.view3d, self.sensor_panel, self.modal_tab, self.palate_panel, self.section_panel):
             self.state.follow_session(view.set_session)
         self._build_compare_panel(top)  # after the views: it draws into A's scene once A's view has built it
 

@@ -27,10 +27,6 @@ from tonguevis._logging import logger
 CONTACT_RANGE_MM = (0.0, 10.0)
 #: A node this close to the palate touches it (the contact area of ``motion.contact_area``).
 TOUCH_MM = 0.3
-#: Half-width of the band around the tongue's midline whose dorsal nodes make the midline profile.
-MIDLINE_BAND = 2e-3  # m
-#: Bins of the midline profile along the tongue, mm.
-MIDLINE_BIN_MM = 2.0
 
 
 @dataclass
@@ -70,15 +66,37 @@ class ShownPalate:
             return self.surface
         return self.surface.lifted(float(self.lift[min(max(int(index), 0), len(self.lift) - 1)]))
 
-    def clearance_mm(self, points: np.ndarray) -> np.ndarray:
-        """(k,) float32 distance (mm) of head-frame ``points`` (k, 3) below the palate; negative inside, NaN off it."""
-        gap, _ = self.surface.clearance(np.asarray(points, dtype=np.float64))
+    def clearance_mm(self, points: np.ndarray, index: int | None = None) -> np.ndarray:
+        """(k,) float32 distance (mm) of head-frame ``points`` (k, 3) below the palate (at frame ``index``: its velum
+        lifted as then; None: at rest); negative inside, NaN off it."""
+        points = np.asarray(points, dtype=np.float64)
+        if index is None or self.lift is None:
+            gap, _ = self.surface.clearance(points)
+        else:
+            amount = float(self.lift[min(max(int(index), 0), len(self.lift) - 1)])
+            gap, _ = self.surface.clearance(points, lift=np.full(len(points), amount))
         return (1e3 * gap).astype(np.float32)
+
+    @property
+    def regions(self):
+        """The palate's references for saying where on it something is
+        (:class:`tonguevis.sim.palate_regions.PalateFrame`), computed once."""
+        cached = getattr(self, "_regions", None)
+        if cached is None:
+            from tonguevis.sim.palate_regions import palate_frame
+
+            cached = self._regions = palate_frame(self.surface)
+        return cached
 
     def describe(self) -> str:
         text = self.label + (" (contact kept in the simulation)" if self.simulated else " (drawn only: simulated "
                                                                                           "without contact)")
-        if self.raised_mm > 0.05:
+        info = self.surface.metadata.get("speaker_palate")
+        if info:  # a speaker's palate made whole from the speech: what was traced, estimated, moved
+            from tonguevis.sim.plausibility import speaker_palate_words
+
+            text += speaker_palate_words(info).replace("; the speaker's palate:", ":", 1)
+        elif self.raised_mm > 0.05:
             text += f", raised {self.raised_mm:.1f} mm above where the sensors went"
         return text
 
@@ -172,41 +190,6 @@ def palate_label(spec) -> str:
     return f"speaker's palate {Path(spec).name}"
 
 
-class MidlineProfile:
-    """The tongue's dorsal midline: nodes within :data:`MIDLINE_BAND` of its mid-plane, by distance behind the tip.
-
-    ``position_mm`` (b,): centre of each :data:`MIDLINE_BIN_MM` bin, mm behind the tongue tip
-    at rest (along x); ``nodes`` the mesh nodes, ``bin_of`` each node's bin.
-    """
-
-    def __init__(self, model):
-        points = np.asarray(model.mesh.points, dtype=np.float64)
-        dorsal = np.asarray(getattr(model, "dorsal_nodes", np.arange(len(points))))
-        mid = float(np.median(points[:, 1]))
-        band = MIDLINE_BAND
-        nodes = dorsal[np.abs(points[dorsal, 1] - mid) < band]
-        while len(nodes) < 8 and band < 4 * MIDLINE_BAND:  # a coarse mesh: widen the band
-            band *= 1.5
-            nodes = dorsal[np.abs(points[dorsal, 1] - mid) < band]
-        near_mid = np.abs(points[:, 1] - mid) < band
-        tip = float(points[near_mid, 0].max()) if near_mid.any() else float(points[:, 0].max())
-        behind = 1e3 * (tip - points[nodes, 0])
-        order = np.argsort(behind, kind="stable")
-        self.nodes = nodes[order]
-        bins = np.floor(behind[order] / MIDLINE_BIN_MM).astype(np.int64)
-        self.bins, self.bin_of = np.unique(bins, return_inverse=True)
-        self.bin_of = self.bin_of.ravel()
-        self.position_mm = (self.bins + 0.5) * MIDLINE_BIN_MM
-        self.band_mm = 1e3 * band
-
-    def distances(self, palate: ShownPalate, head_points: np.ndarray) -> np.ndarray:
-        """(b,) mm: the smallest distance to the palate in each bin (NaN where no palate lies above)."""
-        gap = palate.clearance_mm(np.asarray(head_points)[self.nodes]).astype(np.float64)
-        out = np.full(len(self.bins), np.inf)
-        np.minimum.at(out, self.bin_of, np.where(np.isfinite(gap), gap, np.inf))
-        return np.where(np.isfinite(out), out, np.nan)
-
-
 @dataclass
 class FrameDrawing:
     """One frame as the scene draws it (float32, metres, in ``reference``)."""
@@ -219,6 +202,9 @@ class FrameDrawing:
     targets: np.ndarray
     context_offsets: dict = field(default_factory=dict)
     caption: str = ""
+    #: name -> (k, 3) a context surface's points at this frame where it changes shape (the velum lifting), before
+    #: its offset; surfaces not named keep their shape.
+    context_shapes: dict = field(default_factory=dict)
 
 
 def jaw_offset_at(motion, i: int) -> np.ndarray:
@@ -247,22 +233,27 @@ def draw_frame(session, i: int, reference: str = "head", mode: str = "displaceme
     tongue = jaw if reference == "head" else np.zeros(3, dtype=np.float32)
     palate = getattr(session, "shown_palate", None)
     if mode == "contact":
-        scalars = palate.clearance_mm(frames.points[i] + jaw) if palate is not None else None
+        scalars = palate.clearance_mm(frames.points[i] + jaw, index=i) if palate is not None else None
     else:
         scalars = frames.scalars[mode][i] if mode in frames.scalars else None
     offsets = {"jaw": tongue.astype(np.float64), "palate": (tongue - jaw).astype(np.float64)}
     caption = describe(reference, jaw_moves(motion))
+    shapes = {}
+    if palate is not None and palate.lift is not None and not palate.generic:
+        shapes["palate"] = palate.points_at(i)  # the velum as lifted then
     return FrameDrawing(i, reference, frames.points[i] + tongue, scalars, frames.sensor_points[i] + tongue,
-                        frames.targets[i] + tongue, offsets, caption)
+                        frames.targets[i] + tongue, offsets, caption, shapes)
 
 
 def contact_at(session, i: int) -> dict:
     """What the status bar says about the palate at frame ``i``: {"penetration_mm", "contact_area_mm2"
     (None when the motion was simulated without contact), "closest_mm" (the upper surface's closest
     approach, negative inside; None where no palate lies above), "sensors_above" (the driving sensors
-    measured above the palate: there the sensor wins, and the tongue around it may be inside)}."""
+    measured above the palate: there the sensor wins, and the tongue around it may be inside), "place" (where on
+    the palate the tongue touches it: "front-centre", "back-left"...; "" where it does not)}, against the palate
+    as at that frame (its velum lifted)."""
     motion = session.frames.motion
-    out = {"penetration_mm": None, "contact_area_mm2": None, "closest_mm": None, "sensors_above": []}
+    out = {"penetration_mm": None, "contact_area_mm2": None, "closest_mm": None, "sensors_above": [], "place": ""}
     if getattr(motion, "penetration", None) is not None:
         out["penetration_mm"] = float(1e3 * motion.penetration[i])
     if getattr(motion, "contact_area", None) is not None:
@@ -271,9 +262,15 @@ def contact_at(session, i: int) -> dict:
     if palate is not None:
         frames = session.frames
         nodes = _dorsal(session)
-        gap = palate.clearance_mm(head_points(frames, i)[nodes])
+        points = head_points(frames, i)[nodes]
+        gap = palate.clearance_mm(points, index=i)
         out["closest_mm"] = float(np.nanmin(gap)) if np.isfinite(gap).any() else None
-        sensors = palate.clearance_mm(frames.targets[i] + jaw_offset_at(motion, i))  # the measured positions
+        touching = np.isfinite(gap) & (gap < TOUCH_MM)
+        if touching.any():
+            from tonguevis.sim.palate_regions import place_of
+
+            out["place"] = place_of(palate.regions, points[touching])
+        sensors = palate.clearance_mm(frames.targets[i] + jaw_offset_at(motion, i), index=i)  # as measured
         out["sensors_above"] = [name for name, g in zip(motion.sensor_names, sensors) if g < 0]
     return out
 
@@ -291,6 +288,8 @@ def contact_line(session, i: int, reference: str) -> str:
         parts.append(f"penetration {figures['penetration_mm']:.2f} mm, contact area {figures['contact_area_mm2']:.0f} mm²")
     else:
         parts.append("no contact simulated")
+    if figures["place"]:
+        parts.append(f"touching {figures['place']}")
     if figures["closest_mm"] is not None:
         parts.append(f"closest {figures['closest_mm']:.1f} mm")
     if figures["sensors_above"]:

@@ -309,15 +309,20 @@ class TongueScene:
     def update(self, points: np.ndarray, scalars: np.ndarray | None = None,
                sensor_points: np.ndarray | None = None, targets: np.ndarray | None = None,
                text: str | None = None, render: bool = True,
-               context_offsets: dict[str, np.ndarray] | None = None) -> None:
+               context_offsets: dict[str, np.ndarray] | None = None,
+               context_shapes: dict[str, np.ndarray] | None = None) -> None:
         """Move to one frame: write points/scalars in place, then one render.
 
         context_offsets : name -> (3,) translation of a context surface from where it was
         built (the jaw carried by the jaw's motion in the head frame, the palate by minus
         it in the jaw frame); surfaces not named stay where they are.
+        context_shapes : name -> (k, 3) the surface's points before its offset, where it changes shape (the velum
+        lifting frame by frame); same number of points as built.
         """
         if self.surface is None:
             return
+        for name, shape in (context_shapes or {}).items():
+            self.reshape_context(name, shape)
         for name, offset in (context_offsets or {}).items():
             self.move_context(name, offset)
         self.surface.points[:] = points
@@ -334,6 +339,16 @@ class TongueScene:
             self.time_text.SetText(2, text)  # vtkCornerAnnotation: 2 = upper left
         if render:
             self.plotter.render()
+
+    def reshape_context(self, name: str, points: np.ndarray) -> None:
+        """Give context surface ``name`` the shape ``points`` (k, 3) m (before its offset), in place."""
+        if name not in self.context:
+            return
+        points = np.asarray(points, dtype=np.float32)
+        if points.shape != self._context_rest[name].shape or np.array_equal(points, self._context_rest[name]):
+            return
+        self._context_rest[name] = points.copy()
+        self.context[name].points[:] = points + np.asarray(self._context_offsets[name], dtype=np.float32)
 
     def move_context(self, name: str, offset: np.ndarray) -> None:
         """Translate context surface ``name`` to ``offset`` (3,) m from where it was built, in place."""

@@ -74,7 +74,7 @@ def export_video(session, out, start: float | None = None, end: float | None = N
             drawn = draw_frame(session, i, frame, mode)
             scene.update(drawn.points, drawn.scalars, drawn.sensor_points, drawn.targets,
                          frame_text(frames, i, session.productions, drawn.caption), render=False,
-                         context_offsets=drawn.context_offsets)
+                         context_offsets=drawn.context_offsets, context_shapes=drawn.context_shapes)
             scene.set_view_labels(f" · {drawn.caption.split(':')[0]}")
             yield plotter.screenshot(None, return_img=True, window_size=(width, height))
             report(progress, k + 1, len(times), "rendering video frames")
