@@ -151,11 +151,13 @@ def test_a_speakers_palate_is_placed_exactly_as_the_simulation_placed_it(qtbot, 
     monkeypatch.setattr(simulate_module, "place_palate", spy)
     simulate_with_palate(qtbot, window, path, session)
     assert len(placed) == 1  # by simulate() only: the views draw the surface it returned with the motion
-    (used, shift), = placed
+    (used, lift, info), = placed
     assert session.shown_palate.surface is used is session.motion.palate
-    assert session.shown_palate.raised_mm == pytest.approx(1e3 * shift)
+    assert session.shown_palate.raised_mm == pytest.approx(info.get("traced_raised_mm", 0.0))
     assert session.shown_palate.raised_mm == pytest.approx(session.motion.metadata["contact"]["palate_raised_mm"])
-    assert not np.allclose(used.rotation, np.eye(3)) or used.scale != 1.0  # it was moved by the alignment
+    # it was moved by the alignment (into the model's frame, resampled there when made whole from the speech)
+    x0, x1 = used._from_own(np.array([[used.x[0], used.y[0], 0.0], [used.x[-1], used.y[-1], 0.0]]))[:, 0]
+    assert abs(min(x0, x1) - palate.x[0]) > 1e-3 or abs(max(x0, x1) - palate.x[-1]) > 1e-3
 
 
 @pytest.mark.parametrize("kind", ["garbage", "missing", "no_triangles", "truncated_grid", "flat_line"])

@@ -101,3 +101,29 @@ def test_rest_candidates_are_the_rest_found_then_still_windows_apart():
     for i, (a0, a1) in enumerate(spans):
         for b0, b1 in spans[i + 1:]:
             assert b1 <= a0 - STILLEST_WINDOW_S + 1e-9 or b0 >= a1 + STILLEST_WINDOW_S - 1e-9
+
+
+def test_a_model_that_runs_away_at_the_closures_is_simulated_without_their_pulls_and_says_so(caplog):
+    """A coarse block (20 modes) cannot take the tip's pull onto a flat palate over it: rather than refuse the
+    recording, simulate() drives it by the sensors and the contact alone, says so once, and the summary says so."""
+    import logging
+
+    from tests.gui.conftest import MODES, block_model, demo_session
+    from tests.gui.test_palate_contact import flat_palate
+    from tonguevis.sim import simulate
+    from tonguevis.sim.plausibility import contact_line
+
+    recording = demo_session().recording  # the app's first train of the demo /ta/
+    tt = recording.sensors["TT"]
+    palate = flat_palate(frame=None)
+    centre = np.nanmean(tt, axis=0)
+    palate.x, palate.y = palate.x + centre[0] + 0.02, palate.y + centre[1]
+    palate.z = np.full_like(palate.z, np.nanmax(tt[:, 2]) + 2e-3)
+    with caplog.at_level(logging.WARNING, logger="tonguevis"):
+        motion = simulate(recording, block_model(), modes=MODES, frame="model", landmarks="rule", palate=palate)
+    said = [r.getMessage() for r in caplog.records if "closures' pulls" in r.getMessage()]
+    assert len(said) == 1
+    c = motion.metadata["contact"]
+    assert c["closures_dropped"] and "closures" not in c
+    assert "the closures not pressed" in contact_line(motion.metadata)
+    assert len(motion.metadata["recovered_frames"]) < 0.05 * motion.n_frames

@@ -204,8 +204,6 @@ def palatogram(motion, frames=None, chunk: int = 64, layout: EpgLayout | None = 
     model = motion.model
     nodes, triangles = upper_surface(model)
     rest = model.mesh.points[nodes]
-    used = layout.used
-    electrodes = layout.positions[used][:, :2]  # (62, 2)
     lift = motion.velum_lift
     jaw = motion.jaw_offset if motion.jaw_offset is not None else np.zeros((motion.n_frames, 3))
     contacts = np.zeros((len(frames), ROWS, COLUMNS), dtype=bool)
@@ -213,29 +211,42 @@ def palatogram(motion, frames=None, chunk: int = 64, layout: EpgLayout | None = 
         block = frames[start:start + chunk]
         u = model.displacements(motion.q[block], warping=motion.warping, nodes=nodes)
         points = rest[None] + u + jaw[block][:, None]  # (b, k, 3) head frame
-        # The tongue can touch under an electrode only on a triangle with a corner near the palate.
-        node_gap = motion.palate.clearance(points.reshape(-1, 3), lift=None if lift is None else
-                                           np.repeat(lift[block], len(nodes)))[0].reshape(len(block), -1)
-        near = np.isfinite(node_gap) & (node_gap < NEAR)
-        under = surface_under(points, triangles, electrodes, np.any(near[:, triangles], axis=2))  # (b, 62, 3)
-        amounts = None if lift is None else np.repeat(lift[block], len(electrodes))
-        flat = under.reshape(-1, 3)
-        gap = np.full(len(flat), np.nan)
-        ok = np.isfinite(flat[:, 2])
-        if ok.any():
-            gap[ok] = motion.palate.clearance(flat[ok], lift=None if amounts is None else amounts[ok])[0]
-        lit = (np.isfinite(gap) & (gap < ELECTRODE_TOUCH)).reshape(len(block), -1)
-        page = np.zeros((len(block), ROWS, COLUMNS), dtype=bool)
-        page[:, used] = lit
-        # A node touching within an electrode's cell lights it too: the model's contact is a few nodes where a
-        # real tongue's patch would cover the electrode.
-        f, k = np.nonzero(np.isfinite(node_gap) & (node_gap < ELECTRODE_TOUCH))
-        if len(f):
-            r, c = layout.cell_of(points[f, k, :2])
-            hit = r >= 0
-            page[f[hit], r[hit], c[hit]] = True
-        contacts[start:start + len(block)] = page
+        contacts[start:start + len(block)] = electrode_contacts(points, triangles, motion.palate, layout,
+                                                                None if lift is None else lift[block])
     return Palatogram(contacts, np.asarray(motion.times)[frames], layout)
+
+
+def electrode_contacts(points: np.ndarray, triangles: np.ndarray, palate, layout: EpgLayout,
+                       lift: np.ndarray | None = None) -> np.ndarray:
+    """(b, 8, 8) bool: the electrodes contacted by the tongue's upper surface ``points`` (b, k, 3) m, head frame
+    (its nodes, :func:`upper_surface`'s order) with ``triangles`` (t, 3), against ``palate`` (its velum lifted by
+    ``lift`` (b,) m per frame; None: at rest).  What :func:`palatogram` computes per frame, and the live window for
+    the frame it draws."""
+    points = np.asarray(points, dtype=np.float64)
+    b, k = points.shape[:2]
+    used = layout.used
+    electrodes = layout.positions[used][:, :2]  # (62, 2)
+    node_lift = None if lift is None else np.repeat(np.asarray(lift, dtype=np.float64), k)
+    # The tongue can touch under an electrode only on a triangle with a corner near the palate.
+    node_gap = palate.clearance(points.reshape(-1, 3), lift=node_lift)[0].reshape(b, k)
+    near = np.isfinite(node_gap) & (node_gap < NEAR)
+    under = surface_under(points, triangles, electrodes, np.any(near[:, triangles], axis=2))  # (b, 62, 3)
+    flat = under.reshape(-1, 3)
+    gap = np.full(len(flat), np.nan)
+    ok = np.isfinite(flat[:, 2])
+    if ok.any():
+        amounts = None if lift is None else np.repeat(np.asarray(lift, dtype=np.float64), len(electrodes))[ok]
+        gap[ok] = palate.clearance(flat[ok], lift=amounts)[0]
+    page = np.zeros((b, ROWS, COLUMNS), dtype=bool)
+    page[:, used] = (np.isfinite(gap) & (gap < ELECTRODE_TOUCH)).reshape(b, -1)
+    # A node touching within an electrode's cell lights it too: the model's contact is a few nodes where a real
+    # tongue's patch would cover the electrode.
+    f, n = np.nonzero(np.isfinite(node_gap) & (node_gap < ELECTRODE_TOUCH))
+    if len(f):
+        r, c = layout.cell_of(points[f, n, :2])
+        hit = r >= 0
+        page[f[hit], r[hit], c[hit]] = True
+    return page
 
 
 def epg_indices(contacts: np.ndarray) -> dict[str, np.ndarray]:

@@ -177,6 +177,7 @@ class LiveSimulator:
         self._recent: deque = deque(maxlen=max(8, int(round(REST_SEARCH_S * self.rate))))
         self.ready = False
         self.frames_done = 0
+        self.palate = None  # the settings' palate placed on the rest (a PalateSurface), once the rest is taken
 
     # ------------------------------------------------------------------ rest
     def observe(self, timestamp_s: float, positions_mm: np.ndarray) -> None:
@@ -312,8 +313,25 @@ class LiveSimulator:
         self.sensor_rest_nodes = model.mesh.points[prep.nodes]
         self.driving_names = list(prep.names)
         self.last_corrected = self._head_correct_many(positions[-1:])[0]  # until the first step
+        self.palate = self._placed_palate(snippet)
         self.ready = True
         self.frames_done = 0
+
+    def _placed_palate(self, snippet):
+        """The settings' palate placed on this rest as the replay places it (:func:`tonguevis.sim.palate_placement.
+        place_palate`: a speaker's palate carried by the rest alignment and made whole from the rest's sensors; the
+        generic one with the placed tongue), in the frame the surfaces are given in; None without a palate.  The
+        velum stays at rest (the replay lifts it from the whole session's dorsum; live has only the past)."""
+        if self.settings.palate is None:
+            return None
+        from tonguevis.sim.palate_placement import _speech_references, place_palate
+
+        try:
+            placed, _, _ = place_palate(self.settings.palate, self.prep, quiet=True, model=self.model,
+                                        speech_references=_speech_references(snippet, self.prep, self.settings.palate))
+        except TonguevisError as exc:
+            raise LiveSimulationError(f"cannot place the palate on this rest: {exc}") from exc
+        return placed
 
     # ------------------------------------------------------------------ per frame
     def _head_correct_many(self, positions: np.ndarray) -> np.ndarray:

@@ -108,6 +108,8 @@ def contact_line(metadata: dict) -> str:
         where = c.get("closures_where")
         text += (f"; {c.get('closures_touching', 0)} of {closures['closures']} stop closures touch"
                  + (f" ({where})" if where else "") + ", the tip pressed on the palate there")
+    if c.get("closures_dropped"):
+        text += f"; the closures not pressed ({c['closures_dropped']}): the sensors and the contact alone"
     registered = (c.get("palate") or {}).get("head_registration")
     if registered:
         text += (f"; palate registered into the speech's head frame by {', '.join(registered['references'])} "

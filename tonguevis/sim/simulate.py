@@ -115,7 +115,6 @@ def simulate(
         and the figures then run side by side, :mod:`tonguevis.sim.pipeline`); else not called.
     """
     from tonguevis._backend import check_backend
-    from tonguevis.sim.constrained import point_stiffness
 
     file = recording.metadata.get("file")
     if settings is not None and not isinstance(settings, RunSettings):  # simulate(recording, model, ...)
@@ -141,10 +140,37 @@ def simulate(
                                   "rest_fit (--fit-rest), or with method 'warped'", file)
         motion = simulate_domains(recording, settings, model, progress=progress)
         return _kept(motion, settings.backend) if settings.keep_volume else motion
-    sensor_stiffness, backend, frame = settings.sensor_stiffness_value, settings.backend, settings.frame
     # Frames the recorder dropped come back as missing samples: every step is 1/rate apart.
     recording = recording.on_uniform_grid()
-    model, prep, fit, basis, contact = placed_at_rest(recording, model, settings, progress)
+    placed = placed_at_rest(recording, model, settings, progress)
+    if not (settings.closures and settings.palate is not None):
+        return _simulate_modal(recording, settings, placed, progress, preview, preview_seconds)
+    contact = placed[4]
+    try:
+        return _simulate_modal(recording, settings, (*placed[:4], dict(contact)), progress, preview, preview_seconds)
+    except SimulationError as exc:
+        if "plausibly" not in str(exc):
+            raise
+        # The closures' pulls are phonetic knowledge added to the sensors: where a coarse or odd model cannot
+        # take them, the recording is still simulated as the sensors alone drive it, and that is said.
+        try:
+            motion = _simulate_modal(recording, settings.replace(closures=False), placed, progress, preview,
+                                     preview_seconds)
+        except SimulationError:
+            raise exc from None
+    logger.warning("%s: the model ran away pressing the tongue on the palate at the closures; simulated without "
+                   "the closures' pulls (as --no-closures): the sensors and the contact alone", file)
+    motion.metadata.setdefault("contact", {})["closures_dropped"] = "the model ran away with them"
+    return motion
+
+
+def _simulate_modal(recording, settings, placed, progress, preview, preview_seconds):
+    """:func:`simulate`'s modal methods (warped, linear) on resolved ``settings``, the recording on its uniform grid
+    and ``placed`` as :func:`placed_at_rest` gave it (model, prep, fit, basis, contact)."""
+    from tonguevis.sim.constrained import point_stiffness
+
+    sensor_stiffness, backend, frame = settings.sensor_stiffness_value, settings.backend, settings.frame
+    model, prep, fit, basis, contact = placed
     w_full = model.rotation_matrix(basis)
     dofs = (3 * prep.nodes[:, None] + np.arange(3)).ravel()
     s = len(prep.nodes)
