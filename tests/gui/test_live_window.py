@@ -3,6 +3,7 @@ saved and readable, a dropped connection reconnected, a malformed stream survive
 
 from __future__ import annotations
 
+import os
 import socket
 import struct
 import threading
@@ -228,3 +229,40 @@ def test_live_command_parses_and_refuses_bad_input(tmp_path):
     assert build_parser().parse_args(["live", "--no-sensor-patches"]).sensor_patches is None
     assert main(["live", "--source", "127.0.0.1:http"]) == 2  # a clear one-line error, no window
     assert main(["live", "--profile", str(tmp_path / "nobody.json")]) == 2
+
+
+def test_live_with_the_speakers_palate_draws_it_the_jaw_and_the_palatogram(qtbot, live, osn12_palate, tmp_path):
+    """``tonguevis live --palate FILE`` (issue 36, item 6): the OSN12 /ta/ replayed with the speaker's palate from
+    the traces: the palate as the simulator placed it on the rest (3D and the midsagittal section, traced and
+    estimated), the jaw moving with the JAW sensor, the palatogram beside the section; no traceback."""
+    from tests.conftest import shared_file
+    from tonguevis.live.server import ReplayServer
+    from tonguevis.sim.settings import RunSettings
+    from tonguevis.workflows import open_recording
+
+    recording = open_recording(shared_file("ema", "optispeech", "009_OSN12_Tah_withFb_natural_HR.tsv"),
+                               audio=False, labels=False)
+    with ReplayServer(recording, loop=True) as server:
+        window = live(wavefront(server.port), settings=RunSettings(palate=str(osn12_palate)))
+        window.resize(1280, 800)
+        qtbot.waitUntil(lambda: window.simulator is not None, timeout=60000)
+        qtbot.waitUntil(lambda: window.surface_mesh is not None and window.frames_drawn > 30, timeout=30000)
+        sim = window.simulator
+        assert sim.palate is not None and window.shown_palate is not None
+        assert window.shown_palate.surface is sim.palate  # drawn as the simulator placed it
+        actors = window.plotter.renderer.actors
+        assert "palate" in actors and "jaw" in actors
+        assert len(window.midsagittal.palate) > 5 and len(window.midsagittal.palate_estimated) > 5
+        qtbot.waitUntil(lambda: window.palatogram.contacts is not None, timeout=10000)
+        # the palatogram is computed on the simulator's surface: its upper-surface nodes, mapped into that surface
+        from tonguevis.analysis.epg import upper_surface
+
+        layout, index, triangles = window._epg
+        nodes, want = upper_surface(sim.model)
+        assert layout.used.sum() == 62 and np.array_equal(sim.surface_nodes[index], nodes)
+        assert np.array_equal(triangles, want)
+        assert window.palatogram.note.startswith("t = ")
+        # the jaw moves with the JAW sensor's offset
+        rest = window._jaw_rest
+        qtbot.waitUntil(lambda: np.abs(np.array(window.jaw_mesh.points) - rest).max() > 1e-4, timeout=20000)
+        window.grab().save("/tmp/shots/live_palate.png" if os.path.isdir("/tmp/shots") else str(tmp_path / "l.png"))

@@ -31,7 +31,7 @@ import numpy as np
 ROWS, COLUMNS = 8, 8
 #: The Reading palate's front row has the 6 middle electrodes (columns 2-7, 1-based).
 FRONT_ROW = (1, 2, 3, 4, 5, 6)
-#: Share of a row's width (where the palate is defined) the columns span.
+#: Share of a row's width (where the palate is defined) the columns span (less where the palate narrows).
 WIDTH_SHARE = 0.9
 #: m: the tongue's surface under an electrode this close to the palate contacts it.  Wider than the contact's
 #: TOUCH (0.3 mm): the model's surface is flat between nodes 3-5 mm apart, where a real tongue pressed on the palate
@@ -101,22 +101,32 @@ def epg_layout(palate) -> EpgLayout:
     positions = np.full((ROWS, COLUMNS, 3), np.nan)
     row_x = frame.front - (np.arange(ROWS) + 0.5) / ROWS * frame.length
     step = frame.length / ROWS
+    spacing = float(np.median(np.abs(np.diff(x)))) * float(getattr(palate, "scale", 1.0)) if len(x) > 1 else 1e-3
     for r, xr in enumerate(row_x):
-        band = placed[np.abs(placed[:, 0] - xr) <= max(step / 2, 1e-3)]
+        band = placed[np.abs(placed[:, 0] - xr) <= max(spacing, 5e-4)]  # the palate's width on the row's line
+        if len(band) == 0:
+            band = placed[np.abs(placed[:, 0] - xr) <= max(step / 2, 1e-3)]
         if len(band) == 0:
             continue
         left, right = band[:, 1].max(), band[:, 1].min()
-        centre, half = 0.5 * (left + right), 0.5 * (left - right) * WIDTH_SHARE
-        ys = centre + half * np.linspace(1.0, -1.0, COLUMNS)  # column 1 on the left (y > 0), as EPG plots face it
-        for c in range(COLUMNS):
-            if r == 0 and c not in FRONT_ROW:
-                continue
-            point = np.array([[xr, ys[c], 0.0]])
-            gap, _ = palate.clearance(point)
-            if np.isfinite(gap[0]):
-                own_xy = palate._to_own(point)[:, :2]
-                height = palate._interp(own_xy)[0][0]
-                positions[r, c] = palate._from_own(np.array([[own_xy[0, 0], own_xy[0, 1], height]]))[0]
+        centre = 0.5 * (left + right)
+        wanted = [c for c in range(COLUMNS) if r > 0 or c in FRONT_ROW]
+        # The palate narrows within a row's band (the front curves in): the columns close in until each one lies
+        # on the palate at the row's line.
+        for share in np.linspace(WIDTH_SHARE, 0.3, 13):
+            half = 0.5 * (left - right) * share
+            ys = centre + half * np.linspace(1.0, -1.0, COLUMNS)  # column 1 on the left (y > 0), as EPG plots face it
+            row = np.full((COLUMNS, 3), np.nan)
+            for c in wanted:
+                point = np.array([[xr, ys[c], 0.0]])
+                gap, _ = palate.clearance(point)
+                if np.isfinite(gap[0]):
+                    own_xy = palate._to_own(point)[:, :2]
+                    height = palate._interp(own_xy)[0][0]
+                    row[c] = palate._from_own(np.array([[own_xy[0, 0], own_xy[0, 1], height]]))[0]
+            if np.all(np.isfinite(row[wanted])):
+                break
+        positions[r] = row
     return EpgLayout(positions, frame)
 
 

@@ -36,6 +36,7 @@ from PySide6.QtWidgets import (
 
 from tonguevis.errors import TonguevisError
 from tonguevis.gui.midsagittal_view import BACKGROUND, GHOST_COLOUR, SENSOR_COLOUR, TONGUE_COLOUR, MidsagittalView
+from tonguevis.gui.palatogram_view import PalatogramView
 from tonguevis.gui.qt_workarounds import keep_none_alive
 from tonguevis.live.simulator import REST_SEARCH_S, REST_WINDOW_S, LiveSimulationError, LiveSimulator
 from tonguevis.live.targets import (
@@ -50,6 +51,8 @@ POLL_MS = 2
 AUTO_REST_S = REST_SEARCH_S
 #: Latencies and frame times kept for the panel's figures.
 HISTORY = 600
+#: s between two palatograms computed (a few ms each): the clinician reads it, it need not follow every frame.
+EPG_EVERY_S = 0.05
 #: Frames simulated in one tick at most: after a stall the older ones of a burst are skipped (and counted).
 MAX_BURST = 50
 DEFAULT_RADIUS_MM = 5.0
@@ -181,8 +184,14 @@ class LiveWindow(QMainWindow):
         self.plotter.ren_win.AddRenderer(self.overlay)
         split.addWidget(self.plotter.interactor)
         side = QSplitter(Qt.Orientation.Vertical, split)
-        self.midsagittal = MidsagittalView(side)
-        side.addWidget(self.midsagittal)
+        views = QSplitter(Qt.Orientation.Horizontal, side)
+        self.midsagittal = MidsagittalView(views)
+        self.palatogram = PalatogramView(views)
+        views.addWidget(self.midsagittal)
+        views.addWidget(self.palatogram)
+        views.setSizes([230, 110])
+        self.palatogram.setVisible(self.palate is not None)
+        side.addWidget(views)
         side.addWidget(self._panel(side))
         side.setSizes([300, 500])
         split.addWidget(side)
@@ -196,12 +205,11 @@ class LiveWindow(QMainWindow):
         self.target_actors: list = []
         self.ghost_mesh = None
         self.status_label = self.statusBar()
-        if self.palate is not None:
-            import pyvista as pv
-
-            faces = np.hstack([np.full((len(self.palate.faces), 1), 3), self.palate.faces]).ravel()
-            self.plotter.add_mesh(pv.PolyData(np.asarray(self.palate.points), faces), color="#8fc1e3", opacity=0.3,
-                                  name="palate")
+        self.shown_palate = None  # the palate as placed on the rest (a ShownPalate), once a rest is taken
+        self.jaw_mesh = None
+        self._jaw_rest = None
+        self._epg = None  # (layout, upper-surface indices into the simulator's surface, triangles)
+        self._epg_at = -1.0
 
     def _panel(self, parent) -> QWidget:
         scroll = QScrollArea(parent)
@@ -489,14 +497,14 @@ class LiveWindow(QMainWindow):
                 self.surface_mesh.point_data["colours"][:] = self._shaded(surface)
                 self.midsagittal.set_bounds(rest[:, [0, 2]], margin=0.35)
                 self._mid_y = float(np.median(rest[:, 1]))
-                if self.palate is not None:
-                    from tonguevis.analysis.section import plane_section
-
-                    self.midsagittal.palate = plane_section(self.palate.points, self.palate.faces, self._mid_y)
+                self._show_context(sim)
             else:
                 self.surface_mesh.points[:] = surface
                 self.surface_mesh.point_data["colours"][:] = self._shaded(surface)
                 self.surface_mesh.Modified()
+            if self.jaw_mesh is not None:
+                self.jaw_mesh.points[:] = self._jaw_rest + np.asarray(shift, dtype=np.float32)
+                self.jaw_mesh.Modified()
         else:
             sensors_head = np.asarray(frame.positions, dtype=np.float64) / 1000.0
             drawn_sensors = self._low_pass("sensors", sensors_head, dt)
@@ -529,9 +537,60 @@ class LiveWindow(QMainWindow):
         t4 = time.perf_counter()
         self._paint()
         t5 = time.perf_counter()
+        if step is not None and self._epg is not None and frame.timestamp_s - self._epg_at >= EPG_EVERY_S:
+            self._show_palatogram(step, frame)
         self.stage_ms.append({"reconstruct": 1e3 * (step.timings["reconstruct"] if step is not None else 0.0),
                               "scene": 1e3 * (t2 - t0 + t4 - t3), "render": 1e3 * (t3 - t2 + t5 - t4),
                               "submit": 1e3 * (t3 - t2), "paint": 1e3 * (t5 - t4), "targets": 1e3 * (t2 - t1)})
+
+    def _show_context(self, sim) -> None:
+        """Once the rest is taken: the palate as the simulator placed it (3D and the midsagittal section, traced
+        and estimated told apart), the jaw, and what the palatogram needs."""
+        import pyvista as pv
+
+        from tonguevis.render.scene import context_surfaces
+
+        for name in ("palate", "jaw"):
+            self.plotter.remove_actor(name)
+        jaw = context_surfaces(None, sim.model).get("jaw")
+        if jaw is not None:
+            self.jaw_mesh = jaw
+            self._jaw_rest = np.array(jaw.points, dtype=np.float32)
+            self.plotter.add_mesh(jaw, color="#c8c8c8", opacity=0.25, name="jaw", lighting=True,
+                                  culling="back")
+        self.shown_palate = self._epg = None
+        if sim.palate is None:
+            return
+        from tonguevis.analysis.epg import epg_layout, upper_surface
+        from tonguevis.render.drawing import generic_shown, palate_label, speaker_palate
+        from tonguevis.render.midsagittal import palate_sections
+
+        if sim.palate.metadata.get("generic"):
+            shown = generic_shown(True, sim.model)
+        else:
+            shown = speaker_palate(sim.palate, palate_label(self.settings.palate))
+        self.shown_palate = shown
+        if shown is not None:
+            faces = np.hstack([np.full((len(shown.faces), 1), 3), shown.faces]).ravel()
+            self.plotter.add_mesh(pv.PolyData(np.asarray(shown.points, dtype=np.float32), faces), color="#8fc1e3",
+                                  opacity=0.3, name="palate", culling="back")
+            self.midsagittal.palate, self.midsagittal.palate_estimated = palate_sections(shown, self._mid_y)
+        try:
+            nodes, triangles = upper_surface(sim.model)
+            self._epg = (epg_layout(sim.palate), np.searchsorted(sim.surface_nodes, nodes), triangles)
+        except Exception as exc:  # the palatogram is an extra: the live view goes on without it
+            logger.info("no live palatogram: %s", exc)
+            self.palatogram.show_contacts(None, "no electrode layout on this palate")
+
+    def _show_palatogram(self, step, frame) -> None:
+        """The palatogram of the frame just drawn (the simulated surface, not the display's smoothing)."""
+        from tonguevis.analysis.epg import electrode_contacts
+
+        layout, index, triangles = self._epg
+        surface = (np.asarray(step.surface, dtype=np.float64) + step.jaw_offset)[index]
+        contacts = electrode_contacts(surface[None], triangles, self.simulator.palate, layout)[0]
+        self._epg_at = frame.timestamp_s
+        self.palatogram.show_contacts(contacts, f"t = {self._clock(frame):.2f} s")
 
     def _shaded(self, surface: np.ndarray) -> np.ndarray:
         """(k, 3) uint8 colours of the tongue's vertices lit by the view's lights for the camera now."""

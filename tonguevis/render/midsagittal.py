@@ -55,6 +55,30 @@ class MidsagittalPicture:
         return np.vstack(parts) if parts else np.zeros((0, 2))
 
 
+def split_palate(palate) -> tuple[np.ndarray, np.ndarray]:
+    """(traced faces, estimated faces) of a drawn palate (:class:`~tonguevis.render.drawing.ShownPalate`), by its
+    placed surface's traced cells (all estimated when unknown, and for the generic palate)."""
+    faces = np.asarray(palate.faces)
+    traced = getattr(palate.surface, "traced", None)
+    if traced is None or palate.generic:
+        return faces[:0], faces
+    centres = np.asarray(palate.points, dtype=np.float64)[faces].mean(axis=1)
+    own = palate.surface._to_own(centres)
+    share = palate.surface._interp(own[:, :2], np.asarray(traced, dtype=np.float64))[0]
+    mine = np.nan_to_num(share) >= 0.5
+    return faces[mine], faces[~mine]
+
+
+def palate_sections(palate, y: float, index: int | None = None, faces=None) -> tuple[np.ndarray, np.ndarray]:
+    """(traced, estimated) (k, 2, 2) segments (x, z) where the plane ``y`` cuts the drawn palate at frame ``index``
+    (its velum lifted then; None: at rest); ``faces``: :func:`split_palate`'s, when already computed."""
+    from tonguevis.analysis.section import plane_section
+
+    traced, estimated = faces if faces is not None else split_palate(palate)
+    drawn = palate.points if index is None else palate.points_at(index)
+    return plane_section(drawn, traced, y), plane_section(drawn, estimated, y)
+
+
 class MidsagittalSection:
     """The midsagittal pictures of one simulated session (``session.frames``, ``session.shown_palate``)."""
 
@@ -67,26 +91,11 @@ class MidsagittalSection:
         self.faces = surface_faces(motion.model)
         self.y = float(np.median(np.asarray(motion.model.mesh.points)[:, 1]))
         self.palate = getattr(session, "shown_palate", None)
-        self._palate_faces = self._split_palate()
+        self._palate_faces = None if self.palate is None else split_palate(self.palate)
         names = list(motion.sensor_names)
         self.names = names
         self.constricting = [n for n in CONSTRICTING if n in names]
         self._geometry = None
-
-    def _split_palate(self):
-        """(traced faces, estimated faces) of the drawn palate, by the placed surface's traced cells."""
-        palate = self.palate
-        if palate is None:
-            return None
-        faces = np.asarray(palate.faces)
-        traced = getattr(palate.surface, "traced", None)
-        if traced is None or palate.generic:
-            return faces[:0], faces
-        centres = np.asarray(palate.points, dtype=np.float64)[faces].mean(axis=1)
-        own = palate.surface._to_own(centres)
-        share = palate.surface._interp(own[:, :2], np.asarray(traced, dtype=np.float64))[0]
-        mine = np.nan_to_num(share) >= 0.5
-        return faces[mine], faces[~mine]
 
     def region(self, below: float = 0.025) -> np.ndarray:
         """(p, 2) points spanning where the view should look: the palate's section and the sensors over the whole
@@ -116,9 +125,7 @@ class MidsagittalSection:
         points = head_points(frames, i)
         picture = MidsagittalPicture(float(frames.times[i]), plane_section(points, self.faces, self.y))
         if self._palate_faces is not None:
-            drawn = self.palate.points_at(i)
-            picture.traced = plane_section(drawn, self._palate_faces[0], self.y)
-            picture.estimated = plane_section(drawn, self._palate_faces[1], self.y)
+            picture.traced, picture.estimated = palate_sections(self.palate, self.y, i, self._palate_faces)
         jaw = np.asarray(jaw_offset_at(motion, i), dtype=np.float64)
         measured = np.asarray(motion.targets[i], dtype=np.float64) + jaw  # the sensors as measured, head frame
         rate = 1.0 / max(float(np.median(np.diff(frames.times))) if frames.n_frames > 1 else 0.01, 1e-6)
