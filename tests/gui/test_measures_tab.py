@@ -122,3 +122,28 @@ def test_a_newer_request_wins_over_a_running_one(qtbot, tab):
     with qtbot.assertNotEmitted(tab.measured):  # a result for what was asked before is dropped
         tab._on_measured(object(), ("an earlier request",))
     assert tab.result is shown
+
+
+def test_simulated_against_a_palate_each_production_has_its_palatogram_at_the_closure(qtbot, window, tmp_path):
+    """Issue 36, item 4: the productions table gives each production's palatogram at its closure (the percentage,
+    CoG, anteriority and posteriority of tonguevis.analysis.epg.production_epg on the simulated motion)."""
+    from tests.gui.test_palate_contact import flat_palate
+    from tonguevis.analysis.epg import production_epg
+    from tonguevis.gui.measures_tab import MeasuresTab
+
+    window.state.set_run_settings(window.state.run_settings.replace(frame="model"))
+    tab = MeasuresTab(window.state)
+    window.register_tab("Measures", tab)
+    path = tmp_path / "roof.stl"
+    flat_palate().save(path)
+    with qtbot.waitSignal(window.simulation_finished, timeout=120000):
+        window.show_session(demo_session())
+    with qtbot.waitSignal(window.simulation_finished, timeout=120000):
+        assert window.load_palate(path)
+    session = window.session
+    qtbot.waitUntil(lambda: tab.result is not None and "epg_cog" in tab.result.rows[0], timeout=60000)
+    want = production_epg(session.motion, session.production_table)
+    assert [row["epg_percent_contact"] for row in tab.result.rows] == pytest.approx(
+        [w["epg_percent_contact"] for w in want], nan_ok=True)
+    shown = _column(tab, "epg_percent_contact")
+    assert len(shown) == len(want) and any(text not in ("–", "0.00") for text in shown)

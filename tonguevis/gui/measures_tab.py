@@ -33,7 +33,9 @@ COLUMNS = (("production", "production"), ("label", "label"), ("articulator", "ar
            ("peak_velocity_opening_mm_s", "peak velocity\nopening (mm/s)"),
            ("displacement_opening_mm", "displacement\nopening (mm)"), ("stiffness_opening_per_s", "stiffness\nopening (1/s)"),
            ("lip_aperture_mm", "lip aperture\n(mm)"), ("lip_protrusion_mm", "lip protrusion\n(mm)"),
-           ("jaw_opening_mm", "jaw opening\n(mm)"), ("gesture_duration_ms", "gesture\n(ms)"))
+           ("jaw_opening_mm", "jaw opening\n(mm)"), ("gesture_duration_ms", "gesture\n(ms)"),
+           ("epg_percent_contact", "EPG contact\nat closure (%)"), ("epg_cog", "EPG centre\nof gravity"),
+           ("epg_anteriority", "EPG\nanteriority"), ("epg_posteriority", "EPG\nposteriority"))
 PALATES = (("generic", "generic palate (placed by the rest sensors: an estimate)"), ("none", "no palate"))
 
 
@@ -149,6 +151,7 @@ class MeasuresTab(QtWidgets.QWidget):
         key = (id(session), id(table), len(table) if table is not None else 0,
                chosen if isinstance(chosen, str) or chosen is None else id(chosen))
         if key == self._key:
+            self._add_palatograms()  # the simulation finished since: its palatograms join the rows
             return
         self._key = key
         self.result = None
@@ -181,11 +184,30 @@ class MeasuresTab(QtWidgets.QWidget):
             return
         session = self.session
         self.result = result
+        self._epg_of = None
+        self._add_palatograms(show=False)
         self._show_rows(result.rows)
         notes = result.notes + ([result.rest.describe()] if result.rest is not None else [])
         self.status.setText(f"{session.name}: {len(result.rows)} productions; head-corrected mm; speeds of the 12 Hz "
                             "low-passed sensor. " + " ".join(f"{n}." if not n.endswith(".") else n for n in notes))
         self.measured.emit(result)
+
+    def _add_palatograms(self, show: bool = True) -> None:
+        """Each production's palatogram at its closure (:func:`tonguevis.analysis.epg.production_epg`) into the
+        rows, once the session's motion was simulated against a palate: the simulated tongue beside the sensors'
+        measures (a fraction of a second: the few frames around each closure)."""
+        motion = getattr(self.session, "motion", None)
+        table = getattr(self.session, "production_table", None)
+        if (self.result is None or motion is None or getattr(motion, "palate", None) is None or table is None
+                or len(self.result.rows) != len(table) or getattr(self, "_epg_of", None) is motion):
+            return
+        from tonguevis.analysis.epg import production_epg
+
+        for row, epg in zip(self.result.rows, production_epg(motion, table)):
+            row.update(epg)
+        self._epg_of = motion
+        if show:
+            self._show_rows(self.result.rows)
 
     def _on_failed(self, message: str, key) -> None:
         if key != self._key:
