@@ -103,3 +103,25 @@ def test_a_palate_tried_becomes_the_apps_only_when_it_simulates(qtbot, window):
     assert window.palate == "generic" and window.session.motion.penetration is not None
     qtbot.wait(300)
     assert len(started) == 1  # the settings event the controller wrote itself did not simulate again
+
+
+def test_press_the_closures_follows_the_settings_and_resimulates(qtbot, window, tmp_path):
+    """Simulation ▸ Press the closures (issue 36): checked by default (the run settings' closures), unticking it
+    re-simulates against the palate without the tip pressed at the closures (as --no-closures), and a script's
+    change ticks it back."""
+    from tests.gui.conftest import demo_session, show_and_simulate
+
+    window.state.set_run_settings(window.state.run_settings.replace(frame="model"))
+    assert window.closures_action.isChecked() and window.state.run_settings.closures
+    show_and_simulate(qtbot, window, demo_session(3.5, 6.8))
+    with qtbot.waitSignal(window.simulation_finished, timeout=120000):
+        window.use_generic_palate()
+    pressed = window.session.motion.metadata["contact"]
+    with qtbot.waitSignal(window.simulation_finished, timeout=120000) as blocker:
+        window.closures_action.trigger()
+    assert blocker.args == [True] and not window.state.run_settings.closures
+    assert not window.closures_action.isChecked() and "closures" not in window.session.motion.metadata["contact"]
+    assert "closures" in pressed or "closures_dropped" in pressed  # the first run pressed them (or said why not)
+    with qtbot.waitSignal(window.simulation_finished, timeout=120000):
+        window.state.change_run_settings(None, closures=True)
+    assert window.closures_action.isChecked()

@@ -76,6 +76,12 @@ class MenusMixin:
                                         "simulating (tonguevis simulate --fit-rest): the speaker's rest shape")
         self.rest_fit_action.triggered.connect(self.set_rest_fit)
         simulation.addAction(self.rest_fit_action)
+        self.closures_action = QAction("&Press the closures onto the palate", self)
+        self.closures_action.setCheckable(True)
+        self.closures_action.setToolTip("with a palate: at each /t/ closure the part of the tongue ahead of the tip "
+                                        "sensor is pressed onto the palate (off: tonguevis simulate --no-closures)")
+        self.closures_action.triggered.connect(self.set_closures)
+        simulation.addAction(self.closures_action)
         self.method_actions = self._choice_menu(simulation, "&Method", (
             ("warped", "&Modal warping (the paper)", "linear FEM modes made nonlinear by modal warping (Yang 2013)"),
             ("linear", "&Linear modes", "the linear modal model, no warping"),
@@ -124,6 +130,7 @@ class MenusMixin:
         user's click triggers an item, so nothing is written back)."""
         settings = self.state.run_settings
         self.patches_action.setChecked(settings.sensor_patches is not None)
+        self.closures_action.setChecked(bool(settings.closures))
         self.rest_fit_action.setChecked(bool(settings.rest_fit))
         self.method_actions[settings.method].setChecked(True)
         key = self._tongue_size()
@@ -145,6 +152,10 @@ class MenusMixin:
     def set_tongue_size(self, key: str) -> None:
         """Simulate at the tongue size ``key`` ("adult", "alignment" or "generic") from now on."""
         self.state.change_run_settings(self, tongue_size=self.TONGUE_SIZES[key])
+
+    def set_closures(self, on: bool) -> None:
+        """Press (or not) the tongue onto the palate at the closures from now on."""
+        self.state.change_run_settings(self, closures=bool(on))
 
     def set_sensor_patches(self, on: bool) -> None:
         """Simulate with (or without) the sensor patches from now on."""

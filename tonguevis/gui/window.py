@@ -351,6 +351,10 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
     def closeEvent(self, event) -> None:
         self.playback.shutdown()
         self.controller.shutdown()
+        for tab in self.feature_tabs.values():  # a tab's own job (the measures) ends with the window
+            stop = getattr(tab, "stop_worker", None)
+            if stop is not None:
+                stop()
         self.compare_panel.close_view()
         if self.export_job is not None:
             self.export_job.stop()
