@@ -113,13 +113,18 @@ def test_press_the_closures_follows_the_settings_and_resimulates(qtbot, window, 
 
     window.state.set_run_settings(window.state.run_settings.replace(frame="model"))
     assert window.closures_action.isChecked() and window.state.run_settings.closures
+    from tests.gui.test_palate_contact import flat_palate
+
+    path = tmp_path / "roof.stl"
+    flat_palate().save(path)
     show_and_simulate(qtbot, window, demo_session(3.5, 6.8))
     with qtbot.waitSignal(window.simulation_finished, timeout=120000):
-        window.use_generic_palate()
-    pressed = window.session.motion.metadata["contact"]
+        assert window.load_palate(path)
+    first = window.session.motion
+    pressed = first.metadata["contact"]
     with qtbot.waitSignal(window.simulation_finished, timeout=120000) as blocker:
         window.closures_action.trigger()
-    assert blocker.args == [True] and not window.state.run_settings.closures
+    assert blocker.args == [True] and not window.state.run_settings.closures and window.session.motion is not first
     assert not window.closures_action.isChecked() and "closures" not in window.session.motion.metadata["contact"]
     assert "closures" in pressed or "closures_dropped" in pressed  # the first run pressed them (or said why not)
     with qtbot.waitSignal(window.simulation_finished, timeout=120000):
