@@ -69,9 +69,22 @@ REFERENCE_FRAMES = ("head", "jaw")
 SESSION_ROLES = ("primary", "compare")
 #: The morph's ends: t = 0 and t = 1.
 MORPH_ENDS = ("source", "target")
+#: How a compared recording (B) is shown: beside A (its own view) or as a translucent ghost in A's views.
+COMPARE_LAYOUTS = ("side", "ghost")
+#: How B's time follows A's (:class:`tonguevis.analysis.compare.Comparison`'s modes).
+COMPARE_TIME_MODES = ("production", "absolute")
 EVENT_NAMES = ("time", "playing", "speed", "loop", "range", "selection", "color", "reference",
                "session", "motion", "productions", "motions", "morph_ends", "tongue_model", "run_settings", "status",
-               "frame_drawn")
+               "frame_drawn", "compare_view", "comparison")
+
+
+@dataclass(frozen=True)
+class CompareView:
+    """How the compared recording is shown: ``layout`` (:data:`COMPARE_LAYOUTS`) and ``time_mode``
+    (:data:`COMPARE_TIME_MODES`)."""
+
+    layout: str = "side"
+    time_mode: str = "production"
 
 
 @dataclass(frozen=True)
@@ -93,6 +106,8 @@ class AppEvents(SignalGroup):
     """The app model's events: one signal of :class:`Event` per name of the module's table."""
 
     time = Signal(Event)
+    compare_view = Signal(Event)
+    comparison = Signal(Event)
     playing = Signal(Event)
     speed = Signal(Event)
     loop = Signal(Event)
@@ -158,6 +173,8 @@ class AppState:
 
         self._run_settings = RunSettings()
         self._status = ""
+        self._compare_view = CompareView()
+        self._comparison: Any = None
 
     # -- events ----------------------------------------------------------
     def _emit(self, name: str, value: Any, source: Any, key: str | None = None) -> None:
@@ -297,6 +314,35 @@ class AppState:
         self._reference = frame
         self._emit("reference", frame, source)
 
+
+    # -- the comparison of two recordings --------------------------------------
+    @property
+    def compare_view(self) -> CompareView:
+        return self._compare_view
+
+    def set_compare_view(self, source: Any = None, **changes: str) -> None:
+        """Show the compared recording another way: ``layout=``, ``time_mode=`` (see :class:`CompareView`)."""
+        from dataclasses import replace
+
+        view = replace(self._compare_view, **changes)
+        if view.layout not in COMPARE_LAYOUTS:
+            raise ValueError(f"compare layout must be one of {', '.join(COMPARE_LAYOUTS)}, got {view.layout!r}")
+        if view.time_mode not in COMPARE_TIME_MODES:
+            raise ValueError(f"compare time must be one of {', '.join(COMPARE_TIME_MODES)}, got {view.time_mode!r}")
+        if view == self._compare_view:
+            return
+        self._compare_view = view
+        self._emit("compare_view", view, source)
+
+    @property
+    def comparison(self) -> Any:
+        """What the views show of the comparison of the two sessions (the compare panel's
+        :class:`~tonguevis.gui.compare.ShownComparison`), None when none is shown."""
+        return self._comparison
+
+    def set_comparison(self, shown: Any, source: Any = None) -> None:
+        self._comparison = shown
+        self._emit("comparison", shown, source)
 
     # -- sessions: the open recordings ---------------------------------------
     @staticmethod

@@ -83,8 +83,10 @@ def test_side_by_side_views_share_one_camera(qtbot, pair):
 def test_ghost_draws_b_translucent_in_each_of_a_views(qtbot, pair):
     window, _a, b, panel = pair
     panel.set_layout("ghost")
+    assert window.state.compare_view.layout == "ghost"  # the layout is the app model's
     renderers = window.view3d.plotter.renderers
-    assert len(panel._ghosts) == len(renderers) == 4
+    ghosts = window.view3d.ghosts  # A's view draws B's ghost itself, from the model's comparison
+    assert len(ghosts) == len(renderers) == 4
     from tonguevis.render.surface_geometry import hidden_side
     from tonguevis.render.scene import surface_faces
 
@@ -92,7 +94,7 @@ def test_ghost_draws_b_translucent_in_each_of_a_views(qtbot, pair):
     # order, showed the triangles as patches).
     hidden = hidden_side(np.asarray(b.frames.points[0]), surface_faces(b.motion.model))
     assert hidden in ("back", "front")
-    for renderer, ghost in zip(renderers, panel._ghosts):
+    for renderer, ghost in zip(renderers, ghosts):
         assert renderer.HasViewProp(ghost) and ghost.GetVisibility() and ghost.prop.opacity < 0.5
         assert (ghost.prop.GetBackfaceCulling(), ghost.prop.GetFrontfaceCulling()) == (hidden == "back", hidden == "front")
     assert not panel.plotter.interactor.isVisible()
@@ -101,7 +103,10 @@ def test_ghost_draws_b_translucent_in_each_of_a_views(qtbot, pair):
     np.testing.assert_allclose(panel._surface.points, b.frames.points[j] + b.motion.jaw_offset[j].astype(np.float32),
                                atol=1e-7)  # B's head-frame shape at its matched frame
     panel.set_layout("side")
-    assert not any(g.GetVisibility() for g in panel._ghosts) and panel.plotter.interactor.isVisible()
+    assert not window.view3d.ghosts and not any(r.HasViewProp(g) for r, g in zip(renderers, ghosts))
+    assert panel.plotter.interactor.isVisible()
+    window.state.set_compare_view(None, layout="ghost")  # a script's change: the panel and A's view follow
+    assert panel.layout_box.currentData() == "ghost" and len(window.view3d.ghosts) == 4
 
 
 def test_difference_colouring_is_the_distance_between_the_tongues(qtbot, pair):

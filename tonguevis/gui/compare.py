@@ -29,13 +29,14 @@ from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QVBox
 
 from tonguevis.gui.elastic_label import ElasticLabel
 from tonguevis.errors import TonguevisError
-from tonguevis.appstate import connected
+from tonguevis.appstate import COMPARE_LAYOUTS, COMPARE_TIME_MODES, connected
 
 
-#: How B is shown: beside A (its own view, A's camera) or as a translucent ghost in A's views.
-LAYOUTS = {"side": "side by side", "ghost": "ghost in A's views"}
+#: How B is shown (the app model's :data:`~tonguevis.appstate.COMPARE_LAYOUTS`): beside A (its own view, A's
+#: camera) or as a translucent ghost in A's views.
+LAYOUTS = dict(zip(COMPARE_LAYOUTS, ("side by side", "ghost in A's views")))
 #: How B's time follows A's (:class:`~tonguevis.analysis.compare.Comparison` modes).
-TIME_MODES = {"production": "per production", "absolute": "absolute time"}
+TIME_MODES = dict(zip(COMPARE_TIME_MODES, ("per production", "absolute time")))
 GHOST_COLOUR = "#8ff0ff"
 GHOST_PANEL_WIDTH = 460  # px: the panel's controls, when B is drawn inside A's views
 GHOST_OPACITY = 0.4
@@ -86,6 +87,29 @@ def difference_range(comparison, frames_a, frames_b) -> tuple[float, float]:
     return 0.0, max(DIFFERENCE_MIN_RANGE_MM, high)
 
 
+class ShownComparison:
+    """What the app shows of a comparison, held by the app model (``state.comparison``) for every view:
+    ``comparison`` (:class:`~tonguevis.analysis.compare.Comparison`), the two sessions, B's drawn surface
+    ``surface_b`` (a PolyData the compare panel moves to B's matched frame; A's views draw it as a ghost), and
+    ``clim`` (the colour range of the distance to B, mm; None when the meshes differ: no per-node distance)."""
+
+    def __init__(self, comparison, session_a, session_b, surface_b, clim):
+        self.comparison, self.session_a, self.session_b = comparison, session_a, session_b
+        self.surface_b, self.clim = surface_b, clim
+        self._last = None  # (i, j, distances): the pair last asked, once for A's colouring and B's
+
+    def frame_b(self, i: int) -> int:
+        """B's frame matched with A's frame ``i``."""
+        return self.comparison.frame_b(float(self.session_a.frames.times[i]))
+
+    def difference(self, i: int) -> np.ndarray:
+        """(n,) mm :func:`frame_difference_mm` of A's frame ``i`` and B's matched frame."""
+        j = self.frame_b(i)
+        if self._last is None or self._last[:2] != (i, j):
+            self._last = (i, j, frame_difference_mm(self.session_a.frames, i, self.session_b.frames, j))
+        return self._last[2]
+
+
 class ComparePanel(QWidget):
     """The second recording's controls and its view (side by side), following the app model.
 
@@ -98,8 +122,8 @@ class ComparePanel(QWidget):
         from tonguevis.gui.view3d import make_plotter
 
         self.state, self.view_a = state, view_a
-        self.layout_mode, self.time_mode = "side", "production"
         self.comparison = None
+        self.shown: ShownComparison | None = None
         self.note = ""
         self.frame_b = -1
         self.renders = 0
@@ -107,10 +131,8 @@ class ComparePanel(QWidget):
         self._b_nodes = np.zeros(0, dtype=np.int64)  # B's surface nodes (the ones lit)
         self._b_values = None
         self._b_shaded = None
-        self._ghosts: list = []
         self._clim: tuple[float, float] | None = None
         self._camera_seen = None
-        self._last_difference = None
         self._observed_camera = None  # the vtkCamera whose moves repaint both views
         self._camera_observer = None
         self.title = ElasticLabel("", minimum_width=120)  # file names: cut, not a wider window
@@ -141,12 +163,12 @@ class ComparePanel(QWidget):
         layout.addStretch(0)  # takes the room when the view is hidden (ghost): the controls stay on top
         self.layout_box.currentIndexChanged.connect(lambda _i: self.set_layout(self.layout_box.currentData()))
         self.time_box.currentIndexChanged.connect(lambda _i: self.set_time_mode(self.time_box.currentData()))
+        connected(state.events.compare_view, self._on_compare_view)
         self.close_button.clicked.connect(lambda: state.set_session(None, "compare", self))
         # B follows the frame A draws (the model's frame_drawn event, sent as A draws each frame, also
         # for a new frame of reference or colouring): during playback A draws each frame ahead of the
         # clock for the moment it is painted, and B (its ghost in A's views, or its own view,
         # pipelined as A's) is drawn for the same moment.
-        self.difference_shown = False  # A's surface coloured by the distance to B
         connected(state.events.frame_drawn, self._on_frame_drawn)
         connected(state.events.playing, self._on_playing)
         connected(state.events.session, self._on_sessions)
@@ -162,6 +184,19 @@ class ComparePanel(QWidget):
     def session_b(self):
         return self.state.session_of("compare")
 
+    @property
+    def layout_mode(self) -> str:
+        return self.state.compare_view.layout
+
+    @property
+    def time_mode(self) -> str:
+        return self.state.compare_view.time_mode
+
+    @property
+    def difference_shown(self) -> bool:
+        """Whether A's views offer the colouring "distance to B" (a comparison of one mesh is shown)."""
+        return self._clim is not None and self.comparison is not None
+
     def _on_sessions(self, _event) -> None:
         self.rebuild()
 
@@ -170,22 +205,23 @@ class ComparePanel(QWidget):
         a, b = self.session_a, self.session_b
         self.setVisible(b is not None)
         self.comparison, self.note, self.frame_b = None, "", -1
-        self._last_difference = None  # (i, j, distances): the pair of frames last coloured
-        self._remove_ghosts()
+        self._clim = None
         if b is None:
-            self._set_difference_colouring(False)
+            self.state.set_comparison(None, self)
             return
         self.title.setText(f"<b>B</b>: {b.name}  (A: {a.name if a is not None else '—'})")
         if a is None or a.frames is None or b.frames is None:
             self.caption.setText("simulating…")
+            self.state.set_comparison(None, self)
             return
         self.comparison, self.note = make_comparison(a, b, self.time_mode)
         self._build_surface(b)
         self._clim = (difference_range(self.comparison, a.frames, b.frames) if self.comparison.same_mesh else None)
-        self._set_difference_colouring(self._clim is not None)
         self._share_camera()
-        self.set_layout(self.layout_mode)
+        self._apply_layout()
+        self.shown = ShownComparison(self.comparison, a, b, self._surface, self._clim)
         self.show_time(self.state.time)
+        self.state.set_comparison(self.shown, self)  # A's views: the difference colouring, the ghost
 
     def _build_surface(self, session) -> None:
         """B's tongue, drawn as A's: lit at its vertices for the shared camera
@@ -279,71 +315,39 @@ class ComparePanel(QWidget):
 
     # -- settings -----------------------------------------------------------------------------
     def set_layout(self, layout: str) -> None:
-        """"side" (B in the panel's view) or "ghost" (B translucent in A's four views)."""
+        """"side" (B in the panel's view) or "ghost" (B translucent in A's four views): into the app model."""
         if layout not in LAYOUTS:
             raise ValueError(f"compare layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
-        self.layout_mode = layout
-        index = self.layout_box.findData(layout)
-        if index != self.layout_box.currentIndex():
-            self.layout_box.setCurrentIndex(index)
+        self.state.set_compare_view(self, layout=layout)
+
+    def set_time_mode(self, mode: str) -> None:
+        """"production" or "absolute" (see :class:`~tonguevis.analysis.compare.Comparison`): into the app model."""
+        if mode not in TIME_MODES:
+            raise ValueError(f"compare time must be one of {', '.join(TIME_MODES)}, got {mode!r}")
+        self.state.set_compare_view(self, time_mode=mode)
+
+    def _on_compare_view(self, event) -> None:
+        """The model's way of showing B changed (from here, a menu or a script): the controls show it, a new
+        time mode compares afresh, a new layout shows or hides the panel's view."""
+        view = event.value
+        for box, key in ((self.layout_box, view.layout), (self.time_box, view.time_mode)):
+            index = box.findData(key)
+            if index != box.currentIndex():
+                box.blockSignals(True)  # the box shows the model's choice: not a new choice
+                box.setCurrentIndex(index)
+                box.blockSignals(False)
+        if self.comparison is not None and self.comparison.mode != view.time_mode and \
+                not (view.time_mode == "production" and self.note):
+            self.rebuild()
+        else:
+            self._apply_layout()
+            self.show_time(self.state.time)
+
+    def _apply_layout(self) -> None:
+        layout = self.layout_mode
         self.plotter.interactor.setVisible(layout == "side")
         # The ghost needs no view of its own: the panel keeps its controls only.
         self.setMaximumWidth(16777215 if layout == "side" else GHOST_PANEL_WIDTH)
-        if layout == "ghost" and self._surface is not None and not self._ghosts:
-            self._add_ghosts()
-        for actor in self._ghosts:
-            actor.SetVisibility(layout == "ghost")
-        self.view_a.plotter.interactor.update()
-
-    def set_time_mode(self, mode: str) -> None:
-        """"production" or "absolute" (see :class:`~tonguevis.analysis.compare.Comparison`)."""
-        if mode not in TIME_MODES:
-            raise ValueError(f"compare time must be one of {', '.join(TIME_MODES)}, got {mode!r}")
-        self.time_mode = mode
-        index = self.time_box.findData(mode)
-        if index != self.time_box.currentIndex():
-            self.time_box.setCurrentIndex(index)
-        self.rebuild()
-
-    def _add_ghosts(self) -> None:
-        from tonguevis.render.surface_geometry import hidden_side
-
-        plotter = self.view_a.plotter
-        # The ghost is B's closed tongue seen from outside: drawn without its far side, one
-        # translucent layer everywhere (its two walls, blended in triangle order, showed the
-        # triangles as patches).
-        faces = np.asarray(self._surface.faces).reshape(-1, 4)[:, 1:]
-        hidden = hidden_side(np.asarray(self._surface.points), faces)
-        for index in range(len(plotter.renderers)):
-            plotter.subplot(*_subplot_index(plotter, index))
-            actor = plotter.add_mesh(self._surface, color=GHOST_COLOUR, opacity=GHOST_OPACITY, name=f"ghost_b{index}",
-                                     reset_camera=False, show_scalar_bar=False, scalars=None)
-            actor.mapper.scalar_visibility = False
-            actor.prop.interpolation = "gouraud"
-            actor.prop.SetBackfaceCulling(hidden == "back")
-            actor.prop.SetFrontfaceCulling(hidden == "front")
-            self._ghosts.append(actor)
-        plotter.subplot(*_subplot_index(plotter, 0))
-
-    def _remove_ghosts(self) -> None:
-        plotter = self.view_a.plotter
-        for index, actor in enumerate(self._ghosts):
-            try:
-                plotter.renderers[index].RemoveActor(actor)
-            except Exception:  # the view was rebuilt meanwhile
-                pass
-        self._ghosts = []
-
-    def _set_difference_colouring(self, available: bool) -> None:
-        """Offer the colouring "distance to B" in A's views while a comparison with one mesh is shown."""
-        scene = self.view_a.scene
-        if available:
-            scene.set_colour_range("difference", self._clim, "distance to\nB (mm)")
-            self.difference_shown = True
-        else:
-            self.difference_shown = False
-            if self.state.color == "difference":
-                self.state.set_color("displacement", self)
 
     # -- per frame -----------------------------------------------------------------------------
     def matched_frame(self, t_a: float) -> int | None:
@@ -351,27 +355,10 @@ class ComparePanel(QWidget):
         return None if self.comparison is None else self.comparison.frame_b(t_a)
 
     def _on_frame_drawn(self, event) -> None:
-        """A drew frame ``event.value``: B is drawn for the same moment, and A coloured by the distance."""
+        """A drew frame ``event.value``: B is drawn for the same moment (its own view, or the ghost A draws)."""
         if event.source is not self.view_a:
             return
         self.show_frame(event.value)
-        if self.difference_shown:
-            self._colour_a(event.value)
-
-    def _colour_a(self, i: int) -> None:
-        """With the colouring "distance to B", A's surface shows the distance (A's frame ``i``)."""
-        if self.state.color != "difference" or self.comparison is None:
-            return
-        j = self.comparison.frame_b(self.session_a.frames.times[i])
-        self.view_a.scene.surface.point_data["value"][:] = self._difference(i, j)
-
-    def _difference(self, i: int, j: int) -> np.ndarray:
-        """:func:`frame_difference_mm` of A's frame i and B's frame j, once per pair: A's hook and
-        B's drawing both colour by it in the same frame."""
-        if self._last_difference is None or self._last_difference[:2] != (i, j):
-            values = frame_difference_mm(self.session_a.frames, i, self.session_b.frames, j)
-            self._last_difference = (i, j, values)
-        return self._last_difference[2]
 
     def _on_playing(self, event) -> None:
         interactor = self.plotter.interactor
@@ -383,8 +370,6 @@ class ComparePanel(QWidget):
         if self.comparison is None or self._surface is None or not self.isVisible():
             return
         self.show_frame(self.session_a.frames.frame_at(t_a))
-        if self.layout_mode == "ghost":  # A's views draw the ghost: draw them anew
-            self.view_a.plotter.interactor.Render()
 
     def show_frame(self, i: int) -> None:
         """Show B at the moment matched with A's frame ``i``."""
@@ -402,7 +387,7 @@ class ComparePanel(QWidget):
         self._surface.point_data["Normals"][:] = self._normals(drawn.points)
         if len(drawn.sensor_points):
             self._sensors.points[:] = drawn.sensor_points
-        self._b_values = self._difference(i, j) if difference else drawn.scalars
+        self._b_values = self.shown.difference(i) if difference else drawn.scalars
         self.frame_b = j
         self._b_shaded = None  # new points or values: lit again as the view renders
         self.caption.setText(self._caption(session_a, i, session_b, j))
@@ -437,12 +422,6 @@ class ComparePanel(QWidget):
 
     def close_view(self) -> None:
         self.plotter.close()
-
-
-def _subplot_index(plotter, index: int) -> tuple[int, ...]:
-    """The ``subplot`` arguments of renderer ``index`` of ``plotter``."""
-    loc = plotter.renderers.index_to_loc(index)
-    return tuple(int(v) for v in np.atleast_1d(loc))
 
 
 def _background() -> str:

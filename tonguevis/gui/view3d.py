@@ -120,9 +120,10 @@ class View3D(QWidget):
             interactor.on_shown = self._on_shown
             interactor.on_painted = self._on_painted
         self.drawn = None  # the FrameDrawing shown (tests read it)
-        #: name -> hook(i, drawn) called with each new frame before it is painted (the compare
-        #: view colours A's surface by the distance to B there).
+        self.ghosts: list = []  # the compared recording's tongue in each of the four views (the ghost layout)
         connected(state.events.time, self._on_time)
+        connected(state.events.comparison, self._on_comparison)
+        connected(state.events.compare_view, self._on_comparison)
         connected(state.events.playing, self._on_playing)
         connected(state.events.color, self._on_colour)
         connected(state.events.reference, self._on_reference)
@@ -143,7 +144,54 @@ class View3D(QWidget):
         self.message.setText(f"{model.mesh.n_nodes} nodes, {modes_text(frames.motion, long=False)}, "
                              f"sensors {', '.join(frames.motion.sensor_names)}"
                              + (f"; {palate.label}" if palate is not None else ""))
+        self._show_comparison()  # the scene was built anew: its colour range and ghosts too
         self.show_time(self.state.time)
+
+    # -- a compared recording (the app model's comparison) -------------------
+    def _on_comparison(self, _event) -> None:
+        self._show_comparison()
+        self.frame = -1
+        self.show_time(self.state.time)
+
+    def _show_comparison(self) -> None:
+        """The app model's comparison in these views: the colouring "distance to B" offered while one of the same
+        mesh is shown (dropped, back to displacement, when none is), and B's ghost in the ghost layout."""
+        shown = self.state.comparison
+        if shown is not None and shown.clim is not None:
+            self.scene.set_colour_range("difference", shown.clim, "distance to\nB (mm)")
+        elif self.state.color == "difference":
+            self.state.set_color("displacement", self)
+        self._remove_ghosts()
+        if shown is not None and self.state.compare_view.layout == "ghost" and self.scene.surface is not None:
+            self._add_ghosts(shown.surface_b)
+
+    def _add_ghosts(self, surface) -> None:
+        from tonguevis.gui.compare import GHOST_COLOUR, GHOST_OPACITY
+        from tonguevis.render.surface_geometry import hidden_side
+
+        plotter = self.plotter
+        # The ghost is B's closed tongue seen from outside: drawn without its far side, one translucent layer
+        # everywhere (its two walls, blended in triangle order, showed the triangles as patches).
+        faces = np.asarray(surface.faces).reshape(-1, 4)[:, 1:]
+        hidden = hidden_side(np.asarray(surface.points), faces)
+        for index in range(len(plotter.renderers)):
+            plotter.subplot(*_subplot_index(plotter, index))
+            actor = plotter.add_mesh(surface, color=GHOST_COLOUR, opacity=GHOST_OPACITY, name=f"ghost_b{index}",
+                                     reset_camera=False, show_scalar_bar=False, scalars=None)
+            actor.mapper.scalar_visibility = False
+            actor.prop.interpolation = "gouraud"
+            actor.prop.SetBackfaceCulling(hidden == "back")
+            actor.prop.SetFrontfaceCulling(hidden == "front")
+            self.ghosts.append(actor)
+        plotter.subplot(*_subplot_index(plotter, 0))
+
+    def _remove_ghosts(self) -> None:
+        for index, actor in enumerate(self.ghosts):
+            try:
+                self.plotter.renderers[index].RemoveActor(actor)
+            except Exception:  # the scene was rebuilt meanwhile
+                pass
+        self.ghosts = []
 
     def _on_time(self, event) -> None:
         self.show_time(event.value)
@@ -202,6 +250,9 @@ class View3D(QWidget):
         self.frame = i
         reference = self.state.reference
         drawn = draw_frame(self.session, i, reference, self.state.color)
+        shown = self.state.comparison
+        if self.state.color == "difference" and shown is not None and shown.clim is not None:
+            drawn.scalars = shown.difference(i)  # A coloured by the distance to B at the matched moment
         self.drawn = drawn
         self.scene.update(drawn.points, drawn.scalars, drawn.sensor_points, drawn.targets,
                           frame_text(frames, i, self.session.productions, drawn.caption), render=False,
@@ -252,3 +303,9 @@ class View3D(QWidget):
 
     def close_view(self) -> None:
         self.plotter.close()
+
+
+def _subplot_index(plotter, index: int) -> tuple[int, ...]:
+    """The ``subplot`` arguments of renderer ``index`` of ``plotter``."""
+    loc = plotter.renderers.index_to_loc(index)
+    return tuple(int(v) for v in np.atleast_1d(loc))
