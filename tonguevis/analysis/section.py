@@ -80,3 +80,30 @@ class MidlineProfile:
         out = np.full(len(self.bins), np.inf)
         np.minimum.at(out, self.bin_of, np.where(np.isfinite(gap), gap, np.inf))
         return np.where(np.isfinite(out), out, np.nan)
+
+    def closest_approach(self, motion, chunk: int = 512) -> tuple[float, float, float] | None:
+        """Where the dorsal midline comes closest to the palate ``motion`` was simulated against, over the whole
+        motion: (distance mm, negative inside; mm behind the tongue tip; time s), against the palate of each frame
+        (:meth:`~tonguevis.sim.motion.Motion.palate_at`: the velum lifted as simulated).  None without a palate or
+        where no palate lies above the midline."""
+        palate = getattr(motion, "palate", None)
+        if palate is None:
+            return None
+        rest = np.asarray(motion.model.mesh.points, dtype=np.float64)[self.nodes]
+        jaw = motion.jaw_offset if motion.jaw_offset is not None else np.zeros((motion.n_frames, 3))
+        lift = motion.velum_lift
+        best = (np.inf, 0, 0)
+        for frames, u in motion.iter_displacements(chunk=chunk, nodes=self.nodes):
+            frames = np.asarray(frames)
+            points = rest[None] + u + np.asarray(jaw)[frames][:, None]
+            amounts = None if lift is None else np.repeat(np.asarray(lift)[frames], len(self.nodes))
+            gap = palate.clearance(points.reshape(-1, 3), lift=amounts)[0].reshape(len(frames), -1)
+            gap = np.where(np.isfinite(gap), gap, np.inf)
+            k = int(np.argmin(gap))
+            f, n = np.unravel_index(k, gap.shape)
+            if gap[f, n] < best[0]:
+                best = (float(gap[f, n]), int(frames[f]), int(n))
+        if not np.isfinite(best[0]):
+            return None
+        gap, frame, node = best
+        return 1e3 * gap, float(self.position_mm[self.bin_of[node]]), float(motion.times[frame])

@@ -79,6 +79,12 @@ def summary(motion) -> list[str]:
         from tonguevis.sim.plausibility import contact_line
 
         lines.append(contact_line({**meta, "sensor_names": list(motion.sensor_names)}))
+        from tonguevis.analysis.section import MidlineProfile
+
+        closest = MidlineProfile(motion.model).closest_approach(motion)  # what the Palate tab plots, over time
+        if closest is not None:
+            lines.append(f"midline: closest to the palate {closest[0]:.1f} mm, {closest[1]:.0f} mm behind the tip, "
+                         f"at {closest[2]:.2f} s")
     if meta.get("ignored_sensors"):
         lines.append("ignored (no landmark on the model): " + ", ".join(meta["ignored_sensors"]))
     return lines
