@@ -37,9 +37,7 @@ from tonguevis.appstate import COMPARE_LAYOUTS, COMPARE_TIME_MODES, connected
 LAYOUTS = dict(zip(COMPARE_LAYOUTS, ("side by side", "ghost in A's views")))
 #: How B's time follows A's (:class:`~tonguevis.analysis.compare.Comparison` modes).
 TIME_MODES = dict(zip(COMPARE_TIME_MODES, ("per production", "absolute time")))
-GHOST_COLOUR = "#8ff0ff"
 GHOST_PANEL_WIDTH = 460  # px: the panel's controls, when B is drawn inside A's views
-GHOST_OPACITY = 0.4
 #: Colour range of the distance between the tongues: at least this (mm), else the 98th percentile
 #: of a sample of matched frames.
 DIFFERENCE_MIN_RANGE_MM = 1.0

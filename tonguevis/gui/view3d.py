@@ -38,6 +38,11 @@ def image_views() -> bool:
     return QGuiApplication.platformName() in ("xcb", "windows")
 
 
+#: How the compared recording B is drawn inside A's views (a translucent ghost).
+GHOST_COLOUR = "#8ff0ff"
+GHOST_OPACITY = 0.4
+
+
 def make_plotter(parent, multi_samples: int | None = None, auto_update: float | bool = 5.0, **kwargs):
     """A Qt plotter (pyvista ``BasePlotter`` API, ``.interactor`` the widget) for every 3D view of the
     app: an :class:`~tonguevis.gui.image_views.ImageInteractor` where :func:`image_views` says so,
@@ -166,7 +171,6 @@ class View3D(QWidget):
             self._add_ghosts(shown.surface_b)
 
     def _add_ghosts(self, surface) -> None:
-        from tonguevis.gui.compare import GHOST_COLOUR, GHOST_OPACITY
         from tonguevis.render.surface_geometry import hidden_side
 
         plotter = self.plotter
