@@ -247,7 +247,7 @@ def test_the_midline_plot_follows_the_cursor(qtbot, window, tmp_path):
         expected = np.full(len(profile.bins), np.inf)
         np.minimum.at(expected, profile.bin_of, ROOF_MM - 1e3 * head[profile.nodes, 2])
         np.testing.assert_allclose(panel.midline.line.get_ydata(), expected, atol=1e-3)
-        assert f"frame {i + 1}" in panel.midline.title.get_text()
+        assert f"frame {i}/" in panel.midline.title.get_text()
     # Hidden, it does not redraw; shown again, it catches up with the cursor.
     window.tabs.setCurrentWidget(window.sensor_panel)
     window.state.set_time(6.0)

@@ -16,7 +16,8 @@ def add_arguments(parser) -> None:
                         help="sensor map: a preset (paper, haskins, mngu0) or a JSON file of name -> channel")
     parser.add_argument("--screenshot", type=Path, metavar="PNG",
                         help="open the window, show --frame, save the whole window as PNG and exit")
-    parser.add_argument("--frame", type=int, metavar="N", help="frame shown for --screenshot (default: the middle)")
+    parser.add_argument("--frame", type=int, metavar="N", help="frame shown for --screenshot, counted from 0 as the "
+                        "transport, the captions and the exports count them (default: the middle)")
     parser.add_argument("--reference", choices=("head", "jaw"), default="head",
                         help="frame of reference of the views: head (default: tongue and jaw move with the jaw, "
                              "palate fixed) or jaw (the jaw's motion removed)")

@@ -29,6 +29,7 @@ from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QVBox
 
 from tonguevis.gui.elastic_label import ElasticLabel
 from tonguevis.errors import TonguevisError
+from tonguevis.sim.motion import frame_label
 from tonguevis.appstate import COMPARE_LAYOUTS, COMPARE_TIME_MODES, connected
 
 
@@ -400,7 +401,7 @@ class ComparePanel(QWidget):
 
     def _caption(self, session_a, i: int, session_b, j: int) -> str:
         times_b = session_b.frames.times
-        text = f"B at t = {times_b[j]:.3f} s, frame {j + 1}/{len(times_b)}"
+        text = f"B at t = {times_b[j]:.3f} s, {frame_label(j, len(times_b))}"
         phase = self.comparison.phase(float(session_a.frames.times[i]))
         if phase is not None and phase[0] > self.comparison.productions_in_b():
             held = "held on its last frame" if j == len(times_b) - 1 else "running on past its last production"

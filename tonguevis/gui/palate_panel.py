@@ -19,6 +19,7 @@ from tonguevis.appstate import AppState, connected
 from tonguevis.analysis.section import MidlineProfile
 from tonguevis.render.drawing import TOUCH_MM, head_points
 from tonguevis.gui.timeplot import FACE, TimePlot
+from tonguevis.sim.motion import frame_label
 
 PENETRATION_COLOUR = "#c0392b"
 AREA_COLOUR = "#2980b9"
@@ -163,7 +164,7 @@ class PalatePanel(QWidget):
         self.shown_frame = i
         d = self.profile.distances(self.session.shown_palate, head_points(frames, i))
         closest = np.nanmin(d) if np.isfinite(d).any() else float("nan")
-        self.midline.show_distances(d, f"t = {frames.times[i]:.3f} s (frame {i + 1}): closest {closest:.1f} mm")
+        self.midline.show_distances(d, f"t = {frames.times[i]:.3f} s ({frame_label(i, frames.n_frames)}): closest {closest:.1f} mm")
 
     def showEvent(self, event) -> None:  # noqa: N802 (Qt name)
         super().showEvent(event)

@@ -7,6 +7,7 @@ from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QSlider, QToolB
 
 from tonguevis.appstate import AppState, connected, interval_at
 from tonguevis.gui.elastic_label import ElasticLabel
+from tonguevis.sim.motion import frame_label
 
 SPEEDS = (0.25, 0.5, 0.75, 1.0)
 
@@ -72,8 +73,8 @@ class TransportBar(QWidget):
         where = ""
         if production is not None:
             where = f"  production {self.productions.index(production) + 1}/{len(self.productions)}"
-        last = self._frame(self.state.end) + 1
-        self.label.setText(f"{t:7.3f} s / {self.state.end:.2f} s  frame {self._frame(t) + 1}/{last}{where}")
+        frame = frame_label(self._frame(t), self._frame(self.state.end) + 1)
+        self.label.setText(f"{t:7.3f} s / {self.state.end:.2f} s  {frame}{where}")
 
     def _on_slider(self, value: int) -> None:
         self.state.set_time(self.state.start + value * self.state.frame_period, source=self)

@@ -41,6 +41,7 @@ from tonguevis.live.rtc3d import (
 from tonguevis.live.source import recording_frames
 
 from tonguevis._logging import logger
+from tonguevis.sim.motion import frame_label
 
 
 @dataclass
@@ -376,6 +377,7 @@ def serve_until_done(server: ReplayServer, report=None, interval: float = 1.0) -
     while not server.finished.wait(interval):
         if report is not None:
             k = server.current_index()
-            where = "waiting for a client" if k is None else f"frame {k + 1}"
+            n = len(server.times)
+            where = "waiting for a client" if k is None else frame_label(min(k % n if server.loop else k, n - 1), n)
             report(f"{where}, {server.connections} connection(s), {server.frames_sent} frames sent")
 

@@ -663,9 +663,10 @@ def scene_setup(session) -> dict:
 def frame_text(frames, i: int, productions, caption: str | None = None) -> str:
     """The main view's caption at frame ``i``: time, frame number, production, largest sensor residual (mm)."""
     from tonguevis.render.production_marks import interval_at
+    from tonguevis.sim.motion import frame_label
 
     t = frames.times[i]
-    text = f"t = {t:.3f} s   frame {i + 1}/{frames.n_frames}"
+    text = f"t = {t:.3f} s   {frame_label(i, frames.n_frames)}"
     production = interval_at(productions, t)
     if production is not None:
         text += f"   production {productions.index(production) + 1}"

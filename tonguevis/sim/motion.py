@@ -21,6 +21,15 @@ def nearest_frame(times: np.ndarray, t: float) -> int:
     return i if times[i] - t < t - times[i - 1] else i - 1
 
 
+
+def frame_label(i: int, n_frames: int) -> str:
+    """"frame 152/1888": frame ``i`` of ``n_frames``, numbered from 0 to ``n_frames - 1``.
+
+    The one numbering of frames everywhere: ``tonguevis view --frame N``, the transport, the
+    views' captions, the exports (``frame_00000.vtu``, the XDMF's ``/frames``) and Python
+    (``motion.displacement(i)``) all count from 0; the figure after the slash is the last frame."""
+    return f"frame {int(i)}/{int(n_frames) - 1}"
+
 @dataclass
 class Motion:
     """A simulated tongue motion on one :class:`TongueModel`.
