@@ -32,6 +32,20 @@ def test_info_reports_format_rate_sensors_audio(ndi_file, capsys):
     assert "dropped frames: none" in out
 
 
+
+def test_info_says_orientation_only_where_the_file_has_some(tmp_path, capsys):
+    """Issue 37: the demo's Q0..Qz columns are empty, and info said "+orientation" for every sensor."""
+    rec = make_recording(n=40)
+    names = list(rec.sensors)
+    rec.orientations = {name: np.full((rec.n_samples, 4), np.nan) for name in names}
+    rec.orientations[names[0]][:, 0] = 1.0  # one sensor with quaternions, the others with empty columns
+    path = tmp_path / "take.tsv"
+    write_recording(rec, path)
+    assert main(["info", str(path)]) == 0
+    rows = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.startswith("  ")}
+    said = [name for name, line in rows.items() if line.endswith("+orientation")]
+    assert len(rows) == len(names) and len(said) == 1  # written as S<Id>: the one with quaternions
+
 def test_info_lists_dropped_frames_and_labels(capsys):
     assert main(["info", str(shared_file("ema", "ndi_wave", "Example3.tsv"))]) == 0
     assert "1 frame(s) missing in 1 gap(s): 1 after 0.999 s" in capsys.readouterr().out

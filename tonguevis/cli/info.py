@@ -70,7 +70,8 @@ def describe(rec) -> list[str]:
             where = "  ".join(f"{v:8.1f}" for v in mean)
         else:
             where = "no valid sample"
-        extra = " +orientation" if name in rec.orientations else ""
+        quats = rec.orientations.get(name)  # the Q columns of an NDI Wave export may all be empty
+        extra = " +orientation" if quats is not None and np.isfinite(quats).any() else ""
         lines.append(f"  {name:<{width}}  {100 * rec.valid_fraction(name):5.1f}%  {where}{extra}")
     if rec.audio is None:
         lines.append("audio:          none")
