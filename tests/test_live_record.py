@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
 import re
+import subprocess
+import sys
 import threading
 
 import numpy as np
@@ -14,7 +17,7 @@ from tonguevis.io.ndi_wave import read_ndi_wave
 from tonguevis.live.recorder import TsvRecorder, free_path, record, write_head_corrected
 from tonguevis.live.server import Faults, ReplayServer
 from tonguevis.live.source import LiveFrame, WaveFrontSource, recording_frames
-from tonguevis.paths import DEMO_RECORDING
+from tonguevis.paths import DEMO_RECORDING, REPO_DIR
 from tonguevis.preprocess.correction import head_corrected
 from tonguevis.workflows import open_recording
 
@@ -227,14 +230,20 @@ def test_stream_cli_serves_the_record_cli(tmp_path, capsys):
     assert_equals_stream(rec, open_recording(tmp_path / "short.tsv"))
 
 
-def test_record_cli_with_nothing_to_record(tmp_path, capsys):
+def test_record_cli_with_nothing_to_record(tmp_path):
     import socket
 
     sock = socket.create_server(("127.0.0.1", 0))
     port = sock.getsockname()[1]
     sock.close()
-    status = run_cli(["record", "--source", f"127.0.0.1:{port}", "--out", str(tmp_path), "--retries", "0"])
-    assert status == 1 and "nothing recorded" in capsys.readouterr().out
+    # The command itself, as a shell or a script runs it: its exit status and its error line.
+    done = subprocess.run([sys.executable, "-m", "tonguevis", "record", "--source", f"127.0.0.1:{port}",
+                           "--out", str(tmp_path), "--retries", "0"], capture_output=True, text=True, timeout=60,
+                          cwd=REPO_DIR, env=dict(os.environ, PYTHONPATH=str(REPO_DIR)))
+    assert done.returncode == 2, (done.returncode, done.stdout, done.stderr)
+    assert done.stderr.strip().splitlines()[-1].startswith(
+        f"tonguevis record: error: nothing recorded: no frame arrived from 127.0.0.1:{port}")
+    assert "nothing recorded" not in done.stdout
     assert list(tmp_path.iterdir()) == []
     assert main(["record", "--source", "localhost:notaport", "--out", str(tmp_path)]) == 2
 

@@ -66,10 +66,9 @@ def run(args) -> int:
     source.start()
     result = record(source, path, seconds=args.seconds, sensor_map=args.sensors, report=say)
     st = result.status
-    if result.path is None:
-        say(f"nothing recorded: no frame arrived from {host}:{port}"
-            + (f" ({st.errors[-1]})" if st.errors else ""))
-        return 1
+    if result.path is None:  # an error like any other: one line on stderr, exit status 2
+        raise TonguevisError(f"nothing recorded: no frame arrived from {host}:{port}"
+                             + (f" ({st.errors[-1]})" if st.errors else ""))
     how = "stopped by Ctrl-C" if result.interrupted else ("the stream ended" if st.state == "failed" else "done")
     say(f"{how}: {result.frames} frames ({result.seconds:.1f} s) in {result.path}"
         + (f"; {st.missed} frames missed by the device" if st.missed else "")
