@@ -75,3 +75,14 @@ def test_cli_verbose_says_what_happens(capsys):
     assert logger.getEffectiveLevel() == logging.INFO
     assert main(["info", str(demo)]) == 0
     assert logger.getEffectiveLevel() == logging.WARNING
+
+
+def test_set_log_level_is_where_the_module_doc_says():
+    """Issue 37: the docs say ``tonguevis.set_log_level("warning")``; it was not exported."""
+    import tonguevis
+
+    assert "set_log_level" in tonguevis.__all__
+    tonguevis.set_log_level("info")
+    assert logger.level == logging.INFO
+    tonguevis.set_log_level(False)
+    assert logger.level == logging.WARNING

@@ -18,6 +18,7 @@ _LAZY = {
     "Motion": "tonguevis.sim",
     "simulate": "tonguevis.sim",
     "RunSettings": "tonguevis.sim",
+    "set_log_level": "tonguevis._logging",
 }
 
 __all__ = ["__version__", *_LAZY]
