@@ -23,8 +23,12 @@ def report(progress: Optional[ProgressCallback], done: int, total: int, message:
 
 @contextmanager
 def tqdm_progress(description: str, disable: bool = False, unit: str = "step") -> Iterator[ProgressCallback]:
-    """A progress callback drawing a tqdm bar on stderr (counting ``unit``), closed on exit."""
+    """A progress callback drawing a tqdm bar on stderr (counting ``unit``), closed on exit.
+
+    While the bar is drawn, log lines (the CLI's warnings) go through ``tqdm.write``: each on a
+    line of its own above the bar, not glued onto the bar's line."""
     from tqdm import tqdm
+    from tqdm.contrib.logging import logging_redirect_tqdm
 
     bar = tqdm(total=1, desc=description, disable=disable, leave=False, unit=unit)
 
@@ -37,6 +41,7 @@ def tqdm_progress(description: str, disable: bool = False, unit: str = "step") -
         bar.refresh()
 
     try:
-        yield callback
+        with logging_redirect_tqdm(tqdm_class=tqdm):
+            yield callback
     finally:
         bar.close()
