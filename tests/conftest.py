@@ -19,6 +19,15 @@ def _isolated_cache(tmp_path_factory):
     yield
 
 
+@pytest.fixture(autouse=True)
+def _warnings_said_afresh():
+    """Each test hears the warnings of its own runs: warn_once's memory is the process's, not the test's."""
+    from tonguevis._logging import forget_warnings
+
+    forget_warnings()
+    yield
+
+
 def shared_file(*parts: str) -> Path:
     """Path of a file in ../shared/data, or skip the test with the reason."""
     path = SHARED_DATA.joinpath(*parts)

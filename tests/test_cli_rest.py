@@ -85,7 +85,7 @@ def test_every_command_finds_a_rest_and_says_which(which, generated, tmp_path, c
         assert found, (command, out)
         lines[command] = found.group(0)
         # The warning says how to give one.
-        assert "no still interval of 1 s" in caplog.text and "--rest START END" in caplog.text, command
+        assert "no still second" in caplog.text and "--rest START END" in caplog.text, command
     assert len(set(lines.values())) == 1, lines  # one rest, found the same way by every command
 
 

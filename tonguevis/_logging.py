@@ -43,6 +43,32 @@ def _level(verbose: bool | str | int | None) -> int | None:
                      f"got {verbose!r}")
 
 
+#: The warnings :func:`warn_once` has said in this process (each line, as said).
+_said: set[str] = set()
+
+
+def warn_once(line: str, detail: str = "") -> None:
+    """Say ``line`` as a warning once per process, and ``detail`` (the longer why) at the info level.
+
+    ``line`` is one short line: what happened and what to do.  A script that simulates
+    the same recording again, or the app simulating it again with other settings, is not
+    told the same thing twice (the line holds the file and the figures, so another
+    recording's is said).  The whole story stays in the run's summary and metadata;
+    ``detail`` is shown with ``tonguevis -v`` or ``verbose=True``.
+    """
+    if line in _said or not logger.isEnabledFor(logging.WARNING):
+        return
+    _said.add(line)
+    logger.warning("%s", line)
+    if detail:
+        logger.info("%s", detail)
+
+
+def forget_warnings() -> None:
+    """Let :func:`warn_once` say every line again (each ``tonguevis`` command starts afresh; tests)."""
+    _said.clear()
+
+
 def set_log_level(verbose: bool | str | int | None = None) -> None:
     """Set how much tonguevis says from now on (see the module doc); None: "warning"."""
     logger.setLevel(_level(verbose) if verbose is not None else logging.WARNING)

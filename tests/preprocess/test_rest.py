@@ -82,7 +82,7 @@ def test_the_rest_falls_back_to_the_stillest_window_and_says_so(caplog):
     assert choice.how == "stillest window" and choice.reason == "no still second in the recording"
     assert 1.2 - 1e-9 <= choice.interval[0] and choice.interval[1] <= 1.5 + 0.011
     assert stillest_window(rec, ["TT"]) == choice.interval
-    assert "stillest 0.2 s window" in caplog.text and "x.tsv" in caplog.text
+    assert "the stillest 0.2 s" in caplog.text and "x.tsv" in caplog.text
     assert choice.describe() == (f"rest: {choice.interval[0]:.2f}-{choice.interval[1]:.2f} s "
                                  "(stillest window: no still second in the recording)")
     assert RestChoice.from_dict(choice.as_dict()) == choice

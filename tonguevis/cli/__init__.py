@@ -69,8 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command is None:  # `tonguevis` or `tonguevis -v` alone: the app on the demo
         args = parser.parse_args([*argv, "view"])
-    from tonguevis._logging import set_log_level
+    from tonguevis._logging import forget_warnings, set_log_level
 
+    forget_warnings()  # each command says its warnings, once (tonguevis._logging.warn_once)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="tonguevis: %(levelname)s: %(message)s")
     set_log_level(args.verbose)

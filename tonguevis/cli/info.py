@@ -43,6 +43,21 @@ def _resampling(resampled) -> list[str]:
             f"{resampled.get('rate_hz', 0):g} Hz ({resampled.get('method', '?')})"]
 
 
+def _rest_line(rec) -> str:
+    """``rest:`` and the interval every command would take as the rest, and how it was found (the
+    warning a simulation gives when there is no still second, said here as a line of the description)."""
+    from tonguevis._logging import use_log_level
+    from tonguevis.errors import TonguevisError
+    from tonguevis.preprocess.rest import choose_rest_interval
+
+    try:
+        with use_log_level("error"):
+            choice = choose_rest_interval(rec)
+    except TonguevisError as exc:
+        return f"rest:           not found: {exc}"
+    return f"rest:           {choice.describe().removeprefix('rest: ')}"
+
+
 def describe(rec) -> list[str]:
     """The lines ``tonguevis info`` prints for a recording."""
     from tonguevis.io.recording import unstated_axes_note
@@ -73,6 +88,7 @@ def describe(rec) -> list[str]:
         quats = rec.orientations.get(name)  # the Q columns of an NDI Wave export may all be empty
         extra = " +orientation" if quats is not None and np.isfinite(quats).any() else ""
         lines.append(f"  {name:<{width}}  {100 * rec.valid_fraction(name):5.1f}%  {where}{extra}")
+    lines.append(_rest_line(rec))
     if rec.audio is None:
         lines.append("audio:          none")
     else:

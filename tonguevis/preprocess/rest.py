@@ -13,6 +13,7 @@ which in a :class:`RestChoice`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -21,7 +22,7 @@ from tonguevis.io.recording import Recording
 from tonguevis.preprocess._localpoly import savgol
 from tonguevis.preprocess._names import is_reference, tongue_names
 
-from tonguevis._logging import logger
+from tonguevis._logging import warn_once
 
 #: What a user can do when no rest is found: the command-line option and the app's menu item.
 HOW_TO_GIVE_REST = "give one with --rest START END (seconds) or, in the app, Simulation ▸ Set rest interval…"
@@ -195,8 +196,11 @@ def choose_rest_interval(recording: Recording, sensors=None, given=None) -> Rest
     short = recording.duration < MIN_REST_S
     reason = ("the recording is shorter than a second" if short
               else f"no still {'second' if MIN_REST_S == 1 else f'{MIN_REST_S:g} s'} in the recording")
-    logger.warning("%s; the stillest %.1f s window %.2f-%.2f s stands in for the rest pose",
-                   detail, STILLEST_WINDOW_S, *interval)
+    name = Path(str(recording.metadata.get("file") or "recording")).name
+    warn_once(f"{name}: {reason}; rest: the stillest {STILLEST_WINDOW_S:.1f} s, {interval[0]:.2f}-{interval[1]:.2f} s "
+              "(--rest START END gives one)",
+              f"{detail}; the stillest {STILLEST_WINDOW_S:.1f} s window {interval[0]:.2f}-{interval[1]:.2f} s "
+              "stands in for the rest pose")
     return RestChoice(interval, "stillest window", reason)
 
 

@@ -47,6 +47,13 @@ from tonguevis.sim.settings import ADULT, FRAMES  # noqa: F401 (re-exported)
 ADULT_VOLUMES = (0.5, 2.0)
 
 
+def _file_name(recording) -> str:
+    """The recording's file name without its folders, for a warning's one line."""
+    from pathlib import Path
+
+    return Path(str(recording.metadata.get("file") or "recording")).name
+
+
 def placement_key(transform, density_factor: float) -> str:
     """Hex digest of a placement (scale, rotation, translation, density factor), for basis keys."""
     h = hashlib.sha256()
@@ -241,14 +248,15 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
         if ADULT_VOLUMES[0] <= volume <= ADULT_VOLUMES[1]:
             tongue_size = None  # the alignment's size is an adult's: kept
         else:
-            from tonguevis._logging import logger
+            from tonguevis._logging import warn_once
 
-            logger.warning(
-                "%s: the rest alignment would make the tongue %.1f times the generic one's volume (the rest sensors "
-                "sit %s than the model's placement rule), which no adult tongue is: placed at the generic adult "
-                "size instead, the rest sensors fitted onto its upper surface (--tongue-size alignment keeps the "
-                "alignment's size)", recording.metadata.get("file", "recording"), volume,
-                "further apart" if volume > 1 else "closer together")
+            warn_once(f"{_file_name(recording)}: tongue at the adult size; the rest sensors' spread says {volume:.1f} "
+                      "times its volume (--tongue-size alignment keeps that)",
+                      f"{recording.metadata.get('file', 'recording')}: the rest alignment would make the tongue "
+                      f"{volume:.1f} times the generic one's volume (the rest sensors sit "
+                      f"{'further apart' if volume > 1 else 'closer together'} than the model's placement rule), "
+                      "which no adult tongue is: placed at the generic adult size instead, the rest sensors fitted "
+                      "onto its upper surface")
             tongue_size, size_from = 1.0, "adult norm"
     elif frame == "speaker" and tongue_size is not None:
         size_from = "given"
@@ -269,14 +277,15 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
         placement = fit.inverse()
         volume = placement.scale ** 3
         if not ADULT_VOLUMES[0] <= volume <= ADULT_VOLUMES[1]:
-            from tonguevis._logging import logger
+            from tonguevis._logging import warn_once
 
-            logger.warning(
-                "%s: placed in the speaker as the rest alignment scales it (%.2f), the tongue is %.1f times the "
-                "generic one's volume: the rest sensors sit %s than the model's placement rule, which need not "
-                "be the tongue's size; tongue_size=1 ('tonguevis simulate/validate --tongue-size 1') keeps the "
-                "generic size, the sensors fitted onto its surface", recording.metadata.get("file", "recording"), placement.scale, volume,
-                "further apart" if volume > 1 else "closer together")
+            warn_once(f"{_file_name(recording)}: at the rest alignment's size the tongue is {volume:.1f} times the "
+                      "generic one's volume (--tongue-size 1, tongue_size=1: the generic size)",
+                      f"{recording.metadata.get('file', 'recording')}: placed in the speaker as the rest alignment "
+                      f"scales it ({placement.scale:.2f}), the tongue is {volume:.1f} times the generic one's volume: "
+                      f"the rest sensors sit {'further apart' if volume > 1 else 'closer together'} than the model's "
+                      "placement rule, which need not be the tongue's size; tongue_size=1 keeps the generic size, "
+                      "the sensors fitted onto its surface")
         model = PlacedModel(model, placement, keep_frequencies)
         linear = placement.scale * placement.rotation
         prep = replace(
@@ -294,13 +303,14 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
     fitted = model.mesh.points[[int(model.landmarks.sensors[n]) for n in prep.names]] \
         if how == "rule nodes" and bent is None else model.mesh.points[prep.nodes]
     residual = 1e3 * np.linalg.norm(prep.aligned_rest - fitted, axis=1)
+    rms = float(np.sqrt(np.mean(residual ** 2)))
     info = {
         "frame": frame, "fitted_to": how, "tongue_size": None if frame == "model" else 1.0 / fit.scale,
         **({"size_from": size_from} if frame == "speaker" else {}),
         "scale": fit.scale, "rotation": fit.rotation.tolist(), "translation_m": fit.translation.tolist(),
         "rule_node_scale": rule_scale,  # what the rest sensors' fit onto the rule nodes says
         "matrix": fit.matrix.tolist(), "midsagittal": bool(prep.midsagittal),
-        "residual_rms_mm": float(np.sqrt(np.mean(residual ** 2))), "residual_max_mm": float(residual.max()),
+        "residual_rms_mm": rms, "residual_max_mm": float(residual.max()),
         "residual_by_sensor_mm": {n: float(r) for n, r in zip(prep.names, residual)},
         "model_volume_cm3": float(1e6 * model.rest_volume),
         **({"density_factor": getattr(model, "density_factor", getattr(getattr(model, "unfitted", None),
@@ -318,9 +328,10 @@ def describe_fit(fit: dict) -> str:
                 + ("the model's nodes" if fit.get("fitted_to", "rule nodes") == "rule nodes"
                    else "their nodes on its upper surface"))
     if fit["frame"] == "speaker":
+        implied = float(fit.get("rule_node_scale", float("nan"))) ** -3
         size = (f"at {1 / scale:.2f} x its size ({fit['model_volume_cm3']:.0f} cm³)"
-                + (", the generic adult size (the rest alignment's is no adult's), the rest sensors fitted onto "
-                   "its upper surface" if fit.get("size_from") == "adult norm"
+                + (f", the generic adult size (the rest alignment's, {implied:.1f} times that volume, is no adult's), "
+                   "the rest sensors fitted onto its upper surface" if fit.get("size_from") == "adult norm"
                    else ", the rest sensors fitted onto its upper surface" if fit.get("fitted_to") == "upper surface"
                    else ", as the rest alignment scales it"))
         if fit.get("rest_fit"):
