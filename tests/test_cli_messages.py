@@ -71,6 +71,31 @@ def test_a_warning_is_one_line_said_once_per_process_its_detail_kept(speech_only
         assert motion.metadata["rest"]["reason"] == "no still second in the recording"
 
 
+def test_a_rest_far_from_the_models_nodes_is_said_in_one_line(caplog):
+    """Issue 37: rest sensors 6 mm RMS from their nodes (a held-out Opti-Speech speaker) passed unsaid."""
+    import logging
+
+    from tests.sim._models import bar_model
+    from tests.sim.test_simulate import SENSORS, _recording
+    from tonguevis.sim import simulate
+    from tonguevis.sim.placement import REST_MISFIT_MM
+
+    model = bar_model(sensors=SENSORS)
+    good = _recording(model)
+    with caplog.at_level(logging.WARNING, logger="tonguevis"):
+        motion = simulate(good, model, modes=20, backend="numpy")
+    assert motion.metadata["fit"]["residual_rms_mm"] < REST_MISFIT_MM and _warnings(caplog) == []
+    off = good.with_sensors({**good.sensors, "TD": good.sensors["TD"] + [0.0, 0.0, 0.02]})  # TD 2 cm off its node
+    with caplog.at_level(logging.WARNING, logger="tonguevis"):
+        motion = simulate(off, model, modes=20, backend="numpy")
+    fit = motion.metadata["fit"]
+    assert fit["residual_rms_mm"] > REST_MISFIT_MM
+    said = [m for m in _warnings(caplog) if "from their nodes" in m]
+    assert said == [f"synthetic: the rest sensors lie {fit['residual_rms_mm']:.1f} mm RMS from their nodes "
+                    f"(TD {fit['residual_by_sensor_mm']['TD']:.1f} mm): the model's rest shape is not this "
+                    "speaker's (--fit-rest bends it onto them)"]
+
+
 def test_a_real_clinic_recording_says_each_warning_once_in_a_line(tmp_path):
     """The Opti-Speech /ta/ against the speaker's palate: no still second and a rest spread no adult
     tongue has, each a line of its own, none repeated (the palate's placement is said at the info

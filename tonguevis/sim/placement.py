@@ -47,6 +47,12 @@ from tonguevis.sim.settings import ADULT, FRAMES  # noqa: F401 (re-exported)
 ADULT_VOLUMES = (0.5, 2.0)
 
 
+#: Rest sensors further than this from their nodes (mm RMS) are said in a warning: the model's rest shape is
+#: then not the speaker's.  The shared recordings stay under it (Opti-Speech 1.2-1.8 mm at the adult size,
+#: Haskins 4.0, the 0.1 s of rticulate's AG500 4.5); a held-out Opti-Speech speaker's 6.2 mm passed unsaid.
+REST_MISFIT_MM = 5.0
+
+
 def _file_name(recording) -> str:
     """The recording's file name without its folders, for a warning's one line."""
     from pathlib import Path
@@ -304,6 +310,13 @@ def targets_in_frame(recording, model: TongueModel, frame: str = "speaker", land
         if how == "rule nodes" and bent is None else model.mesh.points[prep.nodes]
     residual = 1e3 * np.linalg.norm(prep.aligned_rest - fitted, axis=1)
     rms = float(np.sqrt(np.mean(residual ** 2)))
+    if rms > REST_MISFIT_MM:
+        from tonguevis._logging import warn_once
+
+        worst = int(np.argmax(residual))
+        warn_once(f"{_file_name(recording)}: the rest sensors lie {rms:.1f} mm RMS from their nodes "
+                  f"({prep.names[worst]} {residual[worst]:.1f} mm): the model's rest shape is not this speaker's"
+                  + ("" if bent is not None else " (--fit-rest bends it onto them)"))
     info = {
         "frame": frame, "fitted_to": how, "tongue_size": None if frame == "model" else 1.0 / fit.scale,
         **({"size_from": size_from} if frame == "speaker" else {}),
