@@ -23,6 +23,7 @@ coarsest subspace of all.
 
 from __future__ import annotations
 
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -231,6 +232,14 @@ def test_simulate_method_domains_gives_the_modal_methods_motion():
     assert domains.energy.max() > 0 and np.all(np.isfinite(domains.energy))
     with pytest.raises(SimulationError, match="unknown simulation method"):
         simulate(rec, method="fem")
+    # What `tonguevis simulate` says of each (issue 37: the domains run said "180 modes, linear").
+    from tonguevis.cli.simulate import summary
+
+    said = {name: summary(motion)[0] for name, motion in (("warped", warped), ("linear", linear), ("domains", domains))}
+    assert ", 100 modes, modal warping;" in said["warped"] and ", 100 modes, linear;" in said["linear"]
+    d = domains.metadata["domains"]
+    assert f", {d['domains']} quadratic domains ({d['dofs']} degrees of freedom), nonlinear tissue" in said["domains"]
+    assert "modes" not in said["domains"] and not re.search(r"\blinear\b", said["domains"]), said["domains"]
 
 
 def test_a_saved_domains_motion_loads_with_its_subspace(tmp_path, bar):

@@ -44,9 +44,9 @@ def _stiffness_text(meta: dict) -> str:
 
 
 def _modes_text(motion) -> str:
-    from tonguevis.sim.patches import modes_text
+    from tonguevis.sim.patches import modes_text, physics_text
 
-    return modes_text(motion)
+    return f"{modes_text(motion)}, {physics_text(motion)}"
 
 
 def summary(motion) -> list[str]:
@@ -59,8 +59,8 @@ def summary(motion) -> list[str]:
     meta = motion.metadata
     unconverged = len(meta.get("unconverged_frames", []))
     lines = [
-        f"model: {motion.model.mesh.n_nodes} nodes, {motion.model.mesh.n_tets} tets, {_modes_text(motion)}, "
-        f"{'modal warping' if motion.warping else 'linear'}; sensor nodes: {meta['landmarks']}",
+        f"model: {motion.model.mesh.n_nodes} nodes, {motion.model.mesh.n_tets} tets, {_modes_text(motion)}; "
+        f"sensor nodes: {meta['landmarks']}",
         rest_line(motion),
         "driving sensors: " + ", ".join(f"{n}->node {int(k)}" for n, k in zip(motion.sensor_names, motion.sensor_nodes)),
         (describe_fit(meta["fit"]) if "fit" in meta else  # motions saved before the speaker frame

@@ -168,9 +168,21 @@ def close_sensor_gaps(basis: ModalBasis, rotation: np.ndarray, nodes: np.ndarray
     return np.linalg.solve(mats, gap[:, :, None])[:, :, 0]
 
 
+def physics_text(motion) -> str:
+    """The tongue's physics in a motion's summary: "modal warping", "linear" or, for the domains
+    method, "nonlinear tissue (StVK, Luo et al. 2017)"."""
+    if motion.metadata.get("method") == "domains":
+        return "nonlinear tissue (StVK, Luo et al. 2017)"
+    return "modal warping" if motion.warping else "linear"
+
+
 def modes_text(motion, long: bool = True) -> str:
     """"100 modes", or with sensor patches "100 modes + 15 sensor patch shapes (3 mm, the sensors on
-    the surface)" (``long``) / "100 modes + sensor patches"."""
+    the surface)" (``long``) / "100 modes + sensor patches"; the domains method's degrees of freedom
+    are no modes: "6 quadratic domains (180 degrees of freedom)"."""
+    domains = motion.metadata.get("domains") if motion.metadata.get("method") == "domains" else None
+    if domains:
+        return f"{domains['domains']} quadratic domains ({domains['dofs']} degrees of freedom)"
     patches = motion.metadata.get("sensor_patches")
     if not patches:
         return f"{motion.q.shape[1]} modes"
