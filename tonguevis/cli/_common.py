@@ -132,7 +132,8 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, every: bool = False, m
     group.add_argument("--method", choices=METHODS, default=None,
                        help="the tongue's physics: 'warped' (modal warping, the paper's; default), 'linear' (the "
                             "linear modal model) or 'domains' (the nonlinear StVK tongue of Luo et al. 2017 on "
-                            "quadratic domains: slower, a few hundred frames/s)")
+                            "quadratic domains: slower, a few hundred frames/s, the modal methods thousands; "
+                            "scripts/bench_domains.py)")
     group.add_argument("--linear", action="store_true", help="the linear modal model: --method linear")
     group.add_argument("--keep-volume", action="store_true",
                        help="keep the tongue's volume: each frame projected onto volume-preserving shapes (a "
