@@ -1,10 +1,12 @@
-"""Simulation ▸ Method: the app simulates with warping, the linear modes or seed 001's quadratic domains."""
+"""Simulation ▸ Method: the app simulates with warping, the linear modes or the quadratic domains (Luo et al. 2017)."""
 
 from __future__ import annotations
 
 from tonguevis.sim.settings import RunSettings
 
 import pytest
+
+from tests.test_cli_help import help_of
 
 pytestmark = [pytest.mark.gui, pytest.mark.timeout(240)]
 
@@ -130,3 +132,16 @@ def test_press_the_closures_follows_the_settings_and_resimulates(qtbot, window, 
     with qtbot.waitSignal(window.simulation_finished, timeout=120000):
         window.state.change_run_settings(None, closures=True)
     assert window.closures_action.isChecked()
+
+
+def test_the_methods_are_said_in_a_users_words_with_their_speed(window):
+    """Issue 37: the menu said "seed 001" (the project's name for a paper) and, like `--method`'s help,
+    "tens of frames per second" for a method that runs a few hundred (scripts/bench_domains.py: 300-500
+    frames/s whole trial on 2 cores, the modal methods 6,000-24,000)."""
+    texts = [(a.text(), a.toolTip()) for a in window.method_actions.values()]
+    assert not any("seed" in text.lower() or "seed" in tip.lower() for text, tip in texts), texts
+    domains = window.method_actions["domains"]
+    for said in (domains.toolTip(), help_of("simulate", "--method")):  # the same words
+        assert "a few hundred frames/s" in said and "the modal methods thousands" in said, said
+        assert "Luo et al. 2017" in said and "tens of" not in said
+    assert "nonlinear" in domains.text().lower()

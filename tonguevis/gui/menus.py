@@ -85,8 +85,9 @@ class MenusMixin:
         self.method_actions = self._choice_menu(simulation, "&Method", (
             ("warped", "&Modal warping (the paper)", "linear FEM modes made nonlinear by modal warping (Yang 2013)"),
             ("linear", "&Linear modes", "the linear modal model, no warping"),
-            ("domains", "&Quadratic domains (StVK, seed 001; slow)",
-             "the successor's nonlinear StVK tongue on quadratic domains: tens of frames per second")),
+            ("domains", "&Nonlinear tissue on quadratic domains (slower)",
+             "nonlinear tissue (StVK) on quadratic domains, after Luo et al. 2017: a few hundred frames/s, "
+             "the modal methods thousands (tonguevis simulate --method domains)")),
             None, self.set_method)
         self.size_actions = self._choice_menu(simulation, "Tongue &size", (
             ("adult", "&Adult (the alignment's size when an adult's, else the generic one)",
