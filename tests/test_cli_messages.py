@@ -127,3 +127,14 @@ def test_info_says_the_rest_a_simulation_would_take(speech_only, capsys):
     assert "WARNING" not in err
     assert main(["info", str(DEMO_RECORDING)]) == 0
     assert "(detected: the longest still stretch)" in capsys.readouterr().out
+
+
+def test_a_recording_given_as_the_palate_points_to_tonguevis_palate(tmp_path, capsys):
+    """Issue 37: `--palate TRACE.tsv` said "Could not deduce file format from path"."""
+    from tonguevis.cli import main
+
+    trace = write(demo(3.0, 4.0), tmp_path / "trace.tsv")  # any recording: traces are recordings
+    code = main(["simulate", str(DEMO_RECORDING), "--palate", str(trace), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert str(trace) in err[0] and "not a palate surface" in err[0] and "`tonguevis palate TRACE.tsv" in err[0]

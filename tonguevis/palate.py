@@ -284,12 +284,28 @@ def from_mesh(path, step: float = GRID_STEP) -> PalateSurface:
     try:
         mesh = meshio.read(path)
     except Exception as exc:  # meshio raises many kinds on bad files
+        if _is_recording(path):
+            raise PalateError("a recording (palate traces?), not a palate surface: make one from the traces "
+                              "with `tonguevis palate TRACE.tsv ... --out palate.stl` (in the app, File ▸ Fit "
+                              "palate from traces…), then give palate.stl", path) from exc
         raise PalateError(f"cannot read a surface mesh: {exc}", path) from exc
     tris = [c.data for c in mesh.cells if c.type == "triangle"]
     if not tris:
         raise PalateError("the mesh has no triangles", path)
     return _checked(_height_field(np.asarray(mesh.points, dtype=np.float64)[:, :3], np.concatenate(tris), step,
                                   {"source": [str(path)]}), path)
+
+
+def _is_recording(path) -> bool:
+    """Whether ``path`` is a recording tonguevis reads (by its content or extension), e.g. palate traces."""
+    from tonguevis.errors import RecordingError
+    from tonguevis.io.registry import detect_format
+
+    try:
+        detect_format(path)
+    except (RecordingError, OSError):
+        return False
+    return True
 
 
 def _checked(surface: PalateSurface, path) -> PalateSurface:
