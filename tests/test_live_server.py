@@ -270,3 +270,32 @@ def test_listens_on_every_network_only_when_asked():
         sock.close()
     finally:
         server.stop()
+
+
+
+def test_the_replay_server_counts_the_clients_connected_now():
+    """Issue 37: the server kept reporting "2 connection(s)" after both clients had left."""
+    import socket
+    import time
+
+    from tonguevis.live.server import serve_until_done
+
+    with ReplayServer(synthetic(n=60)) as server:
+        clients = [socket.create_connection(("127.0.0.1", server.port)) for _ in range(2)]
+        deadline = time.monotonic() + 5
+        while server.connected < 2 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert server.connected == 2
+        for sock in clients:
+            sock.close()
+        while server.connected and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert server.connected == 0 and server.connections == 2
+        said = []
+
+        def report(text):  # the first report ends the wait
+            said.append(text)
+            server.finished.set()
+
+        serve_until_done(server, report=report, interval=0.01)
+        assert "0 client(s) connected (2 in all)" in said[0], said

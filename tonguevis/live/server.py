@@ -96,6 +96,7 @@ class ReplayServer:
         # Time stamps are unsigned: a recording whose clock starts below 0 is shifted to start at 0.
         self.time_origin = min(float(self.times[0]), 0.0) if len(self.times) else 0.0
         self.finished = threading.Event()
+        #: Connections accepted since the start (:attr:`connected`: those still open).
         self.connections = 0
         self.frames_sent = 0
         #: (connection number, command text) of every command received, in order (for tests and logs).
@@ -158,6 +159,12 @@ class ReplayServer:
         return (f'<?xml version="1.0" encoding="ascii"?><WaveFront server="tonguevis replay">'
                 f'<Frequency>{rate:g}</Frequency>{axes}<Sensors count="{len(self.names)}">{sensors}</Sensors>'
                 f'</WaveFront>')
+
+    @property
+    def connected(self) -> int:
+        """Clients connected now (:attr:`connections` counts every one accepted since the start)."""
+        with self._lock:
+            return len(self._clients)
 
     # --- serving ---------------------------------------------------------------------------------------
     def start(self) -> int:
@@ -379,5 +386,6 @@ def serve_until_done(server: ReplayServer, report=None, interval: float = 1.0) -
             k = server.current_index()
             n = len(server.times)
             where = "waiting for a client" if k is None else frame_label(min(k % n if server.loop else k, n - 1), n)
-            report(f"{where}, {server.connections} connection(s), {server.frames_sent} frames sent")
+            report(f"{where}, {server.connected} client(s) connected ({server.connections} in all), "
+                   f"{server.frames_sent} frames sent")
 
