@@ -8,6 +8,7 @@ import re
 import subprocess
 import sys
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -276,3 +277,38 @@ def test_streams_and_records_a_recording_of_another_format(tmp_path):
     assert back.sensor_names == real.sensor_names and back.n_samples == real.n_samples
     assert_equals_stream(back, real)  # positions exact; quaternions NaN, as the stream had none
     assert all(np.isnan(q).all() for q in back.orientations.values())
+
+
+def _stream_says(tmp_path, *options) -> str:
+    """What `tonguevis stream` prints before its first client: its address, slots and notes."""
+    short = tmp_path / "short.tsv"
+    if not short.exists():
+        from tonguevis.io.ndi_wave import write_ndi_wave
+
+        write_ndi_wave(synthetic(n=60), short)
+    process = subprocess.Popen([sys.executable, "-m", "tonguevis", "stream", str(short), *options],
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO_DIR,
+                               env=dict(os.environ, PYTHONPATH=str(REPO_DIR)))
+    lines = []
+    try:
+        while not lines or not lines[-1].startswith("sensor slots"):  # then the note, if any; then it waits
+            line = process.stdout.readline()
+            if not line:
+                break
+            lines.append(line)
+        time.sleep(0.5)
+    finally:
+        process.terminate()
+        rest = process.stdout.read()  # what readline() buffered too (communicate() reads past it)
+        process.wait(timeout=30)
+    return "".join(lines) + rest
+
+
+def test_stream_on_a_loopback_address_does_not_say_other_machines_can_connect(tmp_path):
+    """Issue 37: `stream --host 127.0.0.2` (this machine's loopback, as 127.0.0.1 is) said other machines could
+    connect; listening on every network (0.0.0.0) still says so."""
+    loopback = _stream_says(tmp_path, "--host", "127.0.0.2", "--port", "0")
+    assert "streaming" in loopback and "on 127.0.0.2:" in loopback, loopback
+    assert "other machines" not in loopback
+    everywhere = _stream_says(tmp_path, "--host", "0.0.0.0", "--port", "0")
+    assert "note: listening on 0.0.0.0: other machines that reach this one can connect" in everywhere, everywhere

@@ -42,7 +42,7 @@ def run(args) -> int:
     print(f"streaming {args.file} ({rec.n_samples} frames at {rec.rate:g} Hz, {rec.duration:.1f} s"
           f"{', looped' if args.loop else ''}, speed {args.speed:g}) on {args.host}:{port}", flush=True)
     print(f"sensor slots {slots}; the stream starts when a client asks for frames; Ctrl-C stops", flush=True)
-    if args.host not in ("127.0.0.1", "localhost", "::1"):
+    if not server.local_only:  # 127.0.0.2 is this machine too; 0.0.0.0 or a network address is not
         print(f"note: listening on {args.host}: other machines that reach this one can connect", flush=True)
     try:
         serve_until_done(server, report=lambda text: print(text, flush=True), interval=5.0)

@@ -166,6 +166,21 @@ class ReplayServer:
         with self._lock:
             return len(self._clients)
 
+    @property
+    def local_only(self) -> bool:
+        """Whether only this machine can connect: listening on a loopback address (127.0.0.0/8, ::1)."""
+        import ipaddress
+
+        bound = self._listener.getsockname()[0] if self._listener is not None else self.host
+        try:
+            return ipaddress.ip_address(bound.split("%")[0]).is_loopback
+        except ValueError:  # a host name before start(): its addresses decide
+            try:
+                infos = socket.getaddrinfo(bound, None)
+            except OSError:
+                return False
+            return bool(infos) and all(ipaddress.ip_address(i[4][0].split("%")[0]).is_loopback for i in infos)
+
     # --- serving ---------------------------------------------------------------------------------------
     def start(self) -> int:
         """Listen and serve in background threads; returns the port bound."""
