@@ -206,7 +206,7 @@ def test_stream_cli_serves_the_record_cli(tmp_path, capsys):
 
     write_ndi_wave(short, tmp_path / "short.tsv")
     out = {}
-    argv = ["stream", str(tmp_path / "short.tsv"), "--port", "0", "--speed", "2"]
+    argv = ["stream", str(tmp_path / "short.tsv"), "--listen", "127.0.0.1:0", "--speed", "2"]
     thread = threading.Thread(target=lambda: out.setdefault("status", main(argv)), daemon=True)
     thread.start()
     port = None
@@ -307,8 +307,22 @@ def _stream_says(tmp_path, *options) -> str:
 def test_stream_on_a_loopback_address_does_not_say_other_machines_can_connect(tmp_path):
     """Issue 37: `stream --host 127.0.0.2` (this machine's loopback, as 127.0.0.1 is) said other machines could
     connect; listening on every network (0.0.0.0) still says so."""
-    loopback = _stream_says(tmp_path, "--host", "127.0.0.2", "--port", "0")
+    loopback = _stream_says(tmp_path, "--listen", "127.0.0.2:0")
     assert "streaming" in loopback and "on 127.0.0.2:" in loopback, loopback
     assert "other machines" not in loopback
-    everywhere = _stream_says(tmp_path, "--host", "0.0.0.0", "--port", "0")
+    everywhere = _stream_says(tmp_path, "--listen", "0.0.0.0:0")
     assert "note: listening on 0.0.0.0: other machines that reach this one can connect" in everywhere, everywhere
+
+
+
+def test_stream_listens_on_host_port_as_record_and_live_connect_to_it(tmp_path, capsys):
+    """Issue 37: `stream` took --host/--port, `record` and `live` --source HOST:PORT. The address is one
+    HOST:PORT everywhere (stream --listen); the old spellings still work, with a note."""
+    old = _stream_says(tmp_path, "--host", "127.0.0.2", "--port", "0")
+    assert "on 127.0.0.2:" in old and "--host is deprecated" in old and "--port is deprecated" in old, old
+    assert "use --listen HOST:PORT" in old
+    for argv in (["stream", str(DEMO_RECORDING), "--listen", "127.0.0.1:notaport"],
+                 ["stream", str(DEMO_RECORDING), "--listen", ":3030"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--listen" in err[0] and "HOST:PORT" in err[0], err

@@ -7,8 +7,11 @@ import argparse
 import time
 
 
-def parse_address(text: str, default_port: int = 3030) -> tuple[str, int]:
-    """``"HOST:PORT"`` (or ``"HOST"``, ``"[::1]:PORT"``) -> (host, port)."""
+def parse_address(text: str, default_port: int = 3030, option: str = "--source",
+                  any_port: bool = False) -> tuple[str, int]:
+    """``"HOST:PORT"`` (or ``"HOST"``, ``"[::1]:PORT"``) -> (host, port): every network address a command
+    takes (``record``/``live --source``, ``stream --listen``) is written so.  ``any_port``: port 0 (any
+    free one) is allowed, for listening; ``option`` names the option in errors."""
     from tonguevis.errors import TonguevisError
 
     host, sep, port = text.strip().rpartition(":")
@@ -18,9 +21,9 @@ def parse_address(text: str, default_port: int = 3030) -> tuple[str, int]:
     try:
         number = int(port)
     except ValueError:
-        raise TonguevisError(f"--source {text!r}: the port {port!r} is not a number (expected HOST:PORT)") from None
-    if not host or not 0 < number < 65536:
-        raise TonguevisError(f"--source {text!r} is not HOST:PORT")
+        raise TonguevisError(f"{option} {text!r}: the port {port!r} is not a number (expected HOST:PORT)") from None
+    if not host or not (0 if any_port else 1) <= number < 65536:
+        raise TonguevisError(f"{option} {text!r} is not HOST:PORT")
     return host, number
 
 
