@@ -19,3 +19,22 @@ def test_the_domains_method_is_said_at_the_speed_it_runs():
         said = help_of(command, "--method")
         assert "a few hundred frames/s" in said and "the modal methods thousands" in said, said
         assert "Luo et al. 2017" in said and "tens of" not in said and "seed" not in said
+
+
+def test_a_colouring_has_one_name_in_the_app_and_on_the_command_line():
+    """Issue 37: `--color contact` was "distance to palate" in the app. Each of the app's Colour by entries
+    starts with the command line's name, and the options' help gives the app's words for it."""
+    import pytest
+
+    pytest.importorskip("PySide6")
+    from tonguevis.appstate import COLOR_MODES
+    from tonguevis.cli.view import COLOR_CHOICES
+    from tonguevis.gui.view3d import COLOUR_LABELS
+
+    assert set(COLOR_CHOICES) == set(COLOR_MODES) == set(COLOUR_LABELS)
+    helps = [help_of("view", "--color"), help_of("export-video", "--color")]
+    for mode, label in COLOUR_LABELS.items():
+        assert label.split(":")[0].split()[0] == mode, label
+        words = label.split(": ", 1)[-1] if ":" in label else label.removeprefix(mode).strip()
+        for said in helps:
+            assert f"{mode}: {words}" in said or (not words and mode in said), (mode, said)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tonguevis.cli.view import COLOR_CHOICES
+from tonguevis.cli.view import COLOR_CHOICES, COLOR_HELP
 
 
 def add_arguments(parser) -> None:
@@ -22,7 +22,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--fps", type=int, default=25, help="video frames per second (default 25)")
     parser.add_argument("--size", default="1280x720", metavar="WxH", help="video size in pixels (default 1280x720)")
     parser.add_argument("--color", choices=COLOR_CHOICES, default="displacement",
-                        help="surface colouring (default: displacement magnitude; contact = distance to the palate)")
+                        help=f"surface colouring (default: displacement; {COLOR_HELP})")
     parser.add_argument("--reference", choices=("head", "jaw"), default="head",
                         help="frame of reference: head (default: tongue and jaw move with the jaw, palate fixed) "
                              "or jaw (the jaw's motion removed, as simulated)")

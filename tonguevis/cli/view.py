@@ -6,6 +6,9 @@ from pathlib import Path
 
 #: Surface colourings (tonguevis.appstate.COLOR_MODES, spelled out so the parser needs no import).
 COLOR_CHOICES = ("displacement", "energy", "contact", "plain", "difference")
+#: What each means, in the app's words (its Colour by menu says "contact: distance to palate").
+COLOR_HELP = ("displacement: magnitude, energy: elastic energy density, contact: distance to palate, "
+              "difference: distance to B (compared recording), plain")
 
 
 def add_arguments(parser) -> None:
@@ -21,8 +24,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--reference", choices=("head", "jaw"), default="head",
                         help="frame of reference of the views: head (default: tongue and jaw move with the jaw, "
                              "palate fixed) or jaw (the jaw's motion removed)")
-    parser.add_argument("--color", choices=COLOR_CHOICES, help="surface colouring (default: displacement magnitude; "
-                        "contact = distance to the palate)")
+    parser.add_argument("--color", choices=COLOR_CHOICES, help=f"surface colouring (default: displacement; {COLOR_HELP})")
     parser.add_argument("--compare", type=Path, metavar="B",
                         help="a second recording shown with the first: two speakers, two trials, before and after")
     parser.add_argument("--compare-layout", choices=("side", "ghost"), default="side",

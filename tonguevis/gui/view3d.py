@@ -13,9 +13,11 @@ from tonguevis.render.drawing import contact_line, draw_frame
 from tonguevis.gui.elastic_label import ElasticComboBox, ElasticLabel
 from tonguevis.render.scene import TongueScene, frame_text, scene_setup, surface_faces
 
-COLOUR_LABELS = {"displacement": "displacement magnitude", "energy": "elastic energy density",
-                 "contact": "distance to palate", "plain": "plain",
-                 "difference": "distance to B (compared recording)"}
+#: Each colouring as the app names it: the command line's name (``--color contact``) first, so that the
+#: two say the same word, then what it shows where the name alone does not say it.
+COLOUR_LABELS = {"displacement": "displacement magnitude", "energy": "energy: elastic energy density",
+                 "contact": "contact: distance to palate", "plain": "plain",
+                 "difference": "difference: distance to B (compared recording)"}
 #: During playback the status line (frame of reference, palate contact) changes at most this
 #: often (s of wall time): no one reads a line rewritten 30 times a second, and each costs
 #: the palate distances of the frame.  A paused frame's line is always its own.
