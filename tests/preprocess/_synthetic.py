@@ -79,3 +79,30 @@ def bump_release_times(releases, sigma: float = 0.05, fraction: float = 0.2) -> 
             row.append(float(t[np.argmax(falling)]))
         out.append(row)
     return out
+
+
+def isolated_ta_session(n=10, period=2.0, rest=10.0, dip=7.5, closure=11.0, vowel=0.0, rate=100.0) -> Recording:
+    """A clinic session of ``n`` isolated /ta/ (DATA.md's description of the Opti-Speech sessions): the tip
+    rests high (``rest`` mm), dips briefly (``dip``), rises fast to the closure (``closure``), falls far to
+    the vowel (``vowel``) and slowly returns to rest, every ``period`` s; the other sensors follow it.
+    The rise from the dip is 0.32 of the tip's range, its fall the whole range: every syllable clear."""
+    from scipy.interpolate import PchipInterpolator
+
+    keys = [(0.0, rest)]
+    for k in range(n):
+        t0 = 1.0 + k * period
+        keys += [(t0, rest), (t0 + 0.10, dip), (t0 + 0.22, closure), (t0 + 0.30, closure), (t0 + 0.50, vowel),
+                 (t0 + 0.65, vowel), (t0 + 1.35, rest)]
+    keys.append((1.0 + n * period + 0.5, rest))
+    t, z = np.array(keys).T
+    times = np.arange(0.0, t[-1], 1.0 / rate)
+    height = PchipInterpolator(t, z)(times) / 1000.0
+
+    def at(x, y, up):
+        return np.column_stack([np.full_like(times, x), np.full_like(times, y), up])
+
+    sensors = {"TT": at(-0.01, 0.0, height), "TB": at(-0.02, 0.0, 0.6 * height), "TD": at(-0.04, 0.0, 0.3 * height),
+               "TL": at(-0.02, 0.01, 0.5 * height), "TR": at(-0.02, -0.01, 0.5 * height),
+               "JAW": at(0.0, 0.0, -0.03 + 0.3 * (height - rest / 1000.0))}
+    return Recording(rate=rate, times=times, sensors=sensors,
+                     metadata={"format": "test", "file": None, "original_unit": "m"})

@@ -48,7 +48,7 @@ class Production:
     target (articulator lowest), between start and end; closure : the maximum
     constriction (NaN for labelled productions); label : the syllable ("ta") or the
     label's text; articulator : the sensor it was found on (TT, TD, LA); clarity : 0 at
-    the detection threshold to 1 for a closure spanning half the articulator's range
+    the detection threshold to 1 for a closure whose fall to the vowel spans half the articulator's range
     (NaN for labelled productions).
     """
 
@@ -300,7 +300,12 @@ def _measure(times: np.ndarray, rate: float, signal, closure, peaks: list[int], 
     search_start = floor + int(np.argmin(s[floor:peak + 1]))
     landmarks = gestures.gesture_landmarks(times, signal.positions, signal.speed, s, peak, search_start, vowel,
                                            max(end_index, vowel))
-    clarity = float(np.clip((closure.size / scale - gestures.MIN_SIZE) / gestures.MIN_SIZE, 0.0, 1.0))
+    # How clearly this is a CV production: its fall from the closure to the vowel (the release), against
+    # the range.  Not the rise, which only has to pass MIN_SIZE: in isolated repetitions of a coronal
+    # the tip rests high, near its closure, and rises only from a short opening dip (the certain /ta/
+    # of Opti-Speech 009 at 2.4 s rose 0.34 of the range and fell 0.60), so the rise called every
+    # production of a clean /ta/ session weak and the session unclear.
+    clarity = float(np.clip((closure.fall / scale - gestures.MIN_SIZE) / gestures.MIN_SIZE, 0.0, 1.0))
     return {"release": float(release if release is not None else times[peak]), "vowel": float(times[vowel]),
             "vowel_end": float(vowel_end), "closure": landmarks.times["maxc"], "landmarks": landmarks,
             "clarity": clarity}
