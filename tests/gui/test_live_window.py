@@ -266,3 +266,24 @@ def test_live_with_the_speakers_palate_draws_it_the_jaw_and_the_palatogram(qtbot
         rest = window._jaw_rest
         qtbot.waitUntil(lambda: np.abs(np.array(window.jaw_mesh.points) - rest).max() > 1e-4, timeout=20000)
         window.grab().save("/tmp/shots/live_palate.png" if os.path.isdir("/tmp/shots") else str(tmp_path / "l.png"))
+
+
+def test_the_rest_is_said_on_the_windows_clock_not_the_servers(qtbot, live, demo):
+    """Issue 37: the rest was reported in the stream's time stamps: a looping replay server that had been
+    serving for 40 s (the 17.6 s demo's third lap) gave "stream time 41.3-41.8 s" for a rest taken in
+    the window's first seconds."""
+    import re
+
+    from tonguevis.gui.live_window import AUTO_REST_S
+    from tonguevis.live.server import ReplayServer
+
+    with ReplayServer(demo, loop=True) as server:
+        server._start_clock()
+        server._clock -= 40.0  # as if another client had started it 40 s ago
+        window = live(wavefront(server.port))
+        qtbot.waitUntil(lambda: window.simulator is not None, timeout=60000)
+        assert window.simulator.rest_times[0] > 39.0  # the stream's own clock is the server's
+        found = re.search(r"(\d+\.\d\d)-(\d+\.\d\d) s after the first frame", window.rest_label.text())
+        assert found, window.rest_label.text()
+        start, end = map(float, found.groups())
+        assert 0.0 <= start < end <= AUTO_REST_S + 0.1

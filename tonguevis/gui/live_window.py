@@ -728,10 +728,13 @@ class LiveWindow(QMainWindow):
         if self.surface_mesh is not None:
             self.plotter.remove_actor("tongue")
             self.surface_mesh = None
-        start, end = sim.rest_times[0], sim.rest_times[-1]
+        # On this window's clock (0 at its first frame, as a given rest is), not the device's or a looping
+        # replay server's, whose time stamps run on from wherever it was (40 s into a 17 s recording's third lap).
+        origin = self._clock0 if self._clock0 is not None else sim.rest_times[0]
+        start, end = sim.rest_times[0] - origin, sim.rest_times[-1] - origin
         how = "(stillest moment)" if stillest else "(as given)" if interval is not None else "taken"
-        self.rest_label.setText(f"rest {how}: stream time "
-                                f"{start:.2f}-{end:.2f} s; {len(sim.driving_names)} sensors drive the tongue "
+        self.rest_label.setText(f"rest {how}: {start:.2f}-{end:.2f} s "
+                                f"after the first frame; {len(sim.driving_names)} sensors drive the tongue "
                                 f"({', '.join(sim.driving_names)}), {self.settings.modes} modes")
         self.show_status("rest taken")
         return True
