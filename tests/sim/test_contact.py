@@ -91,7 +91,9 @@ def test_a_sensor_above_the_palate_wins_and_is_reported():
     z = model.mesh.points[top, 2] + np.einsum("kcm,m->kc", phi_top, q)[:, 2]
     far = np.linalg.norm(model.mesh.points[top] - model.mesh.points[nodes[0]], axis=1) > 0.012
     assert z[~far].max() > HEIGHT + 0.004 and z[far].max() <= HEIGHT + 0.004 + 1e-9
-    assert res["targets"][0, 0, 2] == 0.0 and res["active"][1] >= 0
+    assert res["targets"][0, 0, 2] == 0.0
+    # Frame 1's held bar presses on the roof (3 nodes); the frames without a target touch nothing.
+    assert res["active"][0] == res["active"][2] == 0 and res["active"][1] > 0
 
 
 def test_a_bar_pulled_into_a_plane_stays_below_it_and_touches_it(bar):
@@ -196,7 +198,7 @@ def test_simulate_keeps_the_demo_tongue_below_the_generic_palate(capsys):
     from tonguevis.palate import generic_palate
     from tonguevis.paths import DATA_DIR
     from tonguevis.sim import TongueModel, simulate
-    from tonguevis.sim.contact import penetration as deepest
+    from tonguevis.sim.contact import contact_frames, penetration as deepest
     from tonguevis.preprocess.targets import prepare_targets
 
     rec = read_recording(DATA_DIR / "spk1_ta.tsv")
@@ -208,7 +210,12 @@ def test_simulate_keeps_the_demo_tongue_below_the_generic_palate(capsys):
     held = simulate(rec, model, sensor_stiffness=None, palate="generic")
     assert held.penetration.max() < 5e-4 and held.metadata["contact"]["frames_in_contact"] > 10
     assert held.metadata["contact"]["closures"]["closures"] > 10  # the tip pressed on it at the closures, still out
-    assert held.contact_area.max() > 0 and np.all(held.contact_area[held.penetration > 0] >= 0)
+    assert held.contact_area.max() > 0
+    # Every frame where the tongue enters the palate has a contact area: the free motion enters it in
+    # 66 frames (counting only the nodes outside it, 10 of them read 0 mm²).
+    pen, area = contact_frames(free.displacements(), model.mesh.points, model.dorsal_nodes, generic_palate(), jaw,
+                               model.surface_faces)
+    assert (pen > 0).sum() > 10 and np.all(area[pen > 0] > 0)
     assert held.metadata["plausibility"]["volume_change_max_percent"] < 2.0
     assert main(["simulate", str(DATA_DIR / "spk1_ta.tsv"), "--palate", "generic", "--sensor-stiffness", "hard",
                  "--quiet"]) == 0
