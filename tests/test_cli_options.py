@@ -191,6 +191,9 @@ def test_a_silent_video_says_it_is_silent_and_why(monkeypatch, tmp_path, capsys)
         recording=recording(), rest=SimpleNamespace(describe=lambda: "rest: given")))
     monkeypatch.setattr(simulation, "simulate_session", lambda session, *a, **kw: None)
     monkeypatch.setattr(video, "export_video", lambda session, out, *a, **kw: out)
+    import tonguevis.render.mp4 as mp4  # the file's streams, as the fake export would have written them
+
+    monkeypatch.setattr(mp4, "probe_streams", lambda path: ["video"] + (["audio"] if sound["audio"] else []))
     out = tmp_path / "v.mp4"
     take = tmp_path / "take.tsv"
     assert main(["export-video", str(take), "--out", str(out), "--quiet"]) == 0
@@ -201,7 +204,8 @@ def test_a_silent_video_says_it_is_silent_and_why(monkeypatch, tmp_path, capsys)
     assert "is silent: the sound was turned off (-O audio=false)" in capsys.readouterr().out
     sound["audio"] = Audio(np.zeros(160), 16000.0)
     assert main(["export-video", str(take), "--out", str(out), "--quiet"]) == 0
-    assert "is silent" not in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "is silent" not in printed and f"{out} (head frame, with the recording's sound)" in printed
 
 
 def test_batch_simulates_with_the_command_line_method(monkeypatch, tmp_path):

@@ -61,7 +61,8 @@ def test_export_video_writes_an_mp4_without_importing_qt(tmp_path):
     qt = json.loads(report[-1][len("QT-REPORT "):])
     # Nothing even tried to import Qt (a fallback behind a try/except would hide a refused import).
     assert qt == {"asked": [], "loaded": []}
-    assert f"{out} (head frame)" in result.stdout
     assert out.stat().st_size > 1000
     assert sorted(probe_streams(out)) == ["audio", "video"]
+    # Issue 37: it said nothing of the sound it holds (only, elsewhere, when a video is silent).
+    assert f"{out} (head frame, with the recording's sound: from {DEMO_RECORDING.stem}.wav)" in result.stdout
     assert [p.name for p in tmp_path.iterdir()] == ["clip.mp4"]  # no temporary file left beside it

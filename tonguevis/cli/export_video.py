@@ -56,11 +56,24 @@ def run(args) -> int:
     with tqdm_progress("rendering", disable=args.quiet) as progress:
         out = export_video(session, args.out, args.start, args.end, fps=args.fps, size=(width, height),
                            mode=args.color, progress=progress, frame=args.reference)
+    from tonguevis.render.mp4 import probe_streams
+
+    if "audio" in probe_streams(out):  # what the file holds, not what was meant to go in
+        print(f"{session.rest.describe()}\n{out} ({args.reference} frame, with the recording's sound"
+              f"{sound_source(session.recording)})")
+        return 0
     print(f"{session.rest.describe()}\n{out} ({args.reference} frame)")
     silent = silence_reason(session.recording, Path(path), audio_off=options.get("audio") is False)
-    if silent is not None:
-        print(f"note: {out} is silent: {silent}")
+    print(f"note: {out} is silent: {silent or 'the time range lies outside the sound of the recording'}")
     return 0
+
+
+def sound_source(recording) -> str:
+    """": from take.wav" / ": the file's own" for the line saying a video has sound; "" when unknown."""
+    meta = recording.metadata
+    if meta.get("audio_file"):
+        return f": from {Path(str(meta['audio_file'])).name}"
+    return ": the file's own" if meta.get("audio_source") == "embedded" else ""
 
 
 def silence_reason(recording, path: Path, audio_off: bool = False) -> str | None:
