@@ -104,3 +104,18 @@ def test_readme_opens_the_batch_tables_with_what_tonguevis_installs(tmp_path, mo
                    tmp_path / "results" / "energy.parquet")
     monkeypatch.chdir(tmp_path)
     exec(compile(blocks[0], "README.md", "exec"), {})
+
+
+def test_the_readme_gives_the_palate_fit_tonguevis_palate_prints(tmp_path, capsys):
+    """Issue 37: the README gave two residuals for the fit of the same traces (0.88 and 0.76 mm)."""
+    from tests.conftest import shared_file
+
+    traces = [shared_file("ema", "optispeech", f"00{k}_OSN12_Palate_{kind}_HR.tsv")
+              for k, kind in ((2, "MidSagital"), (3, "Coronal"), (4, "Scribble"))]
+    assert main(["palate", *map(str, traces), "--out", str(tmp_path / "palate.stl")]) == 0
+    out = capsys.readouterr().out
+    rms = re.search(r"RMS distance to the surface (\d+\.\d\d) mm", out).group(1)
+    bend = re.search(r"tightest bend (\d+\.\d) mm", out).group(1)
+    said = re.findall(r"Opti-Speech traces now fit with (\d+\.\d\d) mm RMS, tightest bend (\d+\.\d) mm",
+                      " ".join(README.read_text(encoding="utf-8").split()))
+    assert said == [(rms, bend)]
