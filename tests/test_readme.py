@@ -106,6 +106,25 @@ def test_readme_opens_the_batch_tables_with_what_tonguevis_installs(tmp_path, mo
     exec(compile(blocks[0], "README.md", "exec"), {})
 
 
+def test_the_readme_documents_how_the_tongue_follows_the_sensors():
+    """Issue 37: --method and --keep-volume, which every simulating command takes, were nowhere in the
+    README. Every option of the physics (tonguevis.cli._common.add_physics_arguments) is."""
+    import argparse
+
+    from tonguevis.cli._common import add_physics_arguments
+
+    parser = argparse.ArgumentParser()
+    add_physics_arguments(parser)
+    options = [o for a in parser._actions for o in a.option_strings if o.startswith("--") and o != "--help"]
+    text = README.read_text(encoding="utf-8")
+    assert {"--method", "--keep-volume"} <= set(options)
+    missing = [o for o in options if not re.search(re.escape(o) + r"(?![\w-])", text)]
+    assert missing == []
+    simulate = next(a for a in build_parser()._actions if a.dest == "command").choices["simulate"]
+    for method in simulate._option_string_actions["--method"].choices:
+        assert f"`--method {method}`" in text
+
+
 def test_the_readme_gives_the_palate_fit_tonguevis_palate_prints(tmp_path, capsys):
     """Issue 37: the README gave two residuals for the fit of the same traces (0.88 and 0.76 mm)."""
     from tests.conftest import shared_file
