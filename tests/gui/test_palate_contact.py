@@ -383,3 +383,21 @@ def test_sensors_on_the_surface_from_the_simulation_menu(qtbot, window):
     motion = window.session.motion
     assert motion.metadata["sensor_patches"]["shapes"] == 3 * len(motion.sensor_nodes)
     assert np.nanmax(motion.sensor_residual) < 1e-9
+
+
+def test_the_midline_plot_holds_every_frames_curve(qtbot, window, tmp_path):
+    """Issue 37: the midline plot's range came from the rest frame (-2 mm to 12 mm on the real /ta/), and
+    the curve left it below and above. Now no frame's distances fall outside it."""
+    from tonguevis.render.drawing import head_points
+
+    path = tmp_path / "roof.stl"
+    flat_palate().save(path)
+    session = simulate_with_palate(qtbot, window, path)
+    panel, frames = window.palate_panel, session.frames
+    window.tabs.setCurrentWidget(panel)
+    qtbot.waitUntil(panel.isVisible)
+    every = np.array([panel.profile.distances(session.shown_palate, head_points(frames, i))
+                      for i in range(frames.n_frames)])
+    low, high = panel.midline.ax.get_ylim()
+    assert low <= np.nanmin(every) and np.nanmax(every) <= high, (low, high, np.nanmin(every), np.nanmax(every))
+    assert high - low < 1.5 * (np.nanmax(every) - min(np.nanmin(every), 0.0)) + 4  # and not far wider

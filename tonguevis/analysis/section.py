@@ -68,6 +68,28 @@ class MidlineProfile:
         self.position_mm = (self.bins + 0.5) * MIDLINE_BIN_MM
         self.band_mm = 1e3 * band
 
+    def distance_range(self, palate, motion, most_frames: int = 2000) -> tuple[float, float]:
+        """(smallest, largest) distance (mm) of the midline to ``palate`` (as :meth:`distances`) over ``motion``
+        in the head frame (at most ``most_frames`` frames spread evenly over it): the range a plot of every
+        frame needs; (NaN, NaN) when no palate lies above the midline."""
+        from tonguevis.sim.reference import jaw_moves
+
+        n = motion.n_frames
+        picked = np.unique(np.linspace(0, n - 1, min(n, most_frames)).round().astype(np.int64))
+        rest = np.asarray(motion.model.mesh.points, dtype=np.float64)[self.nodes]
+        moves = jaw_moves(motion)
+        low, high = np.inf, -np.inf
+        for frames, u in motion.iter_displacements(frames=picked, nodes=self.nodes):
+            points = (rest[None] + u + (np.asarray(motion.jaw_offset)[frames, None] if moves else 0.0)).reshape(-1, 3)
+            if hasattr(palate, "clearance_mm"):
+                gap = np.asarray(palate.clearance_mm(points), dtype=np.float64)
+            else:
+                gap = 1e3 * palate.clearance(points)[0]
+            gap = gap[np.isfinite(gap)]
+            if gap.size:
+                low, high = min(low, float(gap.min())), max(high, float(gap.max()))
+        return (low, high) if np.isfinite(low) else (float("nan"), float("nan"))
+
     def distances(self, palate, head_points: np.ndarray) -> np.ndarray:
         """(b,) mm: the smallest distance to ``palate`` (a :class:`~tonguevis.palate.PalateSurface`, or anything
         with ``clearance_mm(points)``: the app's shown palate) in each bin (NaN where no palate lies above);

@@ -37,7 +37,7 @@ class MidlinePlot(FigureCanvasQTAgg):
         self.line = None
         self.title = None
 
-    def reset(self, position_mm: np.ndarray, top_mm: float, message: str = "") -> None:
+    def reset(self, position_mm: np.ndarray, top_mm: float, message: str = "", bottom_mm: float = -2.0) -> None:
         ax = self.ax
         ax.clear()
         ax.set_facecolor("white")
@@ -50,7 +50,7 @@ class MidlinePlot(FigureCanvasQTAgg):
         ax.axhline(0, color="#555555", lw=0.8)
         if len(position_mm):
             ax.set_xlim(0, float(position_mm.max()) + 2)
-        ax.set_ylim(-2, top_mm)
+        ax.set_ylim(bottom_mm, top_mm)
         (self.line,) = ax.plot(position_mm, np.full(len(position_mm), np.nan), "-o", ms=3, lw=1.4,
                                color="#8e44ad")
         self.title = ax.set_title(message, fontsize=8, loc="left")
@@ -139,12 +139,17 @@ class PalatePanel(QWidget):
             return
         motion = frames.motion
         self.profile = MidlineProfile(motion.model)
-        rest = self.profile.distances(palate, head_points(frames, 0))
-        top = max(10.0, 1.3 * float(np.nanmax(rest))) if np.isfinite(rest).any() else 10.0
+        # The range of every frame's curve, not the rest frame's: the tongue enters the palate and drops
+        # far below it (on the real /ta/ -3.5 to 18 mm against the rest's -2 to 12).
+        low, high = self.profile.distance_range(palate, motion)
+        if not np.isfinite(low):
+            low, high = 0.0, 10.0
+        margin = 0.05 * max(high - low, 1.0)
+        bottom, top = min(-2.0, low - margin), max(10.0, high + margin)
         self.header.setText(
             f"{palate.describe()}. Distances are from the tongue's dorsal midline (nodes within "
             f"{self.profile.band_mm:.0f} mm of its mid-plane) to the palate; the same in the head and the jaw frame.")
-        self.midline.reset(self.profile.position_mm, top)
+        self.midline.reset(self.profile.position_mm, top, bottom_mm=bottom)
         if motion.penetration is not None:
             area = motion.contact_area if motion.contact_area is not None else np.zeros(motion.n_frames)
             self.timeline.show_motion(motion.times, 1e3 * motion.penetration, 1e6 * area)
