@@ -81,10 +81,22 @@ def mark_landmarks(ax, landmarks, times: np.ndarray | None = None, trace: np.nda
         artists.append(line)
     if legend and artists:
         place = {"loc": "lower right", "bbox_to_anchor": (1.0, 1.0)} if above else {"loc": "lower right"}
-        artists.append(ax.legend(handles=[a for a in artists if not a.get_label().startswith("_")], fontsize=6,
-                                 frameon=not above, framealpha=0.8, ncol=5, handlelength=1.0, borderaxespad=0.2,
-                                 columnspacing=0.8, **place))
+        handles = [a for a in artists if not a.get_label().startswith("_")]
+        artists.append(ax.legend(handles=handles, fontsize=6, frameon=not above, framealpha=0.8,
+                                 ncol=legend_columns(ax, [h.get_label() for h in handles], 6.0), handlelength=1.0,
+                                 borderaxespad=0.2, columnspacing=0.8, **place))
     return artists
+
+
+def legend_columns(ax, labels: list[str], fontsize: float, most: int = 5) -> int:
+    """How many columns of ``labels`` (at ``fontsize`` points) fit across ``ax`` as it is drawn now: five
+    across a wide plot, fewer in a narrow window, where five ran past the axes' left edge."""
+    if not labels:
+        return 1
+    width_px = ax.get_window_extent().width
+    char_px = 0.6 * fontsize * ax.figure.dpi / 72.0  # a generous average for the sans-serif font
+    column_px = max(len(label) for label in labels) * char_px + 3.0 * fontsize * ax.figure.dpi / 72.0
+    return int(max(1, min(most, len(labels), width_px // column_px)))
 
 
 def interval_at(intervals: list[tuple[float, float]], t: float) -> tuple[float, float] | None:
