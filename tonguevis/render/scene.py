@@ -91,6 +91,11 @@ class Caption:
 
         self.actor = vtk.vtkTextActor()
         self.actor.SetInput(text)
+        self._text, self._size_px = text, int(size_px)
+        # Wrapped to the view's width at each render where it changed: a narrow view (1280 pixels, a
+        # recording compared beside) cut "head frame: tongue and jaw move with the jaw, palate fixed".
+        self._renderer, self._width = plotter.renderer, -1
+        self._renderer.AddObserver("StartEvent", lambda *_args: self._fit())
         prop = self.actor.GetTextProperty()
         prop.SetFontSize(int(size_px))
         prop.SetColor(pv.Color(colour).float_rgb)
@@ -103,14 +108,52 @@ class Caption:
         plotter.add_actor(self.actor, reset_camera=False, name=name, pickable=False)
 
     def GetText(self, _corner: int = 2) -> str:  # noqa: N802 (the corner annotation's name)
-        return self.actor.GetInput() or ""
+        """The text as set (:meth:`shown_text`: as drawn, wrapped to the view)."""
+        return self._text
 
     def SetText(self, _corner: int, text: str) -> None:  # noqa: N802
-        if text != self.GetText():
-            self.actor.SetInput(text)
+        if text != self._text:
+            self._text = text
+            self._width = -1
+            self._fit()
+
+    def shown_text(self) -> str:
+        return self.actor.GetInput() or ""
+
+    def _fit(self) -> None:
+        width = int(self._renderer.GetSize()[0])
+        if width == self._width:
+            return
+        self._width = width
+        shown = wrap_to_pixels(self._text, width - 12, self._size_px) if width > 0 else self._text
+        if shown != self.shown_text():
+            self.actor.SetInput(shown)
 
     def SetVisibility(self, visible: bool) -> None:  # noqa: N802
         self.actor.SetVisibility(visible)
+
+
+#: Width of a character of the views' sans-serif font, as a fraction of its size in pixels: a generous
+#: average (Arial's lower case is about 0.5), so that a wrapped line never runs past the edge.
+CHAR_WIDTH = 0.6
+
+
+def wrap_to_pixels(text: str, width_px: float, size_px: float) -> str:
+    """``text`` with each line wrapped at word boundaries (a word longer than a line hyphenated) so that
+    it is at most ``width_px`` wide in the views' font of ``size_px`` pixels."""
+    import textwrap
+
+    chars = max(int(width_px / (CHAR_WIDTH * size_px)), 4)
+    lines = []
+    for line in text.split("\n"):
+        words = []
+        for word in line.split(" "):  # a word longer than a line: hyphenated pieces
+            while len(word) > chars:
+                words.append(word[:chars - 1] + "-")
+                word = word[chars - 1:]
+            words.append(word)
+        lines.extend(textwrap.wrap(" ".join(words), chars, break_long_words=False, break_on_hyphens=True) or [""])
+    return "\n".join(lines)
 
 
 def set_lights(renderer) -> None:
@@ -293,6 +336,8 @@ class TongueScene:
                     title_font_size=12, label_font_size=11,
                 )
                 self.scalar_bar.SetVerticalTitleSeparation(8)
+                self._bar_fitted = None
+                plotter.renderer.AddObserver("StartEvent", lambda *_args: self._fit_bar_title())
                 self.time_text = Caption(plotter, "", CAPTION_PX["main"], "time")
                 if n_sensors:
                     plotter.add_text("sensor node", position=(8, 26), font_size=8, name="legend_s",
@@ -367,6 +412,22 @@ class TongueScene:
         for index, actor in self.view_labels.items():
             actor.SetText(2, f"{VIEW_NAMES[index]}{suffix}")  # vtkCornerAnnotation: 2 = upper left
 
+    def _fit_bar_title(self) -> None:
+        """The colour bar's title wrapped to the room its view leaves it: VTK centres it over the bar near
+        the view's right edge, and a narrow view cut "displacement" to "displaceme"."""
+        bar = self.scalar_bar
+        if bar is None:
+            return
+        renderer = self.plotter.renderers[MAIN]
+        width = int(renderer.GetSize()[0])
+        if width <= 0 or self._bar_fitted == (width, self._mode):
+            return
+        self._bar_fitted = (width, self._mode)
+        centre = COLOUR_BAR["position_x"] * width  # (measured: the title is centred on the bar's left edge)
+        room = 2 * (width - centre) - 6
+        title = self._titles.get(self._mode, "")
+        bar.SetTitle(wrap_to_pixels(title, room, bar.GetTitleTextProperty().GetFontSize()))
+
     def set_mode(self, mode: str) -> None:
         """Colour by ``mode`` ('displacement', 'energy', 'contact' or 'plain')."""
         self._mode = mode
@@ -381,6 +442,8 @@ class TongueScene:
         if self.scalar_bar is not None:
             self.scalar_bar.SetVisibility(not plain)
             self.scalar_bar.SetTitle(self._titles.get(mode, ""))
+            self._bar_fitted = None
+            self._fit_bar_title()
             if lut is not None:
                 self.scalar_bar.SetLookupTable(lut)
             self.scalar_bar.SetDrawBelowRangeSwatch(contact)
