@@ -25,9 +25,10 @@ from types import SimpleNamespace
 
 import numpy as np
 from PySide6.QtCore import QTimer
-from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QComboBox, QLabel, QPushButton, QVBoxLayout, QWidget
 
 from tonguevis.gui.elastic_label import ElasticLabel
+from tonguevis.gui.flow_layout import FlowLayout
 from tonguevis.errors import TonguevisError
 from tonguevis.sim.motion import frame_label
 from tonguevis.appstate import COMPARE_LAYOUTS, COMPARE_TIME_MODES, connected
@@ -134,7 +135,7 @@ class ComparePanel(QWidget):
         self._camera_seen = None
         self._observed_camera = None  # the vtkCamera whose moves repaint both views
         self._camera_observer = None
-        self.title = ElasticLabel("", minimum_width=120)  # file names: cut, not a wider window
+        self.title = ElasticLabel("", minimum_width=120)  # file names: elided, whole in the tooltip
         self.layout_box = QComboBox()
         for key, text in LAYOUTS.items():
             self.layout_box.addItem(text, key)
@@ -146,8 +147,8 @@ class ComparePanel(QWidget):
         self.close_button = QPushButton("Stop comparing")
         self.caption = QLabel("")
         self.caption.setWordWrap(True)
-        bar = QHBoxLayout()
-        bar.addWidget(self.title, 1)
+        # The title on a line of its own, the controls under it, wrapping where the pane is narrow.
+        bar = FlowLayout()
         bar.addWidget(self.layout_box)
         bar.addWidget(self.time_box)
         bar.addWidget(self.close_button)
@@ -156,6 +157,7 @@ class ComparePanel(QWidget):
         self.plotter.renderer.AddObserver("StartEvent", lambda *_a: self._shade_b())
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(self.title)
         layout.addLayout(bar)
         layout.addWidget(self.caption)
         layout.addWidget(self.plotter.interactor, 1)

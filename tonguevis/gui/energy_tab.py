@@ -30,6 +30,7 @@ from PySide6 import QtCore, QtWidgets
 from tonguevis.analysis.energy import EnergyCurve
 from tonguevis.render.energy import plot_energy_curves
 from tonguevis.appstate import connected
+from tonguevis.gui.flow_layout import FlowLayout
 
 from tonguevis._logging import logger
 
@@ -83,6 +84,7 @@ class EnergyTab(QtWidgets.QWidget):
         self.axes = self.figure.add_subplot(1, 1, 1)
         self.marker = None
         self.hover_label = QtWidgets.QLabel("Hover a curve to see its production; click to show that frame.")
+        self.hover_label.setWordWrap(True)  # two lines in a narrow tab rather than a wider window
         self.pick_label = QtWidgets.QLabel("No frame picked.")
         self.to_source = QtWidgets.QPushButton("Morph source ←")
         self.to_target = QtWidgets.QPushButton("Morph target ←")
@@ -123,8 +125,8 @@ class EnergyTab(QtWidgets.QWidget):
         main.addWidget(self.frame_label)
         main.addWidget(self.canvas, 1)
         main.addWidget(self.hover_label)
-        picks = QtWidgets.QHBoxLayout()
-        picks.addWidget(self.pick_label, 1)
+        picks = FlowLayout()  # wraps where the tab is narrow (1280 pixels beside the 3D views)
+        picks.addWidget(self.pick_label)
         picks.addWidget(self.to_source)
         picks.addWidget(self.to_target)
         main.addLayout(picks)

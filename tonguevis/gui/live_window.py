@@ -35,6 +35,7 @@ from PySide6.QtWidgets import (
 )
 
 from tonguevis.errors import TonguevisError
+from tonguevis.gui.flow_layout import FlowLayout
 from tonguevis.gui.midsagittal_view import BACKGROUND, GHOST_COLOUR, SENSOR_COLOUR, TONGUE_COLOUR, MidsagittalView
 from tonguevis.gui.palatogram_view import PalatogramView
 from tonguevis.gui.qt_workarounds import keep_none_alive
@@ -214,6 +215,9 @@ class LiveWindow(QMainWindow):
     def _panel(self, parent) -> QWidget:
         scroll = QScrollArea(parent)
         scroll.setWidgetResizable(True)
+        # Scrolled up and down only: its rows wrap to the panel's width (a horizontal scroll bar hid the
+        # Connect button and cut the rest's line at 1280 pixels).
+        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         body = QWidget()
         layout = QVBoxLayout(body)
         # Source
@@ -221,6 +225,7 @@ class LiveWindow(QMainWindow):
         form = QFormLayout(box)
         row = QHBoxLayout()
         self.source_edit = QLineEdit("127.0.0.1:3030")
+        self.source_edit.setMinimumWidth(90)  # it gives way, not the Connect button
         self.connect_button = QPushButton("Connect")
         self.connect_button.clicked.connect(self.connect_from_panel)
         row.addWidget(self.source_edit)
@@ -251,7 +256,7 @@ class LiveWindow(QMainWindow):
         form.addRow("radius", self.radius_spin)
         form.addRow("oscillation", self.frequency_spin)
         v.addLayout(form)
-        row = QHBoxLayout()
+        row = FlowLayout()
         for text, slot in (("Static at tip", self.add_static_target), ("Oscillating", self.add_oscillating_target),
                            ("Following", self.add_following_target), ("Remove", self.remove_target)):
             button = QPushButton(text)

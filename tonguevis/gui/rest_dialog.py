@@ -12,6 +12,7 @@ from __future__ import annotations
 from PySide6.QtWidgets import QDialog, QDialogButtonBox, QDoubleSpinBox, QFormLayout, QLabel, QVBoxLayout
 
 from tonguevis.errors import TonguevisError
+from tonguevis.gui.elastic_label import ElasticLabel
 
 __all__ = ["RestIntervalDialog", "RestMixin"]
 
@@ -140,7 +141,7 @@ class RestMixin:
         return True
 
     def _build_rest_status(self) -> None:
-        self.rest_label = QLabel()  # the rest line, kept in view while playback messages come and go
+        self.rest_label = ElasticLabel("", minimum_width=160)  # the rest line, kept in view; elided when narrow
         self.rest_label.setToolTip("the rest interval of the simulation and how it was found "
                                    "(Simulation ▸ Set rest interval… to give another)")
         self.statusBar().addPermanentWidget(self.rest_label)

@@ -21,6 +21,7 @@ from tonguevis.errors import TonguevisError
 from tonguevis.render.segmentation_view import (TARGETS, draw_frame, draw_result, draw_seed_markers, make_target,
                                              move_frame, partition_table)
 from tonguevis.appstate import connected
+from tonguevis.gui.flow_layout import FlowLayout
 
 from tonguevis._logging import logger
 
@@ -90,25 +91,16 @@ class SegmentationTab(QtWidgets.QWidget):
         self.status = QtWidgets.QLabel("Choose a target, a mode and seeds, then press Run.")
         self.status.setWordWrap(True)
 
-        first = QtWidgets.QHBoxLayout()
-        first.addWidget(QtWidgets.QLabel("target"))
-        first.addWidget(self.target_box, 2)
-        first.addWidget(QtWidgets.QLabel("mode"))
-        first.addWidget(self.mode_box, 1)
-        first.addWidget(self.run_button)
-        second = QtWidgets.QHBoxLayout()
-        second.addWidget(QtWidgets.QLabel("seeds"))
-        second.addWidget(self.seeding_box)
-        second.addWidget(self.threshold)
-        second.addWidget(self.max_partitions)
-        second.addWidget(self.pick_button)
-        second.addWidget(self.clear_button)
-        second.addStretch(1)
-        third = QtWidgets.QHBoxLayout()
-        third.addWidget(self.seeds_label, 1)
-        third.addWidget(QtWidgets.QLabel("approximation coloured by"))
-        third.addWidget(self.colour_box)
-        third.addWidget(self.scale_box)
+        # Rows that wrap where the tab is narrow (1280 pixels beside the 3D views) instead of widening it.
+        first, second, third = FlowLayout(), FlowLayout(), FlowLayout()
+        for row, widgets in ((first, (QtWidgets.QLabel("target"), self.target_box, QtWidgets.QLabel("mode"),
+                                      self.mode_box, self.run_button)),
+                             (second, (QtWidgets.QLabel("seeds"), self.seeding_box, self.threshold,
+                                       self.max_partitions, self.pick_button, self.clear_button)),
+                             (third, (self.seeds_label, QtWidgets.QLabel("approximation coloured by"),
+                                      self.colour_box, self.scale_box))):
+            for widget in widgets:
+                row.addWidget(widget)
         # Long item texts must not widen the whole window: the combos elide instead.
         for box in (self.target_box, self.mode_box, self.colour_box):
             box.setSizeAdjustPolicy(QtWidgets.QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)

@@ -17,8 +17,9 @@ from itertools import cycle
 
 import numpy as np
 from PySide6.QtCore import Signal
-from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QCheckBox, QComboBox, QLabel, QPushButton, QVBoxLayout, QWidget
 
+from tonguevis.gui.flow_layout import FlowLayout
 from tonguevis.appstate import AppState, connected
 from tonguevis.errors import TonguevisError
 from tonguevis.workflows.session import SIGNAL_KINDS, Session, tongue_sensors
@@ -168,16 +169,12 @@ class SensorPanel(QWidget):
         self.delete_button = QPushButton("Delete at cursor")
         self.save_button = QPushButton("Save productions")
         self.save_button.setToolTip("write NAME.TextGrid beside the recording (its own tiers kept)")
-        controls = QHBoxLayout()
-        controls.addWidget(QLabel("Show"))
-        controls.addWidget(self.kind)
-        controls.addWidget(QLabel("Highlight"))
-        controls.addWidget(self.sensor)
-        controls.addStretch(1)
-        options = QHBoxLayout()  # own row: beside the combos it widens the tab
-        options.addWidget(self.others)
-        options.addStretch(1)
-        for widget in (self.edit, self.add_button, self.delete_button, self.save_button):
+        # Rows that wrap where the tab is narrow (1280 pixels beside the 3D views) instead of widening it.
+        controls = FlowLayout()
+        for widget in (QLabel("Show"), self.kind, QLabel("Highlight"), self.sensor):
+            controls.addWidget(widget)
+        options = FlowLayout()
+        for widget in (self.others, self.edit, self.add_button, self.delete_button, self.save_button):
             options.addWidget(widget)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(2, 2, 2, 2)

@@ -6,11 +6,12 @@ import time
 
 import numpy as np
 from PySide6.QtCore import QElapsedTimer, Signal
-from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QLabel, QPushButton, QVBoxLayout, QWidget
 
 from tonguevis.appstate import AppState, COLOR_MODES, REFERENCE_FRAMES, connected
 from tonguevis.render.drawing import contact_line, draw_frame
 from tonguevis.gui.elastic_label import ElasticComboBox, ElasticLabel
+from tonguevis.gui.flow_layout import FlowLayout
 from tonguevis.render.scene import TongueScene, frame_text, scene_setup, surface_faces
 
 #: Each colouring as the app names it: the command line's name (``--color contact``) first, so that the
@@ -97,15 +98,18 @@ class View3D(QWidget):
         # The model's description (nodes, modes, sensors, palate) is as long as the names in
         # it: cut at the window's edge rather than widening the window past the screen.
         self.message = ElasticLabel("", minimum_width=120)
-        bar = QHBoxLayout()
+        # The controls wrap onto a second line in a narrow window (1280 pixels, a recording compared
+        # beside): the combos keep their whole entries; the model's description has a line of its own.
+        bar = FlowLayout()
         bar.addWidget(QLabel("Colour by"))
         bar.addWidget(self.colour)
         bar.addWidget(self.reference)
         bar.addWidget(self.reset)
-        bar.addWidget(self.message, 1)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
+        layout.setSpacing(2)
         layout.addLayout(bar)
+        layout.addWidget(self.message)
         layout.addWidget(self.plotter.interactor, 1)
         self.colour.currentIndexChanged.connect(lambda _i: state.set_color(self.colour.currentData(), self))
         self.reference.setCurrentIndex(REFERENCE_FRAMES.index(state.reference))

@@ -23,7 +23,7 @@ from tonguevis.errors import TonguevisError
 from tonguevis.gui.audio_panel import AudioPlot
 from tonguevis.gui.compare_actions import CompareMixin
 from tonguevis.gui.dialogs import SensorMapDialog, error_box
-from tonguevis.gui.elastic_label import ElasticLabel
+from tonguevis.gui.elastic_label import ElasticLabel, ElidingStatusBar
 from tonguevis.gui.menus import MenusMixin
 from tonguevis.gui.modal_tab import ModalTab
 from tonguevis.gui.palate_actions import PalateMixin
@@ -50,6 +50,7 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
 
     def __init__(self, state: AppState | None = None, preferences: QSettings | None = None, run_settings=None):
         super().__init__()
+        self.setStatusBar(ElidingStatusBar(self))  # its message elided, whole in the tooltip: never cut
         self.setWindowTitle("tonguevis")
         self.resize(1500, 950)
         self.setAcceptDrops(True)
@@ -313,10 +314,9 @@ class MainWindow(MenusMixin, CompareMixin, RestMixin, PalateMixin, QMainWindow):
 
     # -- status ---------------------------------------------------------------------
     def _show_status(self, event) -> None:
-        """The status line, whole in its tooltip: the notes after a simulation (plausibility, contact, the
-        tongue's size) run past the bar's width."""
+        """The status line (elided, whole in its tooltip: the notes after a simulation, plausibility, contact,
+        the tongue's size, run past the bar's width)."""
         self.statusBar().showMessage(event.value)
-        self.statusBar().setToolTip(event.value)
 
     # -- exports ------------------------------------------------------------------
     def grab_window(self):
