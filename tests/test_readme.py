@@ -108,14 +108,15 @@ def test_readme_opens_the_batch_tables_with_what_tonguevis_installs(tmp_path, mo
 
 def test_the_readme_documents_how_the_tongue_follows_the_sensors():
     """Issue 37: --method and --keep-volume, which every simulating command takes, were nowhere in the
-    README. Every option of the physics (tonguevis.cli._common.add_physics_arguments) is."""
+    README. Every option of a run (tonguevis.cli._common.add_run_arguments) is."""
     import argparse
 
-    from tonguevis.cli._common import add_physics_arguments
+    from tonguevis.cli._common import add_run_arguments
 
     parser = argparse.ArgumentParser()
-    add_physics_arguments(parser)
-    options = [o for a in parser._actions for o in a.option_strings if o.startswith("--") and o != "--help"]
+    add_run_arguments(parser)
+    options = [o for a in parser._actions for o in a.option_strings
+               if o.startswith("--") and o != "--help" and a.help != argparse.SUPPRESS]
     text = README.read_text(encoding="utf-8")
     assert {"--method", "--keep-volume"} <= set(options)
     missing = [o for o in options if not re.search(re.escape(o) + r"(?![\w-])", text)]
