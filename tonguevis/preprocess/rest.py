@@ -196,12 +196,19 @@ def choose_rest_interval(recording: Recording, sensors=None, given=None) -> Rest
     short = recording.duration < MIN_REST_S
     reason = ("the recording is shorter than a second" if short
               else f"no still {'second' if MIN_REST_S == 1 else f'{MIN_REST_S:g} s'} in the recording")
+    choice = RestChoice(interval, "stillest window", reason)
+    say_stillest(recording, choice, detail)
+    return choice
+
+
+def say_stillest(recording: Recording, choice: RestChoice, detail: str = "") -> None:
+    """The warning (once, one line; ``detail``, the longer why, at the info level) that the stillest window
+    ``choice`` stands in for a rest the recording does not have."""
+    start, end = choice.interval
     name = Path(str(recording.metadata.get("file") or "recording")).name
-    warn_once(f"{name}: {reason}; rest: the stillest {STILLEST_WINDOW_S:.1f} s, {interval[0]:.2f}-{interval[1]:.2f} s "
+    warn_once(f"{name}: {choice.reason}; rest: the stillest {end - start:.1f} s, {start:.2f}-{end:.2f} s "
               "(--rest START END gives one)",
-              f"{detail}; the stillest {STILLEST_WINDOW_S:.1f} s window {interval[0]:.2f}-{interval[1]:.2f} s "
-              "stands in for the rest pose")
-    return RestChoice(interval, "stillest window", reason)
+              f"{detail + '; ' if detail else ''}the stillest window {start:.2f}-{end:.2f} s stands in for the rest pose")
 
 
 def rest_candidates(recording: Recording, sensors=None, count: int = 6) -> list[RestChoice]:

@@ -314,7 +314,7 @@ def placed_at_rest(recording: Recording, model: TongueModel, settings: RunSettin
     the palate does not cut through (:class:`~tonguevis.sim.palate_placement.PalateCutsTheRest`: the tongue
     pressed up into the vault there); the rest taken says why in its reason.  None left, or a rest given
     that the palate cuts: SimulationError naming the file, the stillest candidates and ``--rest``."""
-    from tonguevis.preprocess.rest import HOW_TO_GIVE_REST, RestChoice, rest_candidates
+    from tonguevis.preprocess.rest import HOW_TO_GIVE_REST, RestChoice, rest_candidates, say_stillest
     from tonguevis.preprocess.targets import driving_sensors
     from tonguevis.sim.palate_placement import PalateCutsTheRest
     from tonguevis.sim.placement import targets_in_frame
@@ -339,6 +339,8 @@ def placed_at_rest(recording: Recording, model: TongueModel, settings: RunSettin
             cut.append((prep.rest, exc))
             continue
         contact["backend"] = settings.backend  # its clearances and solves: compiled, or the NumPy reference
+        if not cut and settings.rest is None and prep.rest.how == "stillest window":
+            say_stillest(recording, prep.rest)  # as choose_rest_interval says it without a palate
         if cut:
             why = (f"the palate cuts through the tongue at the stiller rest{'s' if len(cut) > 1 else ''} "
                    + ", ".join(f"{r.interval[0]:.2f}-{r.interval[1]:.2f} s" for r, _ in cut)
