@@ -27,7 +27,16 @@ def _cut(widget) -> str | None:
             return f"elided without its text in the tooltip: {widget.plain_text()!r}"
         return None
     if isinstance(widget, QLabel):
-        if widget.wordWrap() or not widget.text() or widget.textFormat() == widget.textFormat().RichText:
+        if widget.wordWrap() and widget.text():  # wrapped: it must be as tall as its lines at its width
+            need = QLabel.heightForWidth(widget, widget.contentsRect().width())
+            # as tall as its lines, and shown so by its parent (a group box shorter than its rows clips them)
+            shown = widget.contentsRect().height()
+            if widget.parentWidget() is not None:
+                shown = min(shown, widget.parentWidget().rect().bottom() - widget.geometry().top())
+            if need > shown + 1:
+                return f"wrapped text cut to {shown} of its {need} px: {widget.text()!r}"
+            return None
+        if not widget.text() or widget.textFormat() == widget.textFormat().RichText:
             return None
         room = widget.contentsRect().width() - 2 * widget.margin() - max(widget.indent(), 0)
         widest = max(metrics.horizontalAdvance(line) for line in widget.text().split("\n"))
@@ -137,6 +146,12 @@ def test_the_live_panel_scrolls_only_up_and_down_and_shows_its_connect_button(qt
         button = window.connect_button
         right = button.mapTo(scroll.viewport(), QPoint(button.width(), 0)).x()
         assert right <= scroll.viewport().width() and _cut(button) is None
+        assert _problems(window, {"live panel": scroll.widget()}) == []
+        # The rest's line once a rest is taken (three lines at this width: it was cut to one and a half).
+        window.rest_label.setText("rest (stillest moment): 0.03-0.53 s after the first frame: 5 sensors drive the "
+                                  "tongue (TT, TB, TD, TL, TR); JAW and the head references are used as given")
+        window.connection_label.setText("streaming: 832 frames — connected to 127.0.0.1:38493")
+        qtbot.wait(100)
         assert _problems(window, {"live panel": scroll.widget()}) == []
     finally:
         window.close_source()

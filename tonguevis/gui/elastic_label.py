@@ -88,6 +88,49 @@ class ElasticLabel(_WholeTextTip, QLabel):
         return self.plain_text() if self.is_elided() else ""
 
 
+class WrappingLabel(QLabel):
+    """A word-wrapped QLabel that is never shorter than its lines at its width.
+
+    A wrapped QLabel's minimum height is that of its text wrapped at some other width: in a panel
+    squeezed up and down (the live window's, under its views) the layout gave the rest's three
+    lines 18 pixels.  This one asks for the height its text needs at the width it has.
+    """
+
+    def __init__(self, text: str = "", parent=None):
+        super().__init__(text, parent)
+        self.setWordWrap(True)
+
+    def _remeasure(self) -> None:
+        width = self.contentsRect().width()
+        if width <= 0:
+            return
+        needed = self.heightForWidth(width) + self.height() - self.contentsRect().height()
+        # An explicit minimum, which every layout above honours; only on a change, so a width that settles
+        # stops here.
+        if needed != self.minimumHeight():
+            self.setMinimumHeight(needed)
+            # and lay out again above it: in the live panel (a scroll area's body laid out by height for
+            # width) the group kept its old height until something else moved, the rest's lines cut
+            parent = self.parentWidget()
+            while parent is not None and not parent.isWindow():
+                if parent.layout() is not None:
+                    parent.layout().invalidate()
+                parent = parent.parentWidget()
+
+    def setText(self, text: str) -> None:  # noqa: N802 (Qt name)
+        super().setText(text)
+        self._remeasure()
+
+    def resizeEvent(self, event) -> None:  # noqa: N802 (Qt name)
+        super().resizeEvent(event)
+        self._remeasure()
+
+    def hasHeightForWidth(self) -> bool:  # noqa: N802 (Qt name)
+        # Its minimum height says it instead: the form and box layouts above, laying out by height for
+        # width, gave the group the height of the text at another width (the rest's 3 lines cut to 1.5).
+        return False
+
+
 class ElasticComboBox(_WholeTextTip, QComboBox):
     """A QComboBox that asks for its longest entry's width but needs only ``minimum_characters``.
 

@@ -35,6 +35,7 @@ from PySide6.QtWidgets import (
 )
 
 from tonguevis.errors import TonguevisError
+from tonguevis.gui.elastic_label import WrappingLabel
 from tonguevis.gui.flow_layout import FlowLayout
 from tonguevis.gui.midsagittal_view import BACKGROUND, GHOST_COLOUR, SENSOR_COLOUR, TONGUE_COLOUR, MidsagittalView
 from tonguevis.gui.palatogram_view import PalatogramView
@@ -231,8 +232,7 @@ class LiveWindow(QMainWindow):
         row.addWidget(self.source_edit)
         row.addWidget(self.connect_button)
         form.addRow("host:port", row)
-        self.connection_label = QLabel("not connected")
-        self.connection_label.setWordWrap(True)
+        self.connection_label = WrappingLabel("not connected")
         form.addRow("status", self.connection_label)
         layout.addWidget(box)
         # Rest
@@ -240,8 +240,7 @@ class LiveWindow(QMainWindow):
         form = QFormLayout(box)
         self.rest_button = QPushButton("Take rest now")
         self.rest_button.clicked.connect(self.take_rest_now)
-        self.rest_label = QLabel("waiting for a still moment")
-        self.rest_label.setWordWrap(True)
+        self.rest_label = WrappingLabel("waiting for a still moment")
         form.addRow(self.rest_button)
         form.addRow(self.rest_label)
         layout.addWidget(box)
@@ -278,8 +277,7 @@ class LiveWindow(QMainWindow):
         row.addWidget(self.start_button)
         row.addWidget(self.stop_button)
         form.addRow(row)
-        self.sweep_label = QLabel("")
-        self.sweep_label.setWordWrap(True)
+        self.sweep_label = WrappingLabel("")
         form.addRow(self.sweep_label)
         layout.addWidget(box)
         # Display
@@ -291,8 +289,7 @@ class LiveWindow(QMainWindow):
         self.smooth_spin.valueChanged.connect(self._smoothing_changed)
         form.addRow(self.smooth_check)
         form.addRow("time constant", self.smooth_spin)
-        self.figures_label = QLabel("")
-        self.figures_label.setWordWrap(True)
+        self.figures_label = WrappingLabel("")
         form.addRow(self.figures_label)
         layout.addWidget(box)
         layout.addStretch(1)
@@ -399,7 +396,7 @@ class LiveWindow(QMainWindow):
         for frame in frames:
             self._recent.append((frame.timestamp_s, np.asarray(frame.positions, dtype=np.float64)))
         if self._clock0 is None:
-            self._clock0 = newest.timestamp_s
+            self._clock0 = frames[0].timestamp_s  # the first frame kept (a burst holds several)
         if self.simulator is None and self.auto_rest and len(self._recent) >= 2:
             given = self.settings.rest
             if given is not None:  # the rest the user gave: when the stream has passed its end
