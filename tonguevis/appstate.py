@@ -40,6 +40,8 @@ of several slots changed, where there are several):
 ``status``        a line for the status bar (str); sent every time, even when the text repeats
 ``frame_drawn``   a 3D view drew the motion's frame ``value`` (int; ``source`` is the view): what
                   another view draws in step with it (the compare panel's B, its difference colours)
+``live_session``  the live session the live views show (a :class:`tonguevis.live.session.LiveSession`,
+                  or None: closed); its frames, rest, targets and sweeps have events of their own
 
 The events are typed signals (psygnal, as napari's evented models): ``state.events.time``
 is a signal of :class:`Event`; ``state.events.time.connect(callback)`` subscribes and
@@ -75,7 +77,7 @@ COMPARE_LAYOUTS = ("side", "ghost")
 COMPARE_TIME_MODES = ("production", "absolute")
 EVENT_NAMES = ("time", "playing", "speed", "loop", "range", "selection", "color", "reference",
                "session", "motion", "productions", "motions", "morph_ends", "tongue_model", "run_settings", "status",
-               "frame_drawn", "compare_view", "comparison")
+               "frame_drawn", "compare_view", "comparison", "live_session")
 
 
 @dataclass(frozen=True)
@@ -124,6 +126,16 @@ class AppEvents(SignalGroup):
     run_settings = Signal(Event)
     status = Signal(Event)
     frame_drawn = Signal(Event)
+    live_session = Signal(Event)
+
+
+def emit_event(events: SignalGroup, name: str, value: Any, source: Any = None, key: str | None = None) -> None:
+    """Send an :class:`Event` on ``events``' signal ``name``; a subscriber's error is raised as it raised it
+    (psygnal wraps it in an EmitLoopError)."""
+    try:
+        getattr(events, name).emit(Event(name, value, source, key))
+    except EmitLoopError as exc:
+        raise (exc.__cause__ or exc) from None
 
 
 def connected(signal, callback: Callback) -> Callable[[], None]:
@@ -175,13 +187,11 @@ class AppState:
         self._status = ""
         self._compare_view = CompareView()
         self._comparison: Any = None
+        self._live_session: Any = None
 
     # -- events ----------------------------------------------------------
     def _emit(self, name: str, value: Any, source: Any, key: str | None = None) -> None:
-        try:
-            getattr(self.events, name).emit(Event(name, value, source, key))
-        except EmitLoopError as exc:  # a view's own error, as it raised it (psygnal wraps it)
-            raise (exc.__cause__ or exc) from None
+        emit_event(self.events, name, value, source, key)
 
     def frame_drawn(self, index: int, source: Any) -> None:
         """``source`` (a 3D view) drew frame ``index``: a ``frame_drawn`` event."""
@@ -490,3 +500,17 @@ class AppState:
         """A line for the status bar (sent even when it repeats: the bar may show something else now)."""
         self._status = str(text)
         self._emit("status", self._status, source)
+
+    # -- the live session ---------------------------------------------------------
+    @property
+    def live_session(self) -> Any:
+        """The live session (a :class:`tonguevis.live.session.LiveSession`) the live views show, or None."""
+        return self._live_session
+
+    def set_live_session(self, session: Any, source: Any = None) -> None:
+        """Show ``session`` in the live views from now on (None: none); the one it replaces is not closed here
+        (its window closes its source)."""
+        if session is self._live_session:
+            return
+        self._live_session = session
+        self._emit("live_session", session, source)

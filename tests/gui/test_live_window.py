@@ -196,17 +196,20 @@ def test_cannot_connect_is_shown(qtbot, live):
     assert "port must be a number" in window.statusBar().currentMessage()
     assert parse_source("[::1]:3031") == ("::1", 3031) and parse_source("host") == ("host", 3030)
     # Display smoothing: a first-order low-pass of what is drawn, off by default.
-    assert window.smoothing == 0 and window._low_pass("p", np.ones(3), 0.01) is not None
-    np.testing.assert_array_equal(window._low_pass("p", np.full(3, 2.0), 0.01), 2.0)
+    # Display smoothing (the session's): set from the panel's check box and time constant.
+    session = window.session
+    assert session.smoothing == 0 and session.low_pass("p", np.ones(3), 0.01) is not None
+    np.testing.assert_array_equal(session.low_pass("p", np.full(3, 2.0), 0.01), 2.0)
     window.smooth_check.setChecked(True)
     window.smooth_spin.setValue(0.05)
-    window._low_pass("p", np.zeros(3), 0.01)
-    np.testing.assert_allclose(window._low_pass("p", np.ones(3), 0.01), 1 - np.exp(-0.2))
+    assert session.smoothing == 0.05
+    session.low_pass("p", np.zeros(3), 0.01)
+    np.testing.assert_allclose(session.low_pass("p", np.ones(3), 0.01), 1 - np.exp(-0.2))
     window.smooth_check.setChecked(False)
-    np.testing.assert_array_equal(window._low_pass("p", np.ones(3), 0.01), 1.0)
+    np.testing.assert_array_equal(session.low_pass("p", np.ones(3), 0.01), 1.0)
     # A sensor map (name -> NDI Id) names the slots by the ids the device lists, else by their numbers.
-    window.given_names = {"TT": 0, "TD": 2}
-    assert window.slot_names(3) == ["TT", "slot1", "TD"]
+    session.given_names = {"TT": 0, "TD": 2}
+    assert session.slot_names(3) == ["TT", "slot1", "TD"]
 
 
 def test_file_menu_opens_the_live_window(qtbot, window):
@@ -217,7 +220,11 @@ def test_file_menu_opens_the_live_window(qtbot, window):
     live_windows = [w for w in window._live_windows if isinstance(w, LiveWindow)]
     assert len(live_windows) == 1 and live_windows[0].isVisible()
     assert live_windows[0].source is None and live_windows[0].source_edit.text() == "127.0.0.1:3030"
+    # The live session is the app model's: the window shows it; asked again, the same window comes up.
+    assert window.state.live_session is live_windows[0].session is not None
+    assert window.open_live_window() is live_windows[0]
     live_windows[0].close()
+    assert window.state.live_session is None
 
 
 def test_live_command_parses_and_refuses_bad_input(tmp_path):
@@ -257,7 +264,8 @@ def test_live_with_the_speakers_palate_draws_it_the_jaw_and_the_palatogram(qtbot
         # the palatogram is computed on the simulator's surface: its upper-surface nodes, mapped into that surface
         from tonguevis.analysis.epg import upper_surface
 
-        layout, index, triangles = window._epg
+        epg = window.session.epg
+        layout, index, triangles = epg.layout, epg.index, epg.triangles
         nodes, want = upper_surface(sim.model)
         assert layout.used.sum() == 62 and np.array_equal(sim.surface_nodes[index], nodes)
         assert np.array_equal(triangles, want)

@@ -1,18 +1,18 @@
-"""The live window: the patient's tongue from a live stream, targets, sweeps (issue 25, item 4).
+"""The live window: views on a live session held by the app's model (issue 25, item 4; issue 34).
 
 A large 3D view for the patient (the simulated tongue surface, the sensors, the targets
 as spheres coloured by their live accuracy, a replay target's ghost), a midsagittal view
 (the tongue's section in the plane of its middle, the sensors, the targets, the palate if
-given) and a small panel for the clinician (source and connection, "Take rest now",
+given), the palatogram, and a small panel for the clinician (source and connection, "Take rest now",
 targets, sweeps, live accuracy, frames per second, latency, dropped frames).
 
-Frames: a :class:`~PySide6.QtCore.QTimer` polls the source every :data:`POLL_MS` ms.  Every
-frame received since the last tick is simulated (the dynamics need each frame at its time
-step) and, during a sweep, saved; only the newest is drawn, the older ones are counted as
-dropped from the display: the window never works through a backlog.  The rest is taken
-automatically from the stillest half second of the first :data:`AUTO_REST_S` s, or by the
-button (the last half second).  Display smoothing (a first-order low-pass of the drawn points,
-off by default) changes only the screen, never what is saved.
+What happens lives in a :class:`~tonguevis.live.session.LiveSession` (no Qt: the source, the
+simulation, the rest, the targets, the sweep, the counters, the display's low-pass), which the
+app's model holds (:attr:`tonguevis.appstate.AppState.live_session`).  This window shows the session
+the model holds, redraws from its events, and its buttons call its methods; a
+:class:`~PySide6.QtCore.QTimer` calls :meth:`LiveSession.tick` every :data:`POLL_MS` ms, which
+simulates every frame received since and hands the newest to the views (the window never works
+through a backlog).  The midsagittal and palatogram views are the replay app's.
 
 Latency of a drawn frame: from its bytes' arrival at the socket (``LiveFrame.arrival_s``) to
 the end of the paint of the view that shows it (after VTK's render returns and the image is
@@ -34,29 +34,22 @@ from PySide6.QtWidgets import (
     QMessageBox, QPushButton, QScrollArea, QSplitter, QVBoxLayout, QWidget,
 )
 
+from tonguevis.appstate import AppState, connected
 from tonguevis.errors import TonguevisError
 from tonguevis.gui.elastic_label import WrappingLabel
 from tonguevis.gui.flow_layout import FlowLayout
 from tonguevis.gui.midsagittal_view import BACKGROUND, GHOST_COLOUR, SENSOR_COLOUR, TONGUE_COLOUR, MidsagittalView
 from tonguevis.gui.palatogram_view import PalatogramView
 from tonguevis.gui.qt_workarounds import keep_none_alive
-from tonguevis.live.simulator import REST_SEARCH_S, REST_WINDOW_S, LiveSimulationError, LiveSimulator
-from tonguevis.live.targets import (
-    FollowingTarget, OscillatingTarget, ReplayTarget, StaticTarget, TargetError, accuracy_colour,
-)
+from tonguevis.live.session import AUTO_REST_S, LiveSession  # noqa: F401 (AUTO_REST_S: the tests' import)
+from tonguevis.live.targets import accuracy_colour
 
 from tonguevis._logging import logger
 
 #: How often the source is polled (ms): a frame waits at most this long before it is simulated.
 POLL_MS = 2
-#: The rest is taken by itself from the stillest half second of the first seconds of the stream.
-AUTO_REST_S = REST_SEARCH_S
 #: Latencies and frame times kept for the panel's figures.
 HISTORY = 600
-#: s between two palatograms computed (a few ms each): the clinician reads it, it need not follow every frame.
-EPG_EVERY_S = 0.05
-#: Frames simulated in one tick at most: after a stall the older ones of a burst are skipped (and counted).
-MAX_BURST = 50
 DEFAULT_RADIUS_MM = 5.0
 
 
@@ -88,71 +81,80 @@ LIVE_RENDER_SCALE = 0.8
 
 class LiveWindow(QMainWindow):
     """The live view of ``source`` (a started or unstarted :class:`~tonguevis.live.source.Source`, or None
-    to connect from the panel).
-
-    sensor_names : the stream's slot names: a list in slot order, or a sensor map (name -> NDI Id);
-        without it the names the device sends (see :meth:`slot_names`).  settings : a :class:`~tonguevis.sim.settings.RunSettings`
-        (default everyone's: the replay's); its ``palate`` is drawn, its ``rest`` (START, END on the stream's
-        clock from the first frame) taken when the stream passes END instead of the stillest moment; model : the
-        unplaced tongue model.
-    profile : a :class:`~tonguevis.live.profiles.Profile` (its targets, offsets; sweeps saved in its
-        folder under ``profiles_root``); None: the profile "default" there (made when first saved).
-    auto_rest : take the rest by itself from the stillest half second of the first seconds.
+    to connect from the panel): the views of a new :class:`~tonguevis.live.session.LiveSession` made of the
+    other arguments (see it) and put into ``state`` (an :class:`~tonguevis.appstate.AppState`, the app's;
+    default one of its own).  The window then shows whichever live session ``state`` holds.
     """
 
     def __init__(self, source=None, sensor_names=None, settings=None, model=None, profile=None,
-                 profiles_root=None, auto_rest: bool = True, parent=None):
+                 profiles_root=None, auto_rest: bool = True, parent=None, *, state: AppState | None = None):
         super().__init__(parent)
         keep_none_alive()
-        from tonguevis.live.simulator import check_live_settings
-        from tonguevis.sim.settings import RunSettings
-
         self.setWindowTitle("tonguevis live")
-        settings = settings if settings is not None else RunSettings()
-        check_live_settings(settings)
-        self.settings, self.model = settings, model
-        self.given_names = (dict(sensor_names) if isinstance(sensor_names, dict) else list(sensor_names)) \
-            if sensor_names else None
-        self.profiles_root = profiles_root
-        self.profile = profile if profile is not None else self._default_profile()
-        self.targets = list(self.profile.targets)
-        self.auto_rest = auto_rest
-        self.palate = settings.palate_surface()
-        self.source = None
-        self.simulator: LiveSimulator | None = None
-        self.sweep = None
-        self.last_saved = None
-        self.smoothing = 0.0  # s (0: off)
-        self._smoothed: dict[str, np.ndarray] = {}
-        self._recent: deque = deque(maxlen=int(REST_SEARCH_S * 200))
-        self._reset_counters()
+        session = LiveSession(settings, model=model, sensor_names=sensor_names, profile=profile,
+                              profiles_root=profiles_root, auto_rest=auto_rest)
+        self.state = state if state is not None else AppState()
+        self.session: LiveSession | None = None
+        self._session_stops: list = []
+        self._reset_display_counters()
         self._build()
         self.timer = QTimer(self)
         self.timer.setTimerType(Qt.TimerType.PreciseTimer)
         self.timer.timeout.connect(self.tick)
+        self._stop_following = connected(self.state.events.live_session, lambda event: self._bind(event.value))
+        self.state.set_live_session(session, source=self)
         if source is not None:
             self.set_source(source)
 
-    # ------------------------------------------------------------------ set-up
-    def _default_profile(self):
-        from tonguevis.live.profiles import Profile, ProfileError, load_profile
+    # ------------------------------------------------------------------ the session the model holds
+    def _bind(self, session) -> None:
+        """Show ``session`` (None: nothing): hear its events, start over the scene and the panel."""
+        for stop in self._session_stops:
+            stop()
+        self.timer.stop()
+        if self.session is not None and self.session is not session:  # the model dropped it: it stops
+            if self.session.sweep is not None:
+                self.session.stop_sweep()
+            self.session.close_source()
+        self.session = session
+        self._forget_scene()
+        if session is None:
+            self._session_stops = []
+            return
+        events = session.events
+        self._session_stops = [
+            connected(events.source, self._on_source), connected(events.frame_processed, self._on_frame),
+            connected(events.rest_changed, self._on_rest), connected(events.targets_changed, self._on_targets),
+            connected(events.sweep_changed, self._on_sweep),
+            connected(events.status, lambda event: self.show_status(event.value)),
+            connected(events.error, lambda event: self.show_error(event.value)),
+        ]
+        self.palatogram.setVisible(session.palate is not None)
+        self.rest_label.setText(session.rest_line)
+        self._refresh_targets()
+        self._sweep_buttons()
+        if session.source is not None:
+            self._source_started(session.source)
 
-        try:
-            return load_profile("default", self.profiles_root)
-        except ProfileError:
-            return Profile("default", name="default")
+    # The session's state, as the window's (what the tests, the benchmark and the menus read).
+    source = property(lambda self: self.session.source, doc="The session's source (None: not connected).")
+    simulator = property(lambda self: self.session.simulator, doc="The session's LiveSimulator (None: no rest).")
+    targets = property(lambda self: self.session.targets, doc="The session's targets.")
+    accuracy = property(lambda self: self.session.accuracy, doc="{target index: accuracy %} of the last frame.")
+    frames_received = property(lambda self: self.session.frames_received)
+    dropped_frames = property(lambda self: self.session.dropped_frames, doc="Received, simulated, not drawn.")
+    skipped_frames = property(lambda self: self.session.skipped_frames, doc="Received, not even simulated.")
 
-    def _reset_counters(self) -> None:
+    def _reset_display_counters(self) -> None:
         self.frames_drawn = 0
-        self.frames_received = 0
-        self.dropped_frames = 0  # received but not drawn (a newer one came in the same tick)
-        self.skipped_frames = 0  # not even simulated (a burst after a stall, beyond MAX_BURST)
         self.latencies_ms: deque = deque(maxlen=HISTORY)
         self.draw_times: deque = deque(maxlen=HISTORY)
-        self.stage_ms: deque = deque(maxlen=HISTORY)  # per drawn frame: {"simulate", "reconstruct", "render"}
-        self.accuracy: dict[int, float] = {}
-        self.last_frame = None
-        self._clock0 = None
+        self.stage_ms: deque = deque(maxlen=HISTORY)  # per drawn frame: {"simulate", "reconstruct", "render"...}
+
+    def _reset_counters(self) -> None:
+        """Count from now (the session's frames and the display's)."""
+        self.session.reset_counters()
+        self._reset_display_counters()
 
     def _build(self) -> None:
         from tonguevis.gui.view3d import make_plotter
@@ -192,7 +194,6 @@ class LiveWindow(QMainWindow):
         views.addWidget(self.midsagittal)
         views.addWidget(self.palatogram)
         views.setSizes([230, 110])
-        self.palatogram.setVisible(self.palate is not None)
         side.addWidget(views)
         side.addWidget(self._panel(side))
         side.setSizes([300, 500])
@@ -210,8 +211,7 @@ class LiveWindow(QMainWindow):
         self.shown_palate = None  # the palate as placed on the rest (a ShownPalate), once a rest is taken
         self.jaw_mesh = None
         self._jaw_rest = None
-        self._epg = None  # (layout, upper-surface indices into the simulator's surface, triangles)
-        self._epg_at = -1.0
+        self._scene_sim = None  # the simulator whose tongue, palate and jaw the scene shows
 
     def _panel(self, parent) -> QWidget:
         scroll = QScrollArea(parent)
@@ -294,23 +294,12 @@ class LiveWindow(QMainWindow):
         layout.addWidget(box)
         layout.addStretch(1)
         scroll.setWidget(body)
-        self._refresh_targets()
         return scroll
 
     # ------------------------------------------------------------------ the source
     def set_source(self, source) -> None:
         """Use ``source`` (started here if it is not): frames are polled from now on."""
-        self.close_source()
-        self.source = source
-        if hasattr(source, "host"):
-            self.source_edit.setText(f"{source.host}:{source.port}")
-        try:
-            source.start()
-        except Exception as exc:  # a source that cannot even start: said, not raised
-            self.show_error(f"cannot start the live source: {exc}")
-            return
-        self._reset_counters()
-        self.timer.start(POLL_MS)
+        self.session.set_source(source)
 
     def connect_from_panel(self) -> None:
         """Connect to the host:port typed in the panel (a WaveFront source)."""
@@ -324,59 +313,29 @@ class LiveWindow(QMainWindow):
         self.set_source(WaveFrontSource(host, port))
 
     def close_source(self) -> None:
-        self.timer.stop() if hasattr(self, "timer") else None
-        if self.source is not None:
-            try:
-                self.source.close()
-            except Exception:  # closing must never fail the window
-                logger.exception("closing the live source failed")
-        self.source = None
+        if self.session is not None:
+            self.session.close_source()
 
-    def slot_names(self, n_slots: int) -> list[str]:
-        """The stream's slot names: a sensor map given (name -> NDI Id, matched to the ids the device listed,
-        else to the slot numbers) or a list given, else the names the device sent, else the profile's map
-        (name -> slot), else slot0, slot1, ..."""
-        given = self.given_names
-        if isinstance(given, dict) and given:
-            ids = getattr(self.source, "sensor_ids", None)
-            ids = list(ids) if ids and len(ids) == n_slots else list(range(n_slots))
-            by_id = {int(i): str(name) for name, i in given.items()}
-            return [by_id.get(int(i), f"slot{k}") for k, i in enumerate(ids)]
-        if given and len(given) >= n_slots:
-            return [str(n) for n in given[:n_slots]]
-        names = getattr(self.source, "sensor_names", None)
-        if names and len(names) == n_slots:
-            return list(names)
-        if self.profile.sensor_map:
-            by_slot = {slot: name for name, slot in self.profile.sensor_map.items()}
-            return [by_slot.get(k, f"slot{k}") for k in range(n_slots)]
-        return [f"slot{k}" for k in range(n_slots)]
+    def _on_source(self, event) -> None:
+        if event.value is None:
+            self.timer.stop()
+        else:
+            self._source_started(event.value)
+
+    def _source_started(self, source) -> None:
+        if hasattr(source, "host"):
+            self.source_edit.setText(f"{source.host}:{source.port}")
+        self._reset_display_counters()
+        self.timer.start(POLL_MS)
 
     # ------------------------------------------------------------------ the frame loop
-    def _pending(self) -> list:
-        """Every frame received since the last tick (oldest first); the newest alone without a queue."""
-        source = self.source
-        frames = []
-        if getattr(source, "_queue", None) is not None:
-            while True:
-                frame = source.get(0)
-                if frame is None:
-                    break
-                frames.append(frame)
-        else:
-            frame = source.latest()
-            if frame is not None and (self.last_frame is None or frame.frame != self.last_frame.frame):
-                frames.append(frame)
-        return frames
-
     def tick(self) -> None:
-        """One poll: simulate what came, draw the newest frame, update the figures (never raises)."""
-        if self.source is None:
+        """One poll: the session simulates what came, the views draw the newest frame (from the session's
+        ``frame_processed`` event), the figures are updated (never raises)."""
+        if self.session is None or self.session.source is None:
             return
         try:
-            frames = self._pending()
-            if frames:
-                self._process(frames)
+            self.session.tick()
             now = time.perf_counter()
             if now - getattr(self, "_last_status", 0.0) > 0.25:
                 self._last_status = now
@@ -385,132 +344,54 @@ class LiveWindow(QMainWindow):
             logger.exception("live view: a frame could not be shown")
             self.show_status(f"a frame could not be shown: {exc}")
 
-    def _process(self, frames: list) -> None:
-        t_start = time.perf_counter()
-        self.frames_received += len(frames)
-        if len(frames) > MAX_BURST:
-            self.skipped_frames += len(frames) - MAX_BURST
-            frames = frames[-MAX_BURST:]
-        newest = frames[-1]
-        names = self.slot_names(newest.n_sensors)
-        for frame in frames:
-            self._recent.append((frame.timestamp_s, np.asarray(frame.positions, dtype=np.float64)))
-        if self._clock0 is None:
-            self._clock0 = frames[0].timestamp_s  # the first frame kept (a burst holds several)
-        if self.simulator is None and self.auto_rest and len(self._recent) >= 2:
-            given = self.settings.rest
-            if given is not None:  # the rest the user gave: when the stream has passed its end
-                if newest.timestamp_s - self._clock0 >= given[1]:
-                    self._take_rest(names, stillest=False, interval=given)
-            elif self._recent[-1][0] - self._recent[0][0] >= AUTO_REST_S - 1e-9:
-                self._take_rest(names, stillest=True)
-        step = None
-        simulate_s = 0.0
-        sim = self.simulator
-        if sim is not None and sim.sensor_names != names:
-            self.simulator = sim = None  # the slots changed (another device): a new rest is needed
-            self.rest_label.setText("the stream's sensors changed: take the rest again")
-        corrected = []
-        for k, frame in enumerate(frames):
-            if sim is not None:
-                try:
-                    step = sim.step(frame.positions, reconstruct=k == len(frames) - 1)
-                except (LiveSimulationError, ValueError, np.linalg.LinAlgError) as exc:
-                    self.show_status(f"simulation stopped: {exc}")
-                    self.simulator = sim = None
-                    step = None
-                else:
-                    simulate_s += sum(v for key, v in step.timings.items() if key != "reconstruct")
-                    corrected.append(step.corrected)
-            if self.sweep is not None:
-                self._add_to_sweep(frame, corrected[-1] if sim is not None and corrected else None)
-        self.dropped_frames += len(frames) - 1
-        self._draw(newest, names, step)
+    def _on_frame(self, event) -> None:
+        update = event.value
+        self._draw(update)
         t_drawn = time.perf_counter()
         self.frames_drawn += 1
-        self.last_frame = newest
-        self.latencies_ms.append(1e3 * (t_drawn - newest.arrival_s))
+        self.latencies_ms.append(1e3 * (t_drawn - update.frame.arrival_s))
         self.draw_times.append(t_drawn)
-        self.stage_ms[-1]["simulate"] = 1e3 * simulate_s
-        self.stage_ms[-1]["pending"] = len(frames)  # frames this tick took from the source (1: no backlog)
-        self.stage_ms[-1]["tick"] = 1e3 * (t_drawn - t_start)
-
-    def _add_to_sweep(self, frame, corrected) -> None:
-        from tonguevis.live.sweeps import SweepError
-
-        sweep = self.sweep
-        try:
-            if sweep._live_correction is False:
-                corrected = None
-            elif sweep._live_correction and corrected is None:
-                return  # the simulation stopped mid-sweep: keep the sweep consistent (raw only from before)
-            self.accuracy = dict(enumerate(sweep.add_frame(frame, corrected=corrected)))
-        except SweepError as exc:
-            self.show_status(f"sweep: frame {frame.frame} not added ({exc})")
-        if sweep.finished:
-            self.stop_sweep()
+        self.stage_ms[-1]["simulate"] = 1e3 * update.simulate_s
+        self.stage_ms[-1]["pending"] = update.frames  # frames this tick took from the source (1: no backlog)
+        self.stage_ms[-1]["tick"] = 1e3 * (t_drawn - update.started_s)
 
     # ------------------------------------------------------------------ drawing
-    def _low_pass(self, key: str, value: np.ndarray, dt: float) -> np.ndarray:
-        """First-order low-pass of what is drawn (off: the value itself)."""
-        if self.smoothing <= 0:
-            return value
-        old = self._smoothed.get(key)
-        if old is None or old.shape != value.shape:
-            self._smoothed[key] = np.array(value, dtype=np.float64)
-            return value
-        alpha = 1.0 - np.exp(-max(dt, 0.0) / self.smoothing)
-        fresh = np.isfinite(old)
-        old[fresh] += alpha * (value[fresh] - old[fresh])
-        old[~fresh] = value[~fresh]
-        return old
+    def _forget_scene(self) -> None:
+        """Nothing drawn: the next frame builds the scene again."""
+        self._forget_tongue()
+        if self.sensor_mesh is not None:
+            self.plotter.remove_actor("sensors")
+            self.sensor_mesh = None
+        self._draw_ghost(None)
+        for actor in self.target_actors:
+            self.overlay.RemoveActor(actor)
+        self.target_actors = []
 
-    def _draw(self, frame, names: list[str], step) -> None:
+    def _forget_tongue(self) -> None:
+        """The tongue, palate and jaw of the last rest gone (a new rest places them again)."""
+        for name in ("tongue", "palate", "jaw"):
+            self.plotter.remove_actor(name)
+        self.surface_mesh = self.jaw_mesh = self.shown_palate = self._scene_sim = None
+
+    def _draw(self, update) -> None:
         import pyvista as pv
 
         t0 = time.perf_counter()
-        dt = 0.0 if self.last_frame is None else frame.timestamp_s - self.last_frame.timestamp_s
-        sim = self.simulator
-        if step is not None and sim is not None:
-            shift = step.jaw_offset
-            surface = self._low_pass("surface", step.surface + shift, dt)
-            sensors_head = step.corrected
-            drawn_sensors = self._low_pass("sensors", sim.sensor_points_in_view(step), dt)
+        sim = self.session.simulator
+        surface = update.surface
+        if surface is not None:
+            if sim is not self._scene_sim:
+                self._forget_tongue()
             if self.surface_mesh is None:
-                faces = np.hstack([np.full((len(sim.surface_faces), 1), 3), sim.surface_faces]).ravel()
-                from tonguevis.render.surface_geometry import VertexNormals, outward_normals
-
-                # Lit on the CPU at the vertices and drawn unlit, its hidden back faces culled (as the app's
-                # scene: VTK's per-pixel lighting in software costs more than the 736 vertices' shading).
-                self._normals = VertexNormals(sim.surface_faces, len(surface))
-                self._normal_sign = 1.0 if np.allclose(outward_normals(sim.rest_surface, sim.surface_faces),
-                                                       self._normals(sim.rest_surface)) else -1.0
-                self.surface_mesh = pv.PolyData(np.array(surface, dtype=np.float32), faces)
-                self.surface_mesh.point_data["colours"] = self._shaded(surface)
-                self.plotter.add_mesh(self.surface_mesh, scalars="colours", rgb=True, name="tongue",
-                                      lighting=False, culling="back" if self._normal_sign > 0 else "front")
-                rest = sim.rest_surface
-                centre = rest.mean(axis=0)
-                # The app's main view: from the front right and above (x anterior, y left, z up), the tongue fitted.
-                self.plotter.camera_position = [tuple(centre + np.array([0.55, -1.0, 0.55])), tuple(centre), (0, 0, 1)]
-                lo, hi = rest.min(axis=0), rest.max(axis=0)
-                self.plotter.renderer.ResetCamera(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2])  # the tongue alone
-                self.plotter.camera.zoom(1.4)
-                self.surface_mesh.point_data["colours"][:] = self._shaded(surface)
-                self.midsagittal.set_bounds(rest[:, [0, 2]], margin=0.35)
-                self._mid_y = float(np.median(rest[:, 1]))
-                self._show_context(sim)
+                self._show_tongue(sim, surface)
             else:
                 self.surface_mesh.points[:] = surface
                 self.surface_mesh.point_data["colours"][:] = self._shaded(surface)
                 self.surface_mesh.Modified()
             if self.jaw_mesh is not None:
-                self.jaw_mesh.points[:] = self._jaw_rest + np.asarray(shift, dtype=np.float32)
+                self.jaw_mesh.points[:] = self._jaw_rest + np.asarray(update.step.jaw_offset, dtype=np.float32)
                 self.jaw_mesh.Modified()
-        else:
-            sensors_head = np.asarray(frame.positions, dtype=np.float64) / 1000.0
-            drawn_sensors = self._low_pass("sensors", sensors_head, dt)
-            surface = None
+        drawn_sensors = update.sensors
         if self.sensor_mesh is None:
             self.sensor_mesh = pv.PolyData(np.nan_to_num(np.array(drawn_sensors, dtype=np.float32)))
             self.plotter.add_mesh(self.sensor_mesh, color=SENSOR_COLOUR, point_size=14, render_points_as_spheres=True,
@@ -524,7 +405,7 @@ class LiveWindow(QMainWindow):
             self.plotter.remove_actor("sensors")
             self.sensor_mesh = None
         t1 = time.perf_counter()
-        self._draw_targets(frame, names, sensors_head)
+        self._draw_targets(update)
         t2 = time.perf_counter()
         # VTK's render returns once the frame is submitted; Mesa rasterises it on its own threads while
         # the midsagittal section is computed here, then the paint reads it back and shows it.
@@ -539,15 +420,46 @@ class LiveWindow(QMainWindow):
         t4 = time.perf_counter()
         self._paint()
         t5 = time.perf_counter()
-        if step is not None and self._epg is not None and frame.timestamp_s - self._epg_at >= EPG_EVERY_S:
-            self._show_palatogram(step, frame)
+        contacts = self.session.palatogram(update)  # after the paint: not in the drawn frame's latency
+        if contacts is not None:
+            self.palatogram.show_contacts(contacts, f"t = {update.time_s:.2f} s")
+        step = update.step
         self.stage_ms.append({"reconstruct": 1e3 * (step.timings["reconstruct"] if step is not None else 0.0),
                               "scene": 1e3 * (t2 - t0 + t4 - t3), "render": 1e3 * (t3 - t2 + t5 - t4),
                               "submit": 1e3 * (t3 - t2), "paint": 1e3 * (t5 - t4), "targets": 1e3 * (t2 - t1)})
 
+    def _show_tongue(self, sim, surface: np.ndarray) -> None:
+        """The tongue of a new rest: its mesh, the camera on it, the midsagittal bounds, the palate and the jaw."""
+        import pyvista as pv
+
+        from tonguevis.render.surface_geometry import VertexNormals, outward_normals
+
+        faces = np.hstack([np.full((len(sim.surface_faces), 1), 3), sim.surface_faces]).ravel()
+        # Lit on the CPU at the vertices and drawn unlit, its hidden back faces culled (as the app's
+        # scene: VTK's per-pixel lighting in software costs more than the 736 vertices' shading).
+        self._normals = VertexNormals(sim.surface_faces, len(surface))
+        self._normal_sign = 1.0 if np.allclose(outward_normals(sim.rest_surface, sim.surface_faces),
+                                               self._normals(sim.rest_surface)) else -1.0
+        self.surface_mesh = pv.PolyData(np.array(surface, dtype=np.float32), faces)
+        self.surface_mesh.point_data["colours"] = self._shaded(surface)
+        self.plotter.add_mesh(self.surface_mesh, scalars="colours", rgb=True, name="tongue",
+                              lighting=False, culling="back" if self._normal_sign > 0 else "front")
+        rest = sim.rest_surface
+        centre = rest.mean(axis=0)
+        # The app's main view: from the front right and above (x anterior, y left, z up), the tongue fitted.
+        self.plotter.camera_position = [tuple(centre + np.array([0.55, -1.0, 0.55])), tuple(centre), (0, 0, 1)]
+        lo, hi = rest.min(axis=0), rest.max(axis=0)
+        self.plotter.renderer.ResetCamera(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2])  # the tongue alone
+        self.plotter.camera.zoom(1.4)
+        self.surface_mesh.point_data["colours"][:] = self._shaded(surface)
+        self.midsagittal.set_bounds(rest[:, [0, 2]], margin=0.35)
+        self._mid_y = float(np.median(rest[:, 1]))
+        self._scene_sim = sim
+        self._show_context(sim)
+
     def _show_context(self, sim) -> None:
         """Once the rest is taken: the palate as the simulator placed it (3D and the midsagittal section, traced
-        and estimated told apart), the jaw, and what the palatogram needs."""
+        and estimated told apart), the jaw."""
         import pyvista as pv
 
         from tonguevis.render.scene import context_surfaces
@@ -560,39 +472,24 @@ class LiveWindow(QMainWindow):
             self._jaw_rest = np.array(jaw.points, dtype=np.float32)
             self.plotter.add_mesh(jaw, color="#c8c8c8", opacity=0.25, name="jaw", lighting=True,
                                   culling="back")
-        self.shown_palate = self._epg = None
+        self.shown_palate = None
         if sim.palate is None:
             return
-        from tonguevis.analysis.epg import epg_layout, upper_surface
         from tonguevis.render.drawing import generic_shown, palate_label, speaker_palate
         from tonguevis.render.midsagittal import palate_sections
 
         if sim.palate.metadata.get("generic"):
             shown = generic_shown(True, sim.model)
         else:
-            shown = speaker_palate(sim.palate, palate_label(self.settings.palate))
+            shown = speaker_palate(sim.palate, palate_label(self.session.settings.palate))
         self.shown_palate = shown
         if shown is not None:
             faces = np.hstack([np.full((len(shown.faces), 1), 3), shown.faces]).ravel()
             self.plotter.add_mesh(pv.PolyData(np.asarray(shown.points, dtype=np.float32), faces), color="#8fc1e3",
                                   opacity=0.3, name="palate", culling="back")
             self.midsagittal.palate, self.midsagittal.palate_estimated = palate_sections(shown, self._mid_y)
-        try:
-            nodes, triangles = upper_surface(sim.model)
-            self._epg = (epg_layout(sim.palate), np.searchsorted(sim.surface_nodes, nodes), triangles)
-        except Exception as exc:  # the palatogram is an extra: the live view goes on without it
-            logger.info("no live palatogram: %s", exc)
+        if self.session.epg is None:
             self.palatogram.show_contacts(None, "no electrode layout on this palate")
-
-    def _show_palatogram(self, step, frame) -> None:
-        """The palatogram of the frame just drawn (the simulated surface, not the display's smoothing)."""
-        from tonguevis.analysis.epg import electrode_contacts
-
-        layout, index, triangles = self._epg
-        surface = (np.asarray(step.surface, dtype=np.float64) + step.jaw_offset)[index]
-        contacts = electrode_contacts(surface[None], triangles, self.simulator.palate, layout)[0]
-        self._epg_at = frame.timestamp_s
-        self.palatogram.show_contacts(contacts, f"t = {self._clock(frame):.2f} s")
 
     def _shaded(self, surface: np.ndarray) -> np.ndarray:
         """(k, 3) uint8 colours of the tongue's vertices lit by the view's lights for the camera now."""
@@ -618,35 +515,15 @@ class LiveWindow(QMainWindow):
         # PySide6 6.12's wrapper drops a reference to None each time until Python aborts.)
         self.plotter.interactor.repaint()
 
-    def _sensor_dict(self, names: list[str], positions: np.ndarray) -> dict[str, np.ndarray]:
-        from tonguevis.live.profiles import apply_sensor_offsets
-
-        return apply_sensor_offsets({n: positions[k] for k, n in enumerate(names)}, self.profile.sensor_offsets)
-
-    def _clock(self, frame) -> float:
-        if self.sweep is not None and self.sweep.start_s is not None:
-            return frame.timestamp_s - self.sweep.start_s
-        return frame.timestamp_s - (self._clock0 or 0.0)
-
-    def _draw_targets(self, frame, names: list[str], sensors_head: np.ndarray) -> None:
+    def _draw_targets(self, update) -> None:
+        """The targets where the session placed them, coloured by their accuracy (3D overlay and midsagittal)."""
         import pyvista as pv
 
-        sensors = self._sensor_dict(names, sensors_head)
-        t = self._clock(frame)
-        shown = []
-        while len(self.target_actors) > len(self.targets):
+        targets = self.session.targets
+        while len(self.target_actors) > len(targets):
             self.overlay.RemoveActor(self.target_actors.pop())
-        ghost = None
-        for j, target in enumerate(self.targets):
-            try:
-                centre = target.position_at(t, sensors)
-                if self.sweep is None:
-                    _, acc = target.score(t, sensors)
-                    self.accuracy[j] = float(acc)
-            except TargetError as exc:
-                self.show_status(str(exc))
-                centre = np.full(3, np.nan)
-            acc = self.accuracy.get(j, np.nan)
+        shown = []
+        for j, (target, (centre, acc)) in enumerate(zip(targets, update.targets)):
             rgb = tuple(float(c) for c in accuracy_colour(acc))
             if j >= len(self.target_actors):
                 sphere = pv.Sphere(radius=target.radius, theta_resolution=24, phi_resolution=16)
@@ -662,10 +539,8 @@ class LiveWindow(QMainWindow):
             if finite:
                 actor.SetPosition(*centre)
             shown.append((centre[0], centre[2], target.radius, rgb))
-            if isinstance(target, ReplayTarget) and target.template and ghost is None:
-                ghost = target.ghost_at(t)
         self.midsagittal.targets = shown
-        self._draw_ghost(ghost)
+        self._draw_ghost(update.ghost)
         if self.frames_drawn % 10 == 0:
             self._refresh_target_figures()
 
@@ -691,208 +566,76 @@ class LiveWindow(QMainWindow):
             self.ghost_mesh.Modified()
         self.midsagittal.ghost = points[:, [0, 2]]
 
-    # ------------------------------------------------------------------ the rest
-    def _take_rest(self, names: list[str], stillest: bool, interval=None) -> bool:
-        """The rest from the stillest moment of the recent frames, the last half second, or ``interval``
-        (start_s, end_s on the stream's clock from its first frame)."""
-        recent = list(self._recent)
-        times = np.array([t for t, _ in recent])
-        if len(times) < 2:
-            self.show_status("no frames yet to take the rest from")
-            return False
-        dt = float(np.median(np.diff(times)))
-        rate = round(1.0 / dt, 3) if dt > 0 else 100.0
-        try:
-            sim = LiveSimulator(names, self.settings, model=self.model, rate=rate)
-            if self.model is None:
-                self.model = sim.source_model  # built once, kept for the next rest
-            if stillest:
-                for t, p in recent:
-                    sim.observe(t, p)
-                sim.take_rest(REST_WINDOW_S)
-            elif interval is not None:
-                start, end = (self._clock0 or 0.0) + interval[0], (self._clock0 or 0.0) + interval[1]
-                inside = (times >= start - 1e-9) & (times <= end + 1e-9)
-                if inside.sum() < 2:
-                    raise LiveSimulationError(f"the rest {interval[0]:g}-{interval[1]:g} s (--rest) holds "
-                                              f"{int(inside.sum())} frame(s) of the stream; give a longer one")
-                sim.set_rest(times[inside], np.stack([p for (_, p), keep in zip(recent, inside) if keep]))
-            else:
-                last = times >= times[-1] - REST_WINDOW_S
-                sim.set_rest(times[last], np.stack([p for (_, p), keep in zip(recent, last) if keep]))
-        except (TonguevisError, ValueError) as exc:
-            self.auto_rest = False  # said once; the clinician presses the button when the patient is still
-            self.rest_label.setText(f"no rest: {exc}")
-            self.show_status(f"cannot take the rest: {exc}")
-            return False
-        self.simulator = sim
-        self._smoothed.clear()
-        if self.surface_mesh is not None:
-            self.plotter.remove_actor("tongue")
-            self.surface_mesh = None
-        # On this window's clock (0 at its first frame, as a given rest is), not the device's or a looping
-        # replay server's, whose time stamps run on from wherever it was (40 s into a 17 s recording's third lap).
-        origin = self._clock0 if self._clock0 is not None else sim.rest_times[0]
-        start, end = sim.rest_times[0] - origin, sim.rest_times[-1] - origin
-        how = "(stillest moment)" if stillest else "(as given)" if interval is not None else "taken"
-        self.rest_label.setText(f"rest {how}: {start:.2f}-{end:.2f} s "
-                                f"after the first frame; {len(sim.driving_names)} sensors drive the tongue "
-                                f"({', '.join(sim.driving_names)}), {self.settings.modes} modes")
-        self.show_status("rest taken")
-        return True
-
+    # ------------------------------------------------------------------ the panel: the session's methods
     def take_rest_now(self) -> bool:
         """The rest from the last half second (the patient holds still when the button is pressed)."""
-        if self.last_frame is None:
-            self.show_status("no frames yet to take the rest from")
-            return False
-        return self._take_rest(self.slot_names(self.last_frame.n_sensors), stillest=False)
+        return self.session.take_rest_now()
 
-    # ------------------------------------------------------------------ targets
-    def _tip(self) -> tuple[str, np.ndarray] | None:
-        """(scored sensor, its head-frame position m now) for new targets; None (said) when unknown."""
-        frame = self.last_frame
-        if frame is None:
-            self.show_status("no frame yet: targets are placed at the tongue tip's current position")
-            return None
-        names = self.slot_names(frame.n_sensors)
-        sensor = "TT" if "TT" in names else next((n for n in names if n.startswith("T")), names[0])
-        if self.simulator is not None and self.simulator.ready:
-            position = self.simulator.last_corrected[names.index(sensor)]
-        else:
-            position = np.asarray(frame.positions[names.index(sensor)], dtype=float) / 1000.0
-        position = self._sensor_dict([sensor], position[None])[sensor]
-        if not np.all(np.isfinite(position)):
-            self.show_status(f"{sensor} is missing now: no target placed")
-            return None
-        return sensor, position
-
-    def _add_target(self, target) -> None:
-        if self.sweep is not None:
-            self.show_status("targets are fixed during a sweep: stop it first")
-            return
-        self.targets.append(target)
-        self._targets_changed()
+    def _on_rest(self, event) -> None:
+        self.rest_label.setText(event.value)
+        if self.session.simulator is not self._scene_sim:
+            self._forget_tongue()  # the new rest's tongue is drawn at the next frame
 
     def add_static_target(self) -> None:
         """A static target at the tongue tip's position now (radius from the panel)."""
-        tip = self._tip()
-        if tip is not None:
-            sensor, p = tip
-            self._add_target(StaticTarget(p, self.radius_spin.value() / 1000.0, sensor=sensor,
-                                          name=f"static {len(self.targets) + 1}"))
+        self.session.add_static_target(self.radius_spin.value() / 1000.0)
 
     def add_oscillating_target(self) -> None:
         """A target oscillating between the tip's position now and 10 mm below it (frequency from the panel)."""
-        tip = self._tip()
-        if tip is not None:
-            sensor, p = tip
-            self._add_target(OscillatingTarget(p, p - np.array([0.0, 0.0, 0.01]), self.frequency_spin.value(),
-                                               self.radius_spin.value() / 1000.0, sensor=sensor,
-                                               name=f"oscillating {len(self.targets) + 1}"))
+        self.session.add_oscillating_target(self.radius_spin.value() / 1000.0, self.frequency_spin.value())
 
     def add_following_target(self) -> None:
         """A target following the jaw (else a head reference) where the tip is now relative to it."""
-        tip = self._tip()
-        if tip is None:
-            return
-        sensor, p = tip
-        names = self.slot_names(self.last_frame.n_sensors)
-        follows = "JAW" if "JAW" in names else next((n for n in names if n != sensor), None)
-        if follows is None:
-            self.show_status("a following target needs another sensor to follow")
-            return
-        positions = self.simulator.last_corrected if self.simulator is not None else \
-            np.asarray(self.last_frame.positions, dtype=float) / 1000.0
-        anchor = self._sensor_dict(names, positions)[follows]
-        if not np.all(np.isfinite(anchor)):
-            self.show_status(f"{follows} is missing now: no target placed")
-            return
-        self._add_target(FollowingTarget(follows, p - anchor, self.radius_spin.value() / 1000.0, sensor=sensor,
-                                         name=f"following {follows} {len(self.targets) + 1}"))
+        self.session.add_following_target(self.radius_spin.value() / 1000.0)
 
     def add_target(self, target) -> None:
         """Add any :class:`~tonguevis.live.targets.Target` (e.g. a ReplayTarget with its ghost)."""
-        self._add_target(target)
+        self.session.add_target(target)
 
     def remove_target(self) -> None:
         """Remove the target selected in the list (the last one when none is)."""
-        if self.sweep is not None:
-            self.show_status("targets are fixed during a sweep: stop it first")
-            return
-        if not self.targets:
-            return
-        row = self.target_list.currentRow()
-        self.targets.pop(row if 0 <= row < len(self.targets) else -1)
-        self._targets_changed()
+        self.session.remove_target(self.target_list.currentRow())
 
-    def _targets_changed(self) -> None:
-        self.accuracy = {}
+    def _on_targets(self, _event) -> None:
         for actor in self.target_actors:
             self.overlay.RemoveActor(actor)
         self.target_actors = []
-        self.profile.targets = list(self.targets)
         self._refresh_targets()
 
     def _refresh_targets(self) -> None:
         self.target_list.clear()
-        for target in self.targets:
+        for target in self.session.targets:
             self.target_list.addItem(f"{target.name} ({target.sensor}, {1000 * target.radius:.0f} mm)")
         self._refresh_target_figures()
 
     def _refresh_target_figures(self) -> None:
-        for j, target in enumerate(self.targets):
+        for j, target in enumerate(self.session.targets):
             item = self.target_list.item(j)
             if item is None:
                 continue
-            acc = self.accuracy.get(j, np.nan)
+            acc = self.session.accuracy.get(j, np.nan)
             figure = "—" if not np.isfinite(acc) else f"{acc:.0f} %"
             item.setText(f"{target.name} ({target.sensor}, {1000 * target.radius:.0f} mm): {figure}")
             item.setForeground(QColor.fromRgbF(*(float(c) for c in accuracy_colour(acc))))
 
-    # ------------------------------------------------------------------ sweeps
     def start_sweep(self) -> bool:
         """Start recording a sweep named as in the panel (every frame from now, raw and head-corrected)."""
-        from tonguevis.live.sweeps import Sweep, SweepError
-
-        if self.last_frame is None:
-            self.show_status("no frames yet: connect to a source first")
-            return False
-        names = self.slot_names(self.last_frame.n_sensors)
-        try:
-            self.sweep = Sweep(self.sweep_name.text(), names, profile=self.profile, targets=list(self.targets),
-                               axes=getattr(self.source, "axes", None))
-        except (SweepError, TargetError) as exc:
-            self.show_error(f"cannot start the sweep: {exc}")
-            return False
-        self.accuracy = {}
-        self.start_button.setEnabled(False)
-        self.stop_button.setEnabled(True)
-        self.sweep_label.setText(f"recording sweep {self.sweep.number} ({self.sweep.name})…")
-        return True
+        return self.session.start_sweep(self.sweep_name.text())
 
     def stop_sweep(self):
         """Stop the sweep and save it into the profile's folder; returns the SavedSweep (None if nothing saved)."""
-        from tonguevis.live.profiles import save_profile
-
-        sweep, self.sweep = self.sweep, None
-        self.start_button.setEnabled(True)
-        self.stop_button.setEnabled(False)
-        if sweep is None:
-            return None
-        try:
-            saved = sweep.save(profiles_root=self.profiles_root)
-            save_profile(self.profile, self.profiles_root)
-        except (TonguevisError, OSError) as exc:
-            self.sweep_label.setText(f"sweep {sweep.number} not saved: {exc}")
-            self.show_error(f"the sweep could not be saved: {exc}")
-            return None
-        self.last_saved = saved
-        summaries = sweep.summaries()
-        means = ", ".join(f"{s.mean_percent:.0f} %" for s in summaries) if summaries else "no targets"
-        self.sweep_label.setText(f"sweep {sweep.number} ({sweep.name}): {sweep.n_samples} frames, "
-                                 f"{sweep.elapsed_s:.1f} s, accuracy {means}; saved in {saved.folder}")
+        saved = self.session.stop_sweep()
+        self._sweep_buttons()
         return saved
+
+    def _on_sweep(self, event) -> None:
+        self.sweep_label.setText(event.value)
+        self._sweep_buttons()
+
+    def _sweep_buttons(self) -> None:
+        recording = self.session.sweep is not None
+        self.start_button.setEnabled(not recording)
+        self.stop_button.setEnabled(recording)
 
     # ------------------------------------------------------------------ figures and messages
     def figures(self) -> dict:
@@ -925,8 +668,7 @@ class LiveWindow(QMainWindow):
         self._refresh_target_figures()
 
     def _smoothing_changed(self, *_args) -> None:
-        self.smoothing = self.smooth_spin.value() if self.smooth_check.isChecked() else 0.0
-        self._smoothed.clear()
+        self.session.set_smoothing(self.smooth_spin.value() if self.smooth_check.isChecked() else 0.0)
 
     def show_status(self, text: str) -> None:
         self.statusBar().showMessage(text, 8000)
@@ -941,9 +683,18 @@ class LiveWindow(QMainWindow):
             QMessageBox.warning(self, "tonguevis live", text)
 
     def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
-        if self.sweep is not None:
-            self.stop_sweep()
-        self.close_source()
+        session = self.session
+        if session is not None:
+            if session.sweep is not None:
+                self.stop_sweep()
+            session.close_source()
+        self._stop_following()
+        for stop in self._session_stops:
+            stop()
+        self._session_stops = []
+        self.timer.stop()
+        if self.state.live_session is session:
+            self.state.set_live_session(None, source=self)  # the model holds no closed session
         self.plotter.close()
         super().closeEvent(event)
 
@@ -957,7 +708,7 @@ def run_live(address: str | None = None, settings=None, *, sensor_map=None, prof
 
     source = WaveFrontSource(*parse_source(address)) if address else None
     app = application()
-    window = LiveWindow(source, sensor_names=sensor_map, settings=settings, profile=profile)
+    window = LiveWindow(source, sensor_names=sensor_map, settings=settings, profile=profile, state=AppState())
     install_error_hook(window)
     window.show()
     return app.exec()

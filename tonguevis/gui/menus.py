@@ -200,8 +200,14 @@ class MenusMixin:
         own, to connect from its panel (a device, or ``tonguevis stream FILE``)."""
         from tonguevis.gui.live_window import LiveWindow
 
-        window = LiveWindow(settings=self.state.run_settings.replace(rest=None))  # the replay's settings
-        self._live_windows = [w for w in getattr(self, "_live_windows", []) if w.isVisible()] + [window]
+        open_ = [w for w in getattr(self, "_live_windows", []) if w.isVisible()]
+        if open_:  # the app's model holds one live session: its window is brought up again
+            open_[-1].raise_()
+            open_[-1].activateWindow()
+            return open_[-1]
+        # the replay's settings; the session goes into the app's model
+        window = LiveWindow(settings=self.state.run_settings.replace(rest=None), state=self.state)
+        self._live_windows = [window]
         window.show()
         return window
 

@@ -106,6 +106,8 @@ class Source(ABC):
     #: "x,y,z" when the device said its positions are already in tonguevis's frame (x anterior,
     #: y left, z up; the replay server of a recording read with its axes), else None (device frame).
     axes: str | None = None
+    #: Whether :meth:`get` hands every frame in order (else only :meth:`latest` is kept).
+    queued: bool = True
 
     @abstractmethod
     def start(self) -> "Source":
@@ -217,6 +219,10 @@ class ThreadedSource(Source):
             logger.exception("live source crashed")
 
     # --- the interface ---------------------------------------------------------------------------------
+    @property
+    def queued(self) -> bool:
+        return self._queue is not None
+
     def start(self) -> "ThreadedSource":
         if self._thread is None:
             self._stop.clear()
