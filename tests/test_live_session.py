@@ -254,3 +254,21 @@ def test_the_app_model_holds_the_live_session():
     assert state.live_session is session and heard == [session]
     state.set_live_session(None)
     assert state.live_session is None and heard == [session, None]
+
+
+def test_the_readme_runs_a_live_session_from_a_script(monkeypatch, tmp_path, capsys):
+    """The README's snippet, as written: the demo played in-process into a session, its rest said."""
+    import re
+
+    from tonguevis.paths import REPO_DIR
+
+    readme = (REPO_DIR / "README.md").read_text(encoding="utf-8")
+    blocks = [b for b in re.findall(r"```python\n(.*?)```", readme, flags=re.S) if "LiveSession()" in b]
+    assert len(blocks) == 1, "the README shows a live session run from a script"
+    monkeypatch.setenv("TONGUEVIS_PROFILES", str(tmp_path))
+    monkeypatch.chdir(REPO_DIR)
+    exec(compile(blocks[0], "README.md", "exec"), {})
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("rest (stillest moment): ")
+    shape, received, dropped = re.fullmatch(r"\((\d+), 3\) (\d+) (\d+)", lines[-1]).groups()
+    assert int(shape) > 500 and int(received) >= 600 and 0 <= int(dropped) < int(received)

@@ -108,6 +108,10 @@ def test_draws_takes_rest_colours_targets_and_saves_a_sweep(qtbot, live, demo, t
         window.add_target(ReplayTarget.from_recording(demo, "TT", 0.004, start_s=5.0, end_s=6.0))
         qtbot.waitUntil(lambda: window.ghost_mesh is not None, timeout=10000)
         assert len(window.ghost_mesh.points) == 2 and len(window.midsagittal.ghost) == 2  # TT and TD, the midline
+        from tonguevis.gui.live_window import live_view_screenshot
+
+        live_view_screenshot(window, "/tmp/shots/live_targets.png" if os.path.isdir("/tmp/shots")
+                             else tmp_path / "targets.png")
 
         # A sweep: every frame from Start to Stop, saved in the profile's folder, readable by every command.
         window.sweep_name.setText("ta train")

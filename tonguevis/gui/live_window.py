@@ -97,7 +97,7 @@ class LiveWindow(QMainWindow):
         self.session: LiveSession | None = None
         self._session_stops: list = []
         self._reset_display_counters()
-        self._build()
+        self._build(palatogram=session.palate is not None)
         self.timer = QTimer(self)
         self.timer.setTimerType(Qt.TimerType.PreciseTimer)
         self.timer.timeout.connect(self.tick)
@@ -156,7 +156,7 @@ class LiveWindow(QMainWindow):
         self.session.reset_counters()
         self._reset_display_counters()
 
-    def _build(self) -> None:
+    def _build(self, palatogram: bool) -> None:
         from tonguevis.gui.view3d import make_plotter
 
         from tonguevis.render.scene import set_lights
@@ -194,6 +194,7 @@ class LiveWindow(QMainWindow):
         views.addWidget(self.midsagittal)
         views.addWidget(self.palatogram)
         views.setSizes([230, 110])
+        self.palatogram.setVisible(palatogram)  # before the sizes are set: the panel's width follows
         side.addWidget(views)
         side.addWidget(self._panel(side))
         side.setSizes([300, 500])
