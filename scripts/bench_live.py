@@ -68,7 +68,7 @@ def main() -> int:
     _app = application()  # kept: the QApplication lives while the window does
 
     def wait(ms: int) -> None:
-        # An event loop, not processEvents() in a Python loop (see LiveWindow._render).
+        # An event loop, not processEvents() in a Python loop (see LiveViews._paint, tonguevis.gui.live_views).
         loop = QEventLoop()
         QTimer.singleShot(int(ms), loop.quit)
         loop.exec()

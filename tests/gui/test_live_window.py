@@ -59,12 +59,12 @@ def test_draws_takes_rest_colours_targets_and_saves_a_sweep(qtbot, live, demo, t
         # The rest is taken by itself from the stillest half second of the first 3 s.
         qtbot.waitUntil(lambda: window.simulator is not None, timeout=60000)
         assert "stillest" in window.rest_label.text() and "TT, TD, TL, TR" in window.rest_label.text()
-        qtbot.waitUntil(lambda: window.surface_mesh is not None and window.frames_drawn > 20, timeout=20000)
-        first = np.array(window.surface_mesh.points)
+        qtbot.waitUntil(lambda: window.views.surface_mesh is not None and window.frames_drawn > 20, timeout=20000)
+        first = np.array(window.views.surface_mesh.points)
         drawn = window.frames_drawn
         qtbot.waitUntil(lambda: window.frames_drawn > drawn + 30, timeout=20000)
-        assert np.abs(np.array(window.surface_mesh.points) - first).max() > 1e-4  # the tongue moves
-        assert len(window.surface_mesh.points) == len(window.simulator.surface_nodes)
+        assert np.abs(np.array(window.views.surface_mesh.points) - first).max() > 1e-4  # the tongue moves
+        assert len(window.views.surface_mesh.points) == len(window.simulator.surface_nodes)
         assert len(window.midsagittal.segments) > 20  # the section is drawn
         # Every frame is simulated; those not drawn are counted, none piles up.
         assert window.frames_drawn + window.dropped_frames + window.skipped_frames == window.frames_received
@@ -77,7 +77,7 @@ def test_draws_takes_rest_colours_targets_and_saves_a_sweep(qtbot, live, demo, t
         # "Take rest now": the last half second.
         assert window.take_rest_now()
         assert "taken" in window.rest_label.text()
-        qtbot.waitUntil(lambda: window.surface_mesh is not None, timeout=10000)
+        qtbot.waitUntil(lambda: window.views.surface_mesh is not None, timeout=10000)
 
         # A static target at the tip's rest position: the /ta/ train takes the tip away from it and back,
         # so the accuracy and the sphere's colour go through low and high values.
@@ -87,8 +87,8 @@ def test_draws_takes_rest_colours_targets_and_saves_a_sweep(qtbot, live, demo, t
         seen = []
 
         def coloured() -> bool:
-            if window.target_actors and 0 in window.accuracy:
-                seen.append((window.accuracy[0], tuple(window.target_actors[0].prop.color)))
+            if window.views.target_actors and 0 in window.accuracy:
+                seen.append((window.accuracy[0], tuple(window.views.target_actors[0].prop.color)))
             values = [a for a, _ in seen if np.isfinite(a)]
             return bool(values) and min(values) < 20 and max(values) > 80
 
@@ -106,8 +106,8 @@ def test_draws_takes_rest_colours_targets_and_saves_a_sweep(qtbot, live, demo, t
         assert [t.kind for t in window.targets] == ["static", "static", "following"]
         # A production replayed as a target with its ghost tongue (the template's midline sensors, joined).
         window.add_target(ReplayTarget.from_recording(demo, "TT", 0.004, start_s=5.0, end_s=6.0))
-        qtbot.waitUntil(lambda: window.ghost_mesh is not None, timeout=10000)
-        assert len(window.ghost_mesh.points) == 2 and len(window.midsagittal.ghost) == 2  # TT and TD, the midline
+        qtbot.waitUntil(lambda: window.views.ghost_mesh is not None, timeout=10000)
+        assert len(window.views.ghost_mesh.points) == 2 and len(window.midsagittal.ghost) == 2  # TT and TD, the midline
         from tonguevis.gui.live_window import live_view_screenshot
 
         live_view_screenshot(window, "/tmp/shots/live_targets.png" if os.path.isdir("/tmp/shots")
@@ -257,10 +257,10 @@ def test_live_with_the_speakers_palate_draws_it_the_jaw_and_the_palatogram(qtbot
         window = live(wavefront(server.port), settings=RunSettings(palate=str(osn12_palate)))
         window.resize(1280, 800)
         qtbot.waitUntil(lambda: window.simulator is not None, timeout=60000)
-        qtbot.waitUntil(lambda: window.surface_mesh is not None and window.frames_drawn > 30, timeout=30000)
+        qtbot.waitUntil(lambda: window.views.surface_mesh is not None and window.frames_drawn > 30, timeout=30000)
         sim = window.simulator
-        assert sim.palate is not None and window.shown_palate is not None
-        assert window.shown_palate.surface is sim.palate  # drawn as the simulator placed it
+        assert sim.palate is not None and window.views.shown_palate is not None
+        assert window.views.shown_palate.surface is sim.palate  # drawn as the simulator placed it
         actors = window.plotter.renderer.actors
         assert "palate" in actors and "jaw" in actors
         assert len(window.midsagittal.palate) > 5 and len(window.midsagittal.palate_estimated) > 5
@@ -275,8 +275,8 @@ def test_live_with_the_speakers_palate_draws_it_the_jaw_and_the_palatogram(qtbot
         assert np.array_equal(triangles, want)
         assert window.palatogram.note.startswith("t = ")
         # the jaw moves with the JAW sensor's offset
-        rest = window._jaw_rest
-        qtbot.waitUntil(lambda: np.abs(np.array(window.jaw_mesh.points) - rest).max() > 1e-4, timeout=20000)
+        rest = window.views._jaw_rest
+        qtbot.waitUntil(lambda: np.abs(np.array(window.views.jaw_mesh.points) - rest).max() > 1e-4, timeout=20000)
         # At 1280 x 800 the panel under the views is short: the rest's line (three lines) was cut to one.
         from PySide6.QtWidgets import QScrollArea
 
