@@ -309,3 +309,35 @@ def test_the_rest_is_said_on_the_windows_clock_not_the_servers(qtbot, live, demo
         assert found, window.rest_label.text()
         start, end = map(float, found.groups())
         assert 0.0 <= start < end <= AUTO_REST_S + 0.1
+
+
+def test_the_window_shows_the_live_session_its_model_holds(qtbot, live, demo, tmp_path):
+    """Issue 34: the window is views on the session the app's model holds: another session put into the model
+    is drawn from its events and steered by the panel; the one it replaced is heard no more and closed."""
+    import time
+
+    from tonguevis.live.session import LiveSession
+    from tonguevis.live.source import LiveFrame, RecordingSource, recording_frames
+
+    positions, quaternions, times = recording_frames(demo)
+    frames = [LiveFrame(i + 1, float(times[i]), time.perf_counter(), positions[i], quaternions[i],
+                        np.zeros(len(positions[i]))) for i in range(20)]
+    window = live(RecordingSource(demo, loop=True), auto_rest=False)
+    old, streaming = window.session, window.source
+    assert window.state.live_session is old is not None and window.timer.isActive()
+    new = LiveSession(sensor_names=demo.sensor_names, auto_rest=False, profiles_root=tmp_path / "profiles")
+    window.state.set_live_session(new)
+    assert window.session is new and not window.timer.isActive()  # no source yet in the new one
+    assert old.source is None and streaming.status().state == "finished"  # the replaced one is closed
+    drawn = window.frames_drawn
+    new.process(frames[:3])
+    assert window.frames_drawn == drawn + 1 and window.dropped_frames == 2
+    np.testing.assert_allclose(window.views.sensor_mesh.points, np.nan_to_num(positions[2] / 1000.0), atol=1e-7)
+    old.process(frames[3:4])  # the replaced session: no longer drawn
+    assert window.frames_drawn == drawn + 1
+    window.add_static_target()  # the panel steers the model's session
+    assert len(new.targets) == 1 and old.targets == [] and window.target_list.count() == 1
+    new.process(frames[4:5])
+    assert window.frames_drawn == drawn + 2 and len(window.views.target_actors) == 1
+    window.close()
+    assert window.state.live_session is None
