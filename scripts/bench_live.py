@@ -61,6 +61,7 @@ def main() -> int:
     from tonguevis.gui.app import application
     from tonguevis.gui.live_window import LiveWindow
     from tonguevis.live.server import ReplayServer
+    from tonguevis.live.session import LiveSession
     from tonguevis.live.source import WaveFrontSource
     from tonguevis.paths import DEMO_RECORDING
     from tonguevis.workflows import open_recording
@@ -81,8 +82,8 @@ def main() -> int:
     profiles = tempfile.mkdtemp(prefix="bench_live_")
     width, height = (int(v) for v in args.size.lower().split("x"))
     with ReplayServer(rec, loop=True) as server:
-        window = LiveWindow(WaveFrontSource("127.0.0.1", server.port), profiles_root=profiles,
-                            settings=RunSettings(modes=args.modes))
+        window = LiveWindow(WaveFrontSource("127.0.0.1", server.port),
+                            LiveSession(RunSettings(modes=args.modes), profiles_root=profiles))
         window.quiet = True
         if args.render_scale is not None and hasattr(window.plotter, "set_render_scale"):
             window.plotter.set_render_scale(args.render_scale)

@@ -131,9 +131,10 @@ def test_the_live_panel_scrolls_only_up_and_down_and_shows_its_connect_button(qt
     from PySide6.QtWidgets import QScrollArea
 
     from tonguevis.gui.live_window import LiveWindow
+    from tonguevis.live.session import LiveSession
     from tonguevis.live.source import WaveFrontSource
 
-    window = LiveWindow(WaveFrontSource("127.0.0.1", 9, max_retries=0), profiles_root=tmp_path / "profiles")
+    window = LiveWindow(WaveFrontSource("127.0.0.1", 9, max_retries=0), LiveSession(profiles_root=tmp_path / "profiles"))
     window.quiet = True
     qtbot.addWidget(window)
     window.show()

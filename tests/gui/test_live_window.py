@@ -27,11 +27,12 @@ def demo():
 def live(qtbot, tmp_path):
     """A function making a LiveWindow on a source (closed at the end of the test)."""
     from tonguevis.gui.live_window import LiveWindow
+    from tonguevis.live.session import LiveSession
 
     windows = []
 
-    def make(source, **options):
-        window = LiveWindow(source, profiles_root=tmp_path / "profiles", **options)
+    def make(source, settings=None, **options):
+        window = LiveWindow(source, LiveSession(settings, profiles_root=tmp_path / "profiles", **options))
         window.quiet = True
         qtbot.addWidget(window)
         window.show()

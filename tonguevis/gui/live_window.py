@@ -81,13 +81,13 @@ class LiveWindow(QMainWindow):
     default one of its own).  The window then shows whichever live session ``state`` holds.
     """
 
-    def __init__(self, source=None, sensor_names=None, settings=None, model=None, profile=None,
-                 profiles_root=None, auto_rest: bool = True, parent=None, *, state: AppState | None = None):
+    def __init__(self, source=None, session: LiveSession | None = None, settings=None, parent=None, *,
+                 state: AppState | None = None):
         super().__init__(parent)
         keep_none_alive()
         self.setWindowTitle("tonguevis live")
-        session = LiveSession(settings, model=model, sensor_names=sensor_names, profile=profile,
-                              profiles_root=profiles_root, auto_rest=auto_rest)
+        # what is simulated, and how, is the session's (its sensors' names, profile, model, rest)
+        session = session if session is not None else LiveSession(settings)
         self.state = state if state is not None else AppState()
         self.session: LiveSession | None = None
         self._session_stops: list = []
@@ -460,7 +460,7 @@ def run_live(address: str | None = None, settings=None, *, sensor_map=None, prof
 
     source = WaveFrontSource(*parse_source(address)) if address else None
     app = application()
-    window = LiveWindow(source, sensor_names=sensor_map, settings=settings, profile=profile, state=AppState())
+    window = LiveWindow(source, LiveSession(settings, sensor_names=sensor_map, profile=profile), state=AppState())
     install_error_hook(window)
     window.show()
     return app.exec()
