@@ -272,3 +272,41 @@ def test_the_readme_runs_a_live_session_from_a_script(monkeypatch, tmp_path, cap
     assert lines[0].startswith("rest (stillest moment): ")
     shape, received, dropped = re.fullmatch(r"\((\d+), 3\) (\d+) (\d+)", lines[-1]).groups()
     assert int(shape) > 500 and int(received) >= 600 and 0 <= int(dropped) < int(received)
+
+
+def test_the_velum_lifts_live_with_the_dorsum_as_the_replay_lifts_it(osn12_palate):
+    """Issue 36 (items 1 and 6): live with the speaker's palate, the velum is lifted frame by frame by the least
+    lift keeping the dorsum sensors over the soft palate a coil's half under it (the replay's rule), held over the
+    last frames; the palatogram is measured against the palate as lifted then.  On the real /ka/ 006: it lifts."""
+    from tests.conftest import shared_file
+    from tonguevis.analysis.epg import electrode_contacts
+    from tonguevis.sim.speaker_palate import LIFT_HOLD, velum_lift
+    from tonguevis.workflows import open_recording
+
+    recording = open_recording(shared_file("ema", "optispeech", "006_OSN12_Kah_nofb_natural_take2_HR.tsv"),
+                               audio=False, labels=False)
+    positions, quaternions, times = recording_frames(recording)
+    session = LiveSession(RunSettings(modes=40, palate=str(osn12_palate)), sensor_names=recording.sensor_names)
+    sim, lifts, own = None, [], []
+    contacts_checked = 0
+    for i in range(min(len(times), 900)):  # the rest, then the first /k/ closures
+        update = session.process([LiveFrame(i + 1, float(times[i]), time.perf_counter(), positions[i],
+                                            quaternions[i], np.zeros(len(positions[i])))])
+        if update.step is None:
+            continue
+        sim = session.simulator
+        assert session.velum is not None and sim.palate.lift_shape is not None  # the speaker's palate: it lifts
+        own.append(float(velum_lift(sim.palate, sim.sensor_points_in_view(update.step)[None])[0]))
+        lifts.append(update.velum_lift)
+        assert update.velum_lift == pytest.approx(max(own[-(LIFT_HOLD + 1):]), abs=1e-12)
+        if update.velum_lift > 0 and contacts_checked < 3:
+            session.epg.last_s = -np.inf  # due now
+            got = session.palatogram(update)
+            surface = (np.asarray(update.step.surface, dtype=np.float64) + update.step.jaw_offset)[session.epg.index]
+            want = electrode_contacts(surface[None], session.epg.triangles, sim.palate.lifted(update.velum_lift),
+                                      session.epg.layout)[0]
+            assert np.array_equal(got, want)
+            contacts_checked += 1
+    assert sim is not None and len(lifts) > 100
+    assert max(lifts) > 0.5e-3 and contacts_checked == 3  # the dorsum lifts the velum at the /k/ closures
+    assert min(lifts) == 0.0  # and it comes down again

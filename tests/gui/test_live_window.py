@@ -278,6 +278,18 @@ def test_live_with_the_speakers_palate_draws_it_the_jaw_and_the_palatogram(qtbot
         # the jaw moves with the JAW sensor's offset
         rest = window.views._jaw_rest
         qtbot.waitUntil(lambda: np.abs(np.array(window.views.jaw_mesh.points) - rest).max() > 1e-4, timeout=20000)
+        # the velum as the dorsum lifts it (tonguevis.live.velum): drawn lifted in 3D and in the section
+        views = window.views
+        rest_points = np.array(views.shown_palate.points)
+        before = [np.array(a, copy=True) for a in (views.midsagittal.palate, views.midsagittal.palate_estimated)]
+        views._lift_velum(2e-3)
+        rise = np.array(views.palate_mesh.points)[:, 2] - rest_points[:, 2]
+        share = views.shown_palate.share
+        assert np.allclose(rise, 2e-3 * share, atol=1e-6) and share.max() > 0.9 and share.min() == 0.0
+        after = (views.midsagittal.palate, views.midsagittal.palate_estimated)
+        assert any(len(a) != len(b) or not np.allclose(a, b) for a, b in zip(after, before))
+        views._lift_velum(0.0)
+        assert np.allclose(np.array(views.palate_mesh.points), rest_points)
         # At 1280 x 800 the panel under the views is short: the rest's line (three lines) was cut to one.
         from PySide6.QtWidgets import QScrollArea
 

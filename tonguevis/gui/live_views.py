@@ -65,6 +65,7 @@ class LiveViews:
         self.target_actors: list = []
         self.ghost_mesh = None
         self.shown_palate = None  # the palate as placed on the rest (a ShownPalate), once a rest is taken
+        self.palate_mesh, self._palate_faces, self._lift_drawn = None, None, 0.0  # drawn, its velum lifted so
         self.jaw_mesh = None
         self._jaw_rest = None
         self._scene_sim = None  # the simulator whose tongue, palate and jaw the scene shows
@@ -88,7 +89,7 @@ class LiveViews:
         """The tongue, palate and jaw of the last rest gone (a new rest places them again)."""
         for name in ("tongue", "palate", "jaw"):
             self.plotter.remove_actor(name)
-        self.surface_mesh = self.jaw_mesh = self.shown_palate = self._scene_sim = None
+        self.surface_mesh = self.jaw_mesh = self.shown_palate = self._scene_sim = self.palate_mesh = None
 
     def draw(self, update, session) -> dict:
         """Draw ``update`` (a :class:`~tonguevis.live.session.LiveUpdate` of ``session``) in the three views;
@@ -111,6 +112,7 @@ class LiveViews:
             if self.jaw_mesh is not None:
                 self.jaw_mesh.points[:] = self._jaw_rest + np.asarray(update.step.jaw_offset, dtype=np.float32)
                 self.jaw_mesh.Modified()
+            self._lift_velum(update.velum_lift)
         drawn_sensors = update.sensors
         if self.sensor_mesh is None:
             self.sensor_mesh = pv.PolyData(np.nan_to_num(np.array(drawn_sensors, dtype=np.float32)))
@@ -201,15 +203,36 @@ class LiveViews:
         if sim.palate.metadata.get("generic"):
             shown = generic_shown(True, sim.model)
         else:
-            shown = speaker_palate(sim.palate, palate_label(self.session.settings.palate))
+            # lift=[0]: the share of a lift each drawn point takes, for the velum the dorsum lifts frame by frame
+            shown = speaker_palate(sim.palate, palate_label(self.session.settings.palate), lift=np.zeros(1))
         self.shown_palate = shown
+        self.palate_mesh, self._palate_faces, self._lift_drawn = None, None, 0.0
         if shown is not None:
+            from tonguevis.render.midsagittal import split_palate
+
             faces = np.hstack([np.full((len(shown.faces), 1), 3), shown.faces]).ravel()
-            self.plotter.add_mesh(pv.PolyData(np.asarray(shown.points, dtype=np.float32), faces), color="#8fc1e3",
-                                  opacity=0.3, name="palate", culling="back")
-            self.midsagittal.palate, self.midsagittal.palate_estimated = palate_sections(shown, self._mid_y)
+            # a copy: VTK would share the array, and each lift drawn would move the palate at rest with it
+            self.palate_mesh = pv.PolyData(np.array(shown.points, dtype=np.float32), faces)
+            self.plotter.add_mesh(self.palate_mesh, color="#8fc1e3", opacity=0.3, name="palate", culling="back")
+            self._palate_faces = split_palate(shown)
+            self.midsagittal.palate, self.midsagittal.palate_estimated = palate_sections(
+                shown, self._mid_y, faces=self._palate_faces)
         if self.session.epg is None:
             self.palatogram.show_contacts(None, "no electrode layout on this palate")
+
+    def _lift_velum(self, lift: float) -> None:
+        """The palate drawn (3D and its midsagittal section) with its velum lifted ``lift`` m, when that changed."""
+        shown = self.shown_palate
+        if shown is None or shown.share is None or self.palate_mesh is None or abs(lift - self._lift_drawn) < 1e-5:
+            return
+        from tonguevis.render.midsagittal import palate_sections
+
+        shown.lift[0] = lift
+        self.palate_mesh.points[:] = shown.points_at(0)
+        self.palate_mesh.Modified()
+        self.midsagittal.palate, self.midsagittal.palate_estimated = palate_sections(
+            shown, self._mid_y, 0, faces=self._palate_faces)
+        self._lift_drawn = lift
 
     def _shaded(self, surface: np.ndarray) -> np.ndarray:
         """(k, 3) uint8 colours of the tongue's vertices lit by the view's lights for the camera now."""

@@ -28,12 +28,14 @@ class LivePalatogram:
         self.palate = sim.palate
         self.last_s = -np.inf
 
-    def contacts(self, step, time_s: float) -> np.ndarray | None:
-        """The electrode contacts of ``step`` (a LiveStep at stream time ``time_s``) when one is due, else None."""
+    def contacts(self, step, time_s: float, lift: float = 0.0) -> np.ndarray | None:
+        """The electrode contacts of ``step`` (a LiveStep at stream time ``time_s``) when one is due, else None;
+        ``lift`` (m): the velum's lift at that frame (the palate measured against as lifted then)."""
         if time_s - self.last_s < EPG_EVERY_S:
             return None
         from tonguevis.analysis.epg import electrode_contacts
 
         surface = (np.asarray(step.surface, dtype=np.float64) + step.jaw_offset)[self.index]
         self.last_s = time_s
-        return electrode_contacts(surface[None], self.triangles, self.palate, self.layout)[0]
+        palate = self.palate.lifted(lift) if lift > 0.0 else self.palate
+        return electrode_contacts(surface[None], self.triangles, palate, self.layout)[0]

@@ -37,6 +37,7 @@ from tonguevis.live.display_filter import DisplayLowPass
 from tonguevis.live.palatogram import LivePalatogram
 from tonguevis.live.rest import simulator_on_rest
 from tonguevis.live.session_targets import SessionTargets
+from tonguevis.live.velum import LiveVelum
 from tonguevis.live.simulator import REST_SEARCH_S, LiveSimulationError, LiveSimulator, check_live_settings
 
 #: The rest is taken by itself from the stillest half second of the first seconds of the stream.
@@ -73,6 +74,8 @@ class LiveUpdate:
     ghost : the first replay target's template sensors now ({name: (3,)}), or None.
     frames : frames this tick took from the source (1: no backlog); simulate_s : seconds simulating them;
     started_s : :func:`time.perf_counter` when the tick began.
+    velum_lift : m, the speaker's velum lifted by the dorsum at this frame (:mod:`tonguevis.live.velum`; 0: at rest
+        or no such palate).
     """
 
     frame: object
@@ -87,6 +90,7 @@ class LiveUpdate:
     frames: int
     simulate_s: float
     started_s: float
+    velum_lift: float = 0.0
 
 
 class LiveSession(SessionTargets):
@@ -124,6 +128,7 @@ class LiveSession(SessionTargets):
         self.low_pass = DisplayLowPass()  # of what is drawn (off by default)
         self._recent: deque = deque(maxlen=int(REST_SEARCH_S * 200))
         self.epg = None  # the LivePalatogram of the rest's palate
+        self.velum = None  # the LiveVelum of the rest's palate, when its velum lifts
         self.latest: LiveUpdate | None = None
         self.reset_counters()
 
@@ -244,8 +249,11 @@ class LiveSession(SessionTargets):
             surface, sensors_head = None, np.asarray(frame.positions, dtype=np.float64) / 1000.0
             sensors = self.low_pass("sensors", sensors_head, dt)
         targets, ghost = self.place_targets(frame, names, sensors_head)
+        lift = 0.0
+        if step is not None and self.velum is not None:  # on the sensors as measured, not the display's smoothing
+            lift = self.velum.lift(sim.sensor_points_in_view(step))
         return LiveUpdate(frame, names, step, self.clock(frame), sensors_head, surface, sensors, targets, ghost,
-                          n_frames, simulate_s, started)
+                          n_frames, simulate_s, started, lift)
 
     # ------------------------------------------------------------------ display smoothing
     @property
@@ -303,6 +311,7 @@ class LiveSession(SessionTargets):
     # ------------------------------------------------------------------ the palatogram
     def _palatogram_layout(self, sim) -> None:
         self.epg = None
+        self.velum = LiveVelum(sim.palate) if LiveVelum.liftable(sim.palate) else None
         if sim.palate is not None:
             try:
                 self.epg = LivePalatogram(sim)
@@ -314,4 +323,4 @@ class LiveSession(SessionTargets):
         :class:`~tonguevis.live.palatogram.LivePalatogram`), else None."""
         if update.step is None or self.epg is None:
             return None
-        return self.epg.contacts(update.step, update.frame.timestamp_s)
+        return self.epg.contacts(update.step, update.frame.timestamp_s, update.velum_lift)
