@@ -264,6 +264,8 @@ def test_live_with_the_speakers_palate_draws_it_the_jaw_and_the_palatogram(qtbot
         assert window.views.shown_palate.surface is sim.palate  # drawn as the simulator placed it
         actors = window.plotter.renderer.actors
         assert "palate" in actors and "jaw" in actors
+        # the palate is an open sheet seen from above and below (culled, it vanished from the view above it)
+        assert not actors["palate"].prop.GetBackfaceCulling() and not actors["palate"].prop.GetFrontfaceCulling()
         assert len(window.midsagittal.palate) > 5 and len(window.midsagittal.palate_estimated) > 5
         qtbot.waitUntil(lambda: window.palatogram.contacts is not None, timeout=10000)
         # the palatogram is computed on the simulator's surface: its upper-surface nodes, mapped into that surface

@@ -170,14 +170,20 @@ class LiveViews:
         centre = rest.mean(axis=0)
         # The app's main view: from the front right and above (x anterior, y left, z up), the tongue fitted.
         self.plotter.camera_position = [tuple(centre + np.array([0.55, -1.0, 0.55])), tuple(centre), (0, 0, 1)]
-        lo, hi = rest.min(axis=0), rest.max(axis=0)
-        self.plotter.renderer.ResetCamera(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2])  # the tongue alone
-        self.plotter.camera.zoom(1.4)
-        self.surface_mesh.point_data["colours"][:] = self._shaded(surface)
         self.midsagittal.set_bounds(rest[:, [0, 2]], margin=0.35)
         self._mid_y = float(np.median(rest[:, 1]))
         self._scene_sim = sim
         self._show_context(sim)
+        lo, hi = rest.min(axis=0), rest.max(axis=0)
+        if self.shown_palate is not None:  # and the palate over it: the contact is what a clinician looks at
+            over = np.asarray(self.shown_palate.points, dtype=np.float64)
+            over = over[np.all((over[:, :2] >= lo[:2]) & (over[:, :2] <= hi[:2]), axis=1)]
+            if len(over):
+                hi = hi.copy()
+                hi[2] = max(hi[2], float(over[:, 2].max()))
+        self.plotter.renderer.ResetCamera(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2])  # the tongue (and palate) alone
+        self.plotter.camera.zoom(1.4 if self.shown_palate is None else 1.2)
+        self.surface_mesh.point_data["colours"][:] = self._shaded(surface)
 
     def _show_context(self, sim) -> None:
         """Once the rest is taken: the palate as the simulator placed it (3D and the midsagittal section, traced
@@ -199,6 +205,7 @@ class LiveViews:
             return
         from tonguevis.render.drawing import generic_shown, palate_label, speaker_palate
         from tonguevis.render.midsagittal import palate_sections
+        from tonguevis.render.surface_geometry import hidden_side
 
         if sim.palate.metadata.get("generic"):
             shown = generic_shown(True, sim.model)
@@ -213,7 +220,9 @@ class LiveViews:
             faces = np.hstack([np.full((len(shown.faces), 1), 3), shown.faces]).ravel()
             # a copy: VTK would share the array, and each lift drawn would move the palate at rest with it
             self.palate_mesh = pv.PolyData(np.array(shown.points, dtype=np.float32), faces)
-            self.plotter.add_mesh(self.palate_mesh, color="#8fc1e3", opacity=0.3, name="palate", culling="back")
+            # an open sheet, seen from both sides (as the replay's scene draws it): culled, it vanished from above
+            self.plotter.add_mesh(self.palate_mesh, color="#8fc1e3", opacity=0.3, name="palate",
+                                  culling=hidden_side(self.palate_mesh.points, shown.faces))
             self._palate_faces = split_palate(shown)
             self.midsagittal.palate, self.midsagittal.palate_estimated = palate_sections(
                 shown, self._mid_y, faces=self._palate_faces)
