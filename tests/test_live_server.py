@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from tonguevis.io.recording import Recording
-from tonguevis.live.rtc3d import BIG, LITTLE, PacketReader, PacketType, decode_data, encode_command
+from tonguevis.live.rtc3d import BIG, LITTLE, LiveProtocolError, PacketReader, PacketType, decode_data, encode_command
 from tonguevis.live.server import Faults, ReplayServer
 from tonguevis.live.source import WaveFrontSource
 from tonguevis.paths import DEMO_RECORDING
@@ -39,6 +39,7 @@ class Client:
         self.sock = socket.create_connection(("127.0.0.1", port), timeout=2.0)
         self.reader = PacketReader(order, detect=False)
         self.pending: list = []
+        self.error = None  # a protocol error, raised once the packets before it are read
 
     def send(self, text: str) -> None:
         self.sock.sendall(encode_command(text, self.reader.byte_order))
@@ -46,11 +47,19 @@ class Client:
     def packet(self, timeout: float = 2.0):
         deadline = time.monotonic() + timeout
         while not self.pending:
+            if self.error is not None:
+                raise self.error
             self.sock.settimeout(max(deadline - time.monotonic(), 0.01))
             data = self.sock.recv(65536)
             if not data:
                 return None
-            self.pending += self.reader.feed(data)
+            # The packets before a bad header come first, its error after them: one recv can hold both (under
+            # load), and the reader, fed the chunk whole, raised for it all (the good packets lost: a flake).
+            try:
+                for start in range(0, len(data), 8):
+                    self.pending += self.reader.feed(data[start:start + 8])
+            except LiveProtocolError as exc:
+                self.error = exc
         return self.pending.pop(0)
 
     def frames(self, count: int, timeout: float = 5.0) -> list:
