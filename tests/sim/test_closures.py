@@ -127,3 +127,35 @@ def test_a_model_that_runs_away_at_the_closures_is_simulated_without_their_pulls
     assert c["closures_dropped"] and "closures" not in c
     assert "the closures not pressed" in contact_line(motion.metadata)
     assert len(motion.metadata["recovered_frames"]) < 0.05 * motion.n_frames
+
+
+def test_the_closures_are_said_where_the_tip_touches_not_where_the_tongue_touches_most(osn12_palate):
+    """At a /t/ the sides and back of the tongue touch the palate too, over a larger area: on the real /ta/ 009
+    "5 of 5 stop closures touch (back-left), the tip pressed on the palate there" was said while the tip was
+    short of it.  How often and where are now the pressed region's own contact at each closure."""
+    from tests.conftest import shared_file
+    from tonguevis.sim import simulate
+    from tonguevis.sim.contact import TOUCH, node_areas
+    from tonguevis.sim.palate_regions import palate_frame, place_of
+    from tonguevis.sim.plausibility import contact_line
+
+    recording = read_recording(shared_file("ema", "optispeech", "009_OSN12_Tah_withFb_natural_HR.tsv"))
+    motion = simulate(recording, palate=str(osn12_palate))
+    c = motion.metadata["contact"]
+    closures = c["closures"]
+    pressed = np.asarray(closures["nodes"])
+    areas = node_areas(motion.model.mesh.points, np.asarray(motion.model.surface_faces))
+    frame = palate_frame(motion.palate)
+    places, everywhere = [], []
+    for f in closures["maximum_constriction_frames"]:
+        points = motion.model.mesh.points + motion.displacement(f) + motion.jaw_offset[f]
+        gap = motion.palate_at(f).clearance(points)[0]
+        on = np.isfinite(gap[pressed]) & (gap[pressed] < TOUCH)
+        places.append(place_of(frame, points[pressed][on], areas[pressed][on]))
+        everywhere.append(bool(np.any(np.isfinite(gap) & (gap < TOUCH))))
+    named = [p for p in places if p]
+    assert c["closures_touching"] == len(named)
+    assert c["closures_where"] == (max(set(named), key=named.count) if named else "")
+    assert len(named) < sum(everywhere)  # the whole tongue touches at more closures than the tip does
+    line = contact_line(motion.metadata)
+    assert f"the tip touches at {len(named)} of {closures['closures']} stop closures" in line

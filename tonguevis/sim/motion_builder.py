@@ -75,32 +75,36 @@ class MotionBuilder:
 
     def _contact_places(self, q, contact_area, contact, warping) -> dict:
         """Where the tongue touches the palate (:func:`tonguevis.sim.palate_regions.place_of`): at the frame of the
-        largest contact area ("largest_contact_where") and at each closure's maximum constriction, the place
-        said most ("closures_where", with "closures_touching": how many closures touch at all)."""
+        largest contact area ("largest_contact_where") and, at each closure's maximum constriction, where the
+        region pressed for the closure (the tip and blade) touches: the place said most ("closures_where", with
+        "closures_touching": at how many closures that region touches).  Not the whole tongue's contact there:
+        at a /t/ the sides and back of the tongue touch too, over a larger area, and "the closures touch (back)"
+        said of a /t/ misled."""
         from tonguevis.sim.contact import TOUCH, node_areas
         from tonguevis.sim.palate_regions import palate_frame, place_of
 
         model, palate = self.model, contact["palate"]
         frame = palate_frame(palate)
         cand = np.asarray(contact["candidates"])
-        areas = node_areas(model.mesh.points, np.asarray(model.surface_faces))[cand]
+        all_areas = node_areas(model.mesh.points, np.asarray(model.surface_faces))
         lift = contact.get("lift")
 
-        def place(f: int) -> str:
-            u = model.displacements(q[f:f + 1], warping=warping, nodes=cand)[0]
-            points = model.mesh.points[cand] + u + contact["jaw_offset"][f, :3]
+        def place(f: int, nodes: np.ndarray) -> str:
+            u = model.displacements(q[f:f + 1], warping=warping, nodes=nodes)[0]
+            points = model.mesh.points[nodes] + u + contact["jaw_offset"][f, :3]
             at = palate.lifted(float(lift[f])) if lift is not None else palate
             gap = at.clearance(points)[0]
             touching = np.isfinite(gap) & (gap < TOUCH)
-            return place_of(frame, points[touching], areas[touching])
+            return place_of(frame, points[touching], all_areas[nodes][touching])
 
         out: dict = {}
         if len(contact_area) and np.max(contact_area) > 0:
-            out["largest_contact_where"] = place(int(np.argmax(contact_area)))
+            out["largest_contact_where"] = place(int(np.argmax(contact_area)), cand)
         closures = contact.get("closures") or {}
         frames = [f for f in closures.get("maximum_constriction_frames", []) if f < len(q)]
-        if frames:
-            places = [place(f) for f in frames]
+        pressed = np.asarray(closures.get("nodes", []), dtype=np.int64)
+        if frames and len(pressed):
+            places = [place(f, pressed) for f in frames]
             named = [p for p in places if p]
             out["closures_touching"] = len(named)
             out["closures_where"] = max(set(named), key=named.count) if named else ""

@@ -107,9 +107,9 @@ def contact_line(metadata: dict) -> str:
     if closures:
         where = c.get("closures_where")
         touching = c.get("closures_touching", 0)
-        text += (f"; {touching} of {closures['closures']} stop closures touch"
-                 + (f" ({where}), the tip pressed on the palate there" if touching else
-                    ": the tip pulled towards the palate there, short of it"))
+        text += (f"; the tip touches at {touching} of {closures['closures']} stop closures"
+                 + (f" ({where}), pressed on the palate there" if touching else
+                    ": pulled towards the palate there, short of it"))
     if c.get("closures_dropped"):
         text += f"; the closures not pressed ({c['closures_dropped']}): the sensors and the contact alone"
     registered = (c.get("palate") or {}).get("head_registration")
