@@ -44,7 +44,7 @@ def _endless(progress):
 def test_a_partial_result_comes_to_the_gui_thread_and_gives_the_window_back(qtbot, parent):
     """A job handing over a first result: on_partial gets it on the GUI thread, the modal dialog closes
     and the rest of the progress goes to the status line; then the whole result as usual."""
-    from tonguevis.gui.worker import Job, run_job
+    from tonguevis.gui.worker import Job, JobReactions, run_job
 
     release = threading.Event()
     partials, done, statuses = [], [], []
@@ -60,7 +60,7 @@ def test_a_partial_result_comes_to_the_gui_thread_and_gives_the_window_back(qtbo
     def on_partial(result):
         partials.append((result, threading.current_thread() is threading.main_thread(), job.dialog.isVisible()))
 
-    job = run_job(parent, "Long", work, done.append, status=statuses.append, on_partial=on_partial,
+    job = run_job(parent, "Long", work, done.append, JobReactions(status=statuses.append, on_partial=on_partial),
                   min_duration_ms=0)
     qtbot.waitUntil(lambda: bool(partials), timeout=10000)
     assert partials == [("first seconds", True, True)]  # the dialog was up until the first result
@@ -71,10 +71,10 @@ def test_a_partial_result_comes_to_the_gui_thread_and_gives_the_window_back(qtbo
 
 
 def test_cancel_stops_the_job_and_nothing_is_handed_back(qtbot, parent):
-    from tonguevis.gui.worker import run_job
+    from tonguevis.gui.worker import JobReactions, run_job
 
     done, statuses, ended = [], [], []
-    job = run_job(parent, "Endless", _endless, done.append, status=statuses.append, on_ended=ended.append,
+    job = run_job(parent, "Endless", _endless, done.append, JobReactions(status=statuses.append, on_ended=ended.append),
                   min_duration_ms=0)
     qtbot.waitUntil(lambda: job.dialog.value() > 0, timeout=10000)  # the dialog shows progress
     assert job.dialog.isVisible()
@@ -92,7 +92,7 @@ def test_cancel_stops_the_job_and_nothing_is_handed_back(qtbot, parent):
 def test_a_failure_becomes_a_dialog_naming_the_task_and_the_file(qtbot, parent, tmp_path):
     from PySide6.QtWidgets import QMessageBox
 
-    from tonguevis.gui.worker import run_job
+    from tonguevis.gui.worker import JobReactions, run_job
 
     def broken(progress):
         progress(1, 2, "half way")
@@ -100,7 +100,8 @@ def test_a_failure_becomes_a_dialog_naming_the_task_and_the_file(qtbot, parent, 
 
     failed = []
     job = run_job(parent, "Reading", broken, lambda _r: pytest.fail("a failed job has no result"),
-                  path=tmp_path / "x.tsv", explain=lambda m: m + "\n(try another file)", on_failed=failed.append)
+                  JobReactions(path=tmp_path / "x.tsv", explain=lambda m: m + "\n(try another file)",
+                               on_failed=failed.append))
     with qtbot.waitSignal(job.ended, timeout=10000) as blocker:
         pass
     assert blocker.args == ["failed"] and failed == ["the file has no samples"]

@@ -80,7 +80,7 @@ class SimulationController(QObject):
 
     def simulate(self, role: str = "primary", changes: dict | None = None) -> None:
         """Simulate the session of ``role`` in a job (the previous job of that role is stopped first)."""
-        from tonguevis.gui.worker import run_job
+        from tonguevis.gui.worker import JobReactions, run_job
         from tonguevis.workflows.simulation import simulate_motion
 
         session = self.state.session_of(role)
@@ -112,11 +112,12 @@ class SimulationController(QObject):
         self.state.set_status(f"simulating {session.name}{which} with {settings.modes} modes{against}…", self)
         self.jobs[role] = run_job(window, "Simulation" if role == "primary" else "Simulation of the compared recording",
                                   work, lambda result: self._simulated(role, session, result, settings, changes),
-                                  label=f"Simulating {session.name}{which}…", path=session.path, explain=explain,
-                                  on_failed=lambda _message: finished.emit(False),
-                                  on_cancelled=lambda: finished.emit(False),
-                                  status=lambda text: self.state.set_status(text, self),
-                                  on_partial=lambda result: self._preview(session, result))
+                                  JobReactions(on_failed=lambda _message: finished.emit(False),
+                                               on_cancelled=lambda: finished.emit(False),
+                                               on_partial=lambda result: self._preview(session, result),
+                                               status=lambda text: self.state.set_status(text, self),
+                                               explain=explain, path=session.path),
+                                  label=f"Simulating {session.name}{which}…")
 
     def _preview(self, session, result) -> None:
         """A long recording's first seconds, simulated (on the GUI thread): shown while the rest simulates

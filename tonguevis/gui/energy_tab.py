@@ -220,7 +220,7 @@ class EnergyTab(QtWidgets.QWidget):
         from tonguevis.analysis.corpus import load_corpus
         from tonguevis.workflows.corpus import corpus_energy_curves
         from tonguevis.errors import TonguevisError
-        from tonguevis.gui.worker import run_job
+        from tonguevis.gui.worker import JobReactions, run_job
 
         if self.job is not None and self.job.isRunning():
             return
@@ -245,9 +245,10 @@ class EnergyTab(QtWidgets.QWidget):
         self.add_button.setEnabled(False)
         self.progress.setVisible(True)
         self.cancel_button.setVisible(True)
-        self.job = run_job(self, "Add recordings", work, lambda done: self._on_loaded(*done, mesh_path), dialog=False,
-                           on_failed=lambda message: self._finish(f"Cannot add: {message}"),
-                           on_cancelled=lambda: self._finish("Adding recordings cancelled."))
+        self.job = run_job(self, "Add recordings", work, lambda done: self._on_loaded(*done, mesh_path),
+                           JobReactions(on_failed=lambda message: self._finish(f"Cannot add: {message}"),
+                                        on_cancelled=lambda: self._finish("Adding recordings cancelled.")),
+                           dialog=False)
         self.job.progressed.connect(self._on_progress)
 
     def cancel(self) -> None:

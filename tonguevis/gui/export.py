@@ -85,15 +85,16 @@ def run_with_progress(window, title: str, function, done_message: str, path, on_
     """Run ``function(progress=...)`` through the job runner (progress dialog, Cancel, errors as a
     dialog naming ``path``); ``done_message`` goes to the status line and ``on_success(result)`` is
     called on the GUI thread when it finished.  Returns the :class:`~tonguevis.gui.worker.Job`."""
-    from tonguevis.gui.worker import run_job
+    from tonguevis.gui.worker import JobReactions, run_job
 
     def done(result) -> None:
         window.state.set_status(done_message, window)
         if on_success is not None:
             on_success(result)
 
-    return run_job(window, title, function, done, path=path, min_duration_ms=200,
-                   status=lambda text: window.state.set_status(text, window))
+    return run_job(window, title, function, done,
+                   JobReactions(path=path, status=lambda text: window.state.set_status(text, window)),
+                   min_duration_ms=200)
 
 
 def ask_video(window):

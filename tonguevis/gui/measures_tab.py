@@ -163,7 +163,7 @@ class MeasuresTab(QtWidgets.QWidget):
                                 else "no productions in this recording")
             self.measured.emit(None)
             return
-        from tonguevis.gui.worker import run_job
+        from tonguevis.gui.worker import JobReactions, run_job
         from tonguevis.workflows.measures import measure_table, measurement_palate
 
         recording, spec, rest = session.recording, self.palate_box.currentData(), getattr(session, "given_rest", None)
@@ -176,8 +176,8 @@ class MeasuresTab(QtWidgets.QWidget):
 
         self.status.setText("measuring…")
         self.worker = run_job(self, "Measures", work, lambda result: self._on_measured(result, key),
-                              label="Measuring the productions…", min_duration_ms=500,
-                              on_failed=lambda message: self._on_failed(message, key))
+                              JobReactions(on_failed=lambda message: self._on_failed(message, key)),
+                              label="Measuring the productions…", min_duration_ms=500)
 
     def _on_measured(self, result, key) -> None:
         if key != self._key:  # another recording, productions or palate since

@@ -292,7 +292,7 @@ class SegmentationTab(QtWidgets.QWidget):
         return function
 
     def run(self) -> None:
-        from tonguevis.gui.worker import run_job
+        from tonguevis.gui.worker import JobReactions, run_job
 
         if self.worker is not None and self.worker.isRunning():
             return
@@ -304,9 +304,10 @@ class SegmentationTab(QtWidgets.QWidget):
             return
         self.run_button.setEnabled(False)
         self.status.setText("segmenting…")
-        self.worker = run_job(self, "Segmentation", function, self._on_done, label="Segmenting…",
-                              on_failed=lambda _message: self.run_button.setEnabled(True),
-                              on_cancelled=self._on_cancelled, on_ended=self.finished.emit)
+        self.worker = run_job(self, "Segmentation", function, self._on_done,
+                              JobReactions(on_failed=lambda _message: self.run_button.setEnabled(True),
+                                           on_cancelled=self._on_cancelled, on_ended=self.finished.emit),
+                              label="Segmenting…")
 
     def cancel(self) -> None:
         if self.worker is not None:

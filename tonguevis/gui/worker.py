@@ -15,6 +15,8 @@ error dialog titled "<title> failed" (the parent's ``show_error`` when it has on
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import time
 import traceback
 from typing import Any, Callable
@@ -118,26 +120,45 @@ def show_job_error(parent, title: str, message: str, path=None):
     return error_box(parent, title, message, path)
 
 
-def run_job(parent, title: str, function: Callable[..., Any], on_done: Callable[[Any], None] | None = None, *,
-            label: str | None = None, path=None, explain: Callable[[str], str] | None = None,
-            on_failed: Callable[[str], None] | None = None, on_cancelled: Callable[[], None] | None = None,
-            on_ended: Callable[[str], None] | None = None, status: Callable[[str], None] | None = None,
-            dialog: bool = True, min_duration_ms: int = 300,
-            on_partial: Callable[[Any], None] | None = None) -> Job:
+@dataclass(frozen=True)
+class JobReactions:
+    """What else a job does besides giving its result (:func:`run_job`), all optional.
+
+    on_failed(message), on_cancelled(), on_ended(outcome) : more reactions (after the error dialog).
+    on_partial(result) : a first, incomplete result, on the GUI thread (``function`` is then called with
+        ``partial=`` too, see :class:`Job`); once it is in, the window is usable again: the modal
+        dialog closes and the progress goes on in ``status`` ("<title>: <message> (n %)").
+    status(text) : where "<title>: cancelled" goes (e.g. the app model's status line).
+    explain(message) -> message : more words for the error dialog (what to try instead).
+    path : the file the error dialog names.
+    """
+
+    on_failed: Callable[[str], None] | None = None
+    on_cancelled: Callable[[], None] | None = None
+    on_ended: Callable[[str], None] | None = None
+    on_partial: Callable[[Any], None] | None = None
+    status: Callable[[str], None] | None = None
+    explain: Callable[[str], str] | None = None
+    path: Any = None
+
+
+def run_job(parent, title: str, function: Callable[..., Any], on_done: Callable[[Any], None] | None = None,
+            reactions: JobReactions | None = None, *, label: str | None = None, dialog: bool = True,
+            min_duration_ms: int = 300) -> Job:
     """Run ``function(progress=...)`` in a :class:`Job` behind a window-modal progress dialog with Cancel.
 
     parent : the widget the dialog and the error dialog belong to (owns the job).
     title : names the task: "<title>…" in the dialog, "<title> failed" on the error dialog.
     on_done(result) : on the GUI thread once it succeeded; the only place its result is used.
-    label : the progress dialog's first text (default "<title>…"); path : the file an error names.
-    explain(message) -> message : more words for the error dialog (what to try instead).
-    on_failed(message), on_cancelled(), on_ended(outcome) : more reactions (after the dialog).
-    status(text) : where "<title>: cancelled" goes (e.g. the app model's status line).
-    dialog : False for no progress dialog (the caller shows progress from ``job.progressed``).
-    on_partial(result) : a first, incomplete result, on the GUI thread (``function`` is then called with
-        ``partial=`` too, see :class:`Job`); once it is in, the window is usable again: the modal
-        dialog closes and the progress goes on in ``status`` ("<title>: <message> (n %)").
+    reactions : :class:`JobReactions`, what else happens (failed, cancelled, ended, a partial result, the
+        status line, the error dialog's words and file).
+    label : the progress dialog's first text (default "<title>…").
+    dialog : False for no progress dialog (the caller shows progress from ``job.progressed``);
+    min_duration_ms : how long a job runs before its dialog shows.
     """
+    r = reactions if reactions is not None else JobReactions()
+    on_failed, on_cancelled, on_ended, on_partial = r.on_failed, r.on_cancelled, r.on_ended, r.on_partial
+    status, explain, path = r.status, r.explain, r.path
     job = Job(function, parent, title, partial=on_partial is not None)
     if dialog:
         from PySide6.QtCore import Qt
