@@ -236,11 +236,12 @@ class LiveViews:
             return
         from tonguevis.render.midsagittal import palate_sections
 
-        shown.lift[0] = lift
-        self.palate_mesh.points[:] = shown.points_at(0)
+        shown.lift[0] = lift  # its one frame: now
+        drawn = shown.points_at(0)
+        self.palate_mesh.points[:] = drawn
         self.palate_mesh.Modified()
         self.midsagittal.palate, self.midsagittal.palate_estimated = palate_sections(
-            shown, self._mid_y, 0, faces=self._palate_faces)
+            shown, self._mid_y, faces=self._palate_faces, drawn=drawn)
         self._lift_drawn = lift
 
     def _shaded(self, surface: np.ndarray) -> np.ndarray:

@@ -69,13 +69,15 @@ def split_palate(palate) -> tuple[np.ndarray, np.ndarray]:
     return faces[mine], faces[~mine]
 
 
-def palate_sections(palate, y: float, index: int | None = None, faces=None) -> tuple[np.ndarray, np.ndarray]:
+def palate_sections(palate, y: float, index: int | None = None, faces=None, drawn=None) -> tuple[np.ndarray, np.ndarray]:
     """(traced, estimated) (k, 2, 2) segments (x, z) where the plane ``y`` cuts the drawn palate at frame ``index``
-    (its velum lifted then; None: at rest); ``faces``: :func:`split_palate`'s, when already computed."""
+    (its velum lifted then; None: at rest); ``faces``: :func:`split_palate`'s, when already computed; ``drawn``:
+    the palate's points at that frame, when already computed (:meth:`ShownPalate.points_at`)."""
     from tonguevis.analysis.section import plane_section
 
     traced, estimated = faces if faces is not None else split_palate(palate)
-    drawn = palate.points if index is None else palate.points_at(index)
+    if drawn is None:
+        drawn = palate.points if index is None else palate.points_at(index)
     return plane_section(drawn, traced, y), plane_section(drawn, estimated, y)
 
 
