@@ -134,6 +134,30 @@ def test_press_the_closures_follows_the_settings_and_resimulates(qtbot, window, 
     assert window.closures_action.isChecked()
 
 
+def test_the_humps_follow_the_settings_and_resimulate(qtbot, window):
+    """Simulation ▸ Move the tissue around each sensor as a hump (issue 36): it shows the run settings' humps,
+    unticking it re-simulates with the local shapes alone (no hump columns in the motion), a script's change
+    ticks it back, and without sensor patches it is greyed out."""
+    from tests.gui.conftest import demo_session, show_and_simulate
+
+    window.state.set_run_settings(window.state.run_settings.replace(frame="model", humps=True))
+    assert window.humps_action.isChecked() and window.state.run_settings.humps
+    show_and_simulate(qtbot, window, demo_session(3.5, 6.8))
+    first = window.session.motion
+    assert first.metadata["sensor_patches"]["hump_mm"] is not None
+    with qtbot.waitSignal(window.simulation_finished, timeout=120000) as blocker:
+        window.humps_action.trigger()
+    assert blocker.args == [True] and not window.state.run_settings.humps and window.session.motion is not first
+    assert not window.humps_action.isChecked() and window.session.motion.metadata["sensor_patches"]["hump_mm"] is None
+    assert window.session.motion.q.shape[1] < first.q.shape[1]
+    with qtbot.waitSignal(window.simulation_finished, timeout=120000):
+        window.state.change_run_settings(None, humps=True)
+    assert window.humps_action.isChecked()
+    with qtbot.waitSignal(window.simulation_finished, timeout=120000):
+        window.state.change_run_settings(None, sensor_patches=None)
+    assert not window.humps_action.isEnabled()
+
+
 def test_the_methods_are_said_in_a_users_words_with_their_speed(window):
     """Issue 37: the menu said "seed 001" (the project's name for a paper) and, like `--method`'s help,
     "tens of frames per second" for a method that runs a few hundred (scripts/bench_domains.py: 300-500

@@ -365,13 +365,21 @@ def test_fitting_a_palate_to_a_recording_without_a_probe_is_a_dialog(qtbot, wind
     window.last_dialog.close()
 
 
+def _patch_shapes(motion) -> int:
+    """Three local shapes per sensor, and each humped sensor's hump (3 translations, 3 x HUMP_TILTS leans)."""
+    from tonguevis.sim.patches import HUMP_TILTS, humped_sensors
+
+    humped = humped_sensors(motion.sensor_names) if motion.metadata["sensor_patches"].get("hump_mm") else []
+    return 3 * len(motion.sensor_nodes) + 3 * (1 + HUMP_TILTS) * len(humped)
+
+
 def test_sensors_on_the_surface_from_the_simulation_menu(qtbot, window):
     """Sensors on the surface is the default (the menu item ticked, every measured sensor on its node);
     unticking Simulation ▸ Sensors on the surface simulates again with the modes alone, ticking it
     puts the patches back."""
     session = show_and_simulate(qtbot, window, demo_session())
     assert window.patches_action.isChecked() and window.sensor_patches == "default"
-    assert session.motion.metadata["sensor_patches"]["shapes"] == 3 * len(session.motion.sensor_nodes)
+    assert session.motion.metadata["sensor_patches"]["shapes"] == _patch_shapes(session.motion)
     assert np.nanmax(session.motion.sensor_residual) < 1e-9
     with qtbot.waitSignal(window.simulation_finished, timeout=60000) as blocker:
         window.patches_action.trigger()
@@ -381,7 +389,7 @@ def test_sensors_on_the_surface_from_the_simulation_menu(qtbot, window):
     with qtbot.waitSignal(window.simulation_finished, timeout=60000):
         window.patches_action.trigger()
     motion = window.session.motion
-    assert motion.metadata["sensor_patches"]["shapes"] == 3 * len(motion.sensor_nodes)
+    assert motion.metadata["sensor_patches"]["shapes"] == _patch_shapes(motion)
     assert np.nanmax(motion.sensor_residual) < 1e-9
 
 

@@ -21,10 +21,18 @@ def test_simulate_prints_the_figures_and_writes_motion_and_vtk(tmp_path, capsys)
     residual_mm = float(out.split("max sensor residual: ")[1].split(" mm")[0])
     assert residual_mm < 0.01
     motion = Motion.load(tmp_path / "motion.npz")
-    # 100 modes, then the sensor patches' shapes (three per sensor: the sensors on the surface by default)
+    # 100 modes, then the sensor patches' shapes (three local ones per sensor: the sensors on the surface by
+    # default, then each sensor's hump but the tip's: three translations and three times six leans)
+    from tonguevis.sim.patches import HUMP_TILTS, humped_sensors
+
     patches = motion.metadata["sensor_patches"]
     assert patches["global_modes"] == 100 and motion.q.shape[1] == 100 + patches["shapes"]
-    assert patches["shapes"] == 3 * len(motion.sensor_nodes) and np.isfinite(motion.q).all()
+    from tonguevis.sim.settings import RunSettings
+
+    humped = len(humped_sensors(motion.sensor_names)) if RunSettings().humps else 0
+    assert patches["shapes"] == 3 * len(motion.sensor_nodes) + 3 * (1 + HUMP_TILTS) * humped
+    assert (patches["hump_mm"] is not None) == RunSettings().humps
+    assert np.isfinite(motion.q).all()
     assert (tmp_path / "vtk" / "motion.pvd").exists()
 
 

@@ -7,23 +7,13 @@ import pytest
 
 from tonguevis.io import read_recording
 from tonguevis.paths import DATA_DIR
-from tonguevis.sim import Motion, TongueModel, simulate
+from tonguevis.sim import Motion, simulate
 from tonguevis.sim.patches import PATCH_REACH, augmented_basis, augmented_model, close_sensor_gaps, global_part
 
 
 @pytest.fixture(scope="module")
-def model():
-    return TongueModel.default()
-
-
-@pytest.fixture(scope="module")
-def demo():
-    return read_recording(DATA_DIR / "spk1_ka.tsv", sensor_map=DATA_DIR / "sensor_map.json")
-
-
-@pytest.fixture(scope="module")
 def patched(model, demo):
-    return simulate(demo, model, modes=40, sensor_patches="default")
+    return simulate(demo, model, modes=40, sensor_patches="default", humps=False)  # the local shapes alone
 
 
 def test_every_measured_sensor_is_on_its_node(model, demo, patched):
@@ -106,13 +96,41 @@ def test_a_bad_radius_is_refused(model, demo):
         simulate(demo, model, modes=10, sensor_patches=-1.0)
 
 
+def test_held_out_sensors_beyond_the_humps_are_predicted_as_without_them(model, demo):
+    """With the humps (the default) the drivers' shapes reach HUMP_REACH: a held-out node farther than that
+    from every humped driver and PATCH_REACH from every driver moves as with the modes alone, and one nearer
+    moves otherwise."""
+    from tonguevis.analysis.validation import validate
+    from tonguevis.sim.patches import HUMP_REACH, humped_sensors
+
+    plain = validate(demo, model, modes=40, quasi_static=False, sensor_patches=None)
+    humped = validate(demo, model, modes=40, quasi_static=False, sensor_patches="default", humps=True)
+    points = model.mesh.points
+    nodes = {name: item.node for name, item in plain.held_out.items()}
+    names = list(nodes)
+    far = near = 0
+    for name, item in humped.held_out.items():
+        drivers = [n for n in names if n != name]
+        with_hump = [nodes[drivers[k]] for k in humped_sensors(drivers)]
+        d_all = np.linalg.norm(points[[nodes[n] for n in drivers]] - points[item.node], axis=1).min()
+        d_hump = np.linalg.norm(points[with_hump] - points[item.node], axis=1).min() if with_hump else np.inf
+        same = np.allclose(item.predicted["model"], plain.held_out[name].predicted["model"], atol=1e-12)
+        if d_all > PATCH_REACH and d_hump > HUMP_REACH:
+            assert same
+            far += 1
+        elif d_hump < HUMP_REACH - 1e-3:
+            assert not same
+            near += 1
+    assert near >= 1
+
+
 def test_held_out_sensors_beyond_the_patches_are_predicted_as_without_them(model, demo):
     """Leave-one-sensor-out: the drivers' patches close the drivers' gaps and reach no further
     than PATCH_REACH, so a held-out node farther from every driver moves as with the modes alone."""
     from tonguevis.analysis.validation import validate
 
-    plain = validate(demo, model, modes=40, quasi_static=False)
-    patched = validate(demo, model, modes=40, quasi_static=False, sensor_patches="default")
+    plain = validate(demo, model, modes=40, quasi_static=False, sensor_patches=None)
+    patched = validate(demo, model, modes=40, quasi_static=False, sensor_patches="default", humps=False)
     points = model.mesh.points
     nodes = {name: item.node for name, item in plain.held_out.items()}
     checked = 0

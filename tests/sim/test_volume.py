@@ -7,22 +7,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from tonguevis.io import read_recording
 from tonguevis.mesh.structured import box_mesh
-from tonguevis.paths import DATA_DIR
-from tonguevis.sim import Motion, TongueModel, simulate
+from tonguevis.sim import Motion, simulate
 from tonguevis.sim.volume import (GOAL, full_space_correction, held_nodes, keep_volume, tet_volumes,
                                   volume_gradients, volume_subspace)
-
-
-@pytest.fixture(scope="module")
-def model():
-    return TongueModel.default()
-
-
-@pytest.fixture(scope="module")
-def demo():
-    return read_recording(DATA_DIR / "spk1_ka.tsv", sensor_map=DATA_DIR / "sensor_map.json")
 
 
 @pytest.fixture(scope="module")

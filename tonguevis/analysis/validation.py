@@ -125,6 +125,7 @@ def validate(
     from tonguevis.preprocess.targets import TONGUE_SENSORS, working_tongue_sensors
     from tonguevis.sim.placement import targets_in_frame
     from tonguevis.sim.settings import RunSettings, build_model, run_settings
+    from tonguevis.sim.patches import humped_sensors
     from tonguevis.sim.simulate import TOUCH_REACH, contact_context, drive_schedule, held_to_palate, simulate
 
     file = recording.metadata.get("file")
@@ -198,8 +199,10 @@ def validate(
 
                 q, _ = keep_below_palate(q, contact, schedules[h][2], basis, phi_s, base_compliance)
             if sensor_patches is not None:  # the drivers' patches close their gaps; the held-out one has none
+                drivers = [name for k, name in enumerate(prep.names) if k != h]
                 run_basis, run_w, q = _patched(model, basis, np.delete(nodes, h), q,
-                                               np.delete(prep.displacement, h, axis=1), warping, sensor_patches)
+                                               np.delete(prep.displacement, h, axis=1), warping, sensor_patches,
+                                               humped_sensors(drivers) if settings.humps else None)
             out.append((_node_trajectory(run_basis, run_w, int(nodes[h]), q, warping), np.asarray(conv, bool)))
             if keep_volume:  # the same run projected, the drivers' nodes held, h's free
                 from tonguevis.sim.volume import held_nodes, volume_subspace
@@ -301,12 +304,15 @@ def _drive_trials(basis, phi_s, w_s, trials, compliance, warping, dt, material, 
     return [(r.q, r.converged) for r in results]
 
 
-def _patched(model, basis, drivers: np.ndarray, q: np.ndarray, measured: np.ndarray, warping: bool, radius: float):
+def _patched(model, basis, drivers: np.ndarray, q: np.ndarray, measured: np.ndarray, warping: bool, radius: float,
+             humped: list[int] | None = None):
     """(augmented basis, its W, q with the patch coordinates) of one run: the driving sensors'
-    patches (:mod:`tonguevis.sim.patches`) closing the gaps to their measurements (F, S', 3)."""
+    patches (:mod:`tonguevis.sim.patches`) closing the gaps to their measurements (F, S', 3); ``humped``: the
+    drivers with a hump (indices; None: no humps)."""
     from tonguevis.sim.patches import augmented_basis, augmented_model, close_sensor_gaps
 
-    augmented = augmented_basis(model, basis, drivers, radius)
+    augmented = augmented_basis(model, basis, drivers, radius, hump=None if humped is None else "scaled",
+                                humped=humped)
     rotation = augmented_model(model, augmented).rotation_matrix(augmented)
     patch = close_sensor_gaps(augmented, rotation, drivers, q, measured, warping)
     return augmented, rotation, np.hstack([q, patch])

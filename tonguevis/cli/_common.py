@@ -152,6 +152,11 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, every: bool = False, m
     group.add_argument("--no-sensor-patches", dest="sensor_patches", action="store_const", const=None,
                        help="no patches: the sensor nodes only pulled by springs towards the sensors (the "
                             "sensors may float millimetres off the surface)")
+    group.add_argument("--humps", action=argparse.BooleanOptionalAction, default=defaults.humps,
+                       help="with the sensor patches, each sensor but the tip also lifts the tissue around it as a "
+                            "hump (flattened against the palate when there is one), so a dorsum at /k/ rises as a "
+                            "whole, not in a cone under its coil; --no-humps: the patches' local shapes alone "
+                            f"(default: {'humps' if defaults.humps else 'no humps'})")
     group.add_argument("--fit-rest", dest="rest_fit", action="store_true",
                        help="bend the tongue so every sensor node sits on its rest sensor before simulating "
                             "(the tongue's own static response, jaw and hyoid held; its modes solved anew, "
@@ -275,7 +280,7 @@ def run_settings_of(args, **changes):
         mesh=args.mesh, mesh_axes=args.mesh_axes, modes=args.modes, method=method, landmarks=args.landmarks,
         sensor_stiffness=args.sensor_stiffness, sensor_patches=args.sensor_patches, rest=rest_arg(args),
         palate=palate, frame=args.model_frame, tongue_size=args.tongue_size, keep_volume=args.keep_volume,
-        rest_fit=args.rest_fit, closures=args.closures).replace(**changes)
+        rest_fit=args.rest_fit, closures=args.closures, humps=args.humps).replace(**changes)
 
 
 def load_model_args(args):

@@ -82,6 +82,12 @@ class MenusMixin:
                                         "sensor is pressed onto the palate (off: tonguevis simulate --no-closures)")
         self.closures_action.triggered.connect(self.set_closures)
         simulation.addAction(self.closures_action)
+        self.humps_action = QAction("Move the tissue around each sensor as a &hump", self)
+        self.humps_action.setCheckable(True)
+        self.humps_action.setToolTip("the tongue around each coil but the tip's rises with it, flattened against the "
+                                     "palate (off: a peak under each coil; tonguevis simulate --no-humps)")
+        self.humps_action.triggered.connect(self.set_humps)
+        simulation.addAction(self.humps_action)
         self.method_actions = self._choice_menu(simulation, "&Method", (
             ("warped", "&Modal warping (the paper)", "linear FEM modes made nonlinear by modal warping (Yang 2013)"),
             ("linear", "&Linear modes", "the linear modal model, no warping"),
@@ -132,6 +138,8 @@ class MenusMixin:
         settings = self.state.run_settings
         self.patches_action.setChecked(settings.sensor_patches is not None)
         self.closures_action.setChecked(bool(settings.closures))
+        self.humps_action.setChecked(bool(settings.humps))
+        self.humps_action.setEnabled(settings.sensor_patches is not None)
         self.rest_fit_action.setChecked(bool(settings.rest_fit))
         self.method_actions[settings.method].setChecked(True)
         key = self._tongue_size()
@@ -157,6 +165,10 @@ class MenusMixin:
     def set_closures(self, on: bool) -> None:
         """Press (or not) the tongue onto the palate at the closures from now on."""
         self.state.change_run_settings(self, closures=bool(on))
+
+    def set_humps(self, on: bool) -> None:
+        """Simulate with (or without) the sensors' humps from now on."""
+        self.state.change_run_settings(self, humps=bool(on))
 
     def set_sensor_patches(self, on: bool) -> None:
         """Simulate with (or without) the sensor patches from now on."""

@@ -287,12 +287,13 @@ class LiveSimulator:
         # modes leave, frame by frame as simulate() does after the dynamics (tonguevis.sim.patches).
         self._patches = None
         if s.sensor_patches is not None:
-            from tonguevis.sim.patches import PATCH_RADIUS, PATCH_REACH, augmented_basis
+            from tonguevis.sim.patches import PATCH_RADIUS, PATCH_REACH, augmented_basis, humped_sensors
 
             radius = s.sensor_patches
             if radius == "default":
                 radius = PATCH_RADIUS * (1.0 / fit["scale"] if s.frame == "speaker" else 1.0)
-            basis = augmented_basis(model, basis, prep.nodes, radius, radius * PATCH_REACH / PATCH_RADIUS)
+            basis = augmented_basis(model, basis, prep.nodes, radius, radius * PATCH_REACH / PATCH_RADIUS,
+                                    "scaled" if s.humps else None, humped_sensors(prep.names))
             w_full = np.array(model.curl_operator @ basis.phi)
             w_full[:, self.eigenvalues.size:] = 0.0  # the patch shapes ride on the modes' rotation, unwarped
             self._patches = (basis, w_full)

@@ -41,10 +41,11 @@ class MotionBuilder:
     def prepare_patches(self, radius: float, reach: float) -> None:
         """Use the sensor patches (:mod:`tonguevis.sim.patches`) of ``radius`` fading out by ``reach`` (m): the
         run's model, basis and sensor rows become the augmented ones (the frame loop keeps the modes alone)."""
-        from tonguevis.sim.patches import augmented_basis, augmented_model
+        from tonguevis.sim.patches import augmented_basis, augmented_model, humped_sensors
 
         self.global_rows = (self.basis, self.phi_s)  # what the frame loop (and a recovery) solves with
-        basis = augmented_basis(self.model, self.basis, self.prep.nodes, radius, reach)
+        basis = augmented_basis(self.model, self.basis, self.prep.nodes, radius, reach,
+                                "scaled" if self.settings.humps else None, humped_sensors(self.prep.names))
         self.model = augmented_model(self.model, basis)
         self.rotation = self.model.rotation_matrix(basis)
         dofs = (3 * np.asarray(self.prep.nodes)[:, None] + np.arange(3)).ravel()
@@ -52,16 +53,18 @@ class MotionBuilder:
         self.basis, self.phi_s, self.w_s = basis, basis.phi[dofs].reshape(s, 3, -1), self.rotation[dofs].reshape(s, 3, -1)
         self.patches = {"radius_mm": 1e3 * radius, "reach_mm": 1e3 * basis.info["patch_reach_m"],
                         "shapes": int(basis.n_modes - basis.info["global_modes"]),
-                        "nodes": basis.info["patch_nodes"], "global_modes": int(basis.info["global_modes"])}
+                        "nodes": basis.info["patch_nodes"], "global_modes": int(basis.info["global_modes"]),
+                        "hump_mm": None if basis.info["hump_m"] is None else [1e3 * v for v in basis.info["hump_m"]],
+                        "humped": basis.info["humped"]}
 
-    def patch_coordinates(self, q: np.ndarray, start: int, end: int) -> np.ndarray:
+    def patch_coordinates(self, q: np.ndarray, start: int, end: int, local_only: bool = False) -> np.ndarray:
         """(end - start, p) patch coordinates closing the sensors' gaps in frames start..end-1 whose
-        modal coordinates (from the frame loop) are ``q`` (end - start, m)."""
+        modal coordinates (from the frame loop) are ``q`` (end - start, m); ``local_only``: the humps at rest."""
         from tonguevis.sim.patches import close_sensor_gaps
 
         frames = slice(start, end)
         return close_sensor_gaps(self.basis, self.rotation, self.prep.nodes, q, self._patch_targets(frames),
-                                 self.warping, weight=self.schedule["weight"][frames])
+                                 self.warping, weight=self.schedule["weight"][frames], local_only=local_only)
 
     def _patch_targets(self, frames) -> np.ndarray:
         """(F, S, 3) m for ``frames`` (a slice or indices): where the patches put the sensor nodes: the sensors

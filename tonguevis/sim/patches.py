@@ -37,6 +37,16 @@ PATCH_RADIUS = 3e-3
 PATCH_REACH = 5e-3
 #: Patch shapes nearly dependent on the modes or on each other (overlapping patches) are dropped.
 DEPENDENCE = 1e-9
+#: m (at PATCH_RADIUS; scaled with it): each sensor's hump, the broad part of its patch: the tissue within
+#: HUMP_FLAT of the sensor node moves with it, fading out (a cosine) by HUMP_REACH.  A constricting dorsum
+#: moves as a whole: measured on the shared /ka/ 006 and 007 with the speaker's palate, the local shapes alone
+#: moved the TD node 1.5-2.3 times as far as the dorsum within 10 mm of it (a cone); with the humps 1.1.
+HUMP_FLAT, HUMP_REACH = 6e-3, 15e-3
+#: How much dearer the local shapes are than the humps (per metre moved at their own node, squared): the gaps
+#: are closed by the humps, the local shapes take what the humps cannot (e.g. where the palate stops a hump).
+LOCAL_COST = 100.0
+#: Each hump may lean along the three axes (its tilts), at this cost per metre of lean at HUMP_FLAT.
+HUMP_TILTS, TILT_COST = 6, 1.0
 
 
 def patch_loads(points: np.ndarray, surface: np.ndarray, nodes: np.ndarray, radius: float) -> np.ndarray:
@@ -64,14 +74,17 @@ def window(points: np.ndarray, centre: np.ndarray, radius: float, reach: float) 
 
 
 def augmented_basis(model, basis: ModalBasis, nodes: np.ndarray, radius: float = PATCH_RADIUS,
-                    reach: float = PATCH_REACH) -> ModalBasis:
+                    reach: float = PATCH_REACH, hump: tuple[float, float] | None | str = None,
+                    humped: list[int] | None = None) -> ModalBasis:
     """``basis`` extended by the patch shapes of the sensor ``nodes`` (see the module docstring).
 
     The first ``basis.n_modes`` columns are ``basis``'s own, then three per sensor (x, y, z of
-    its load).  ``eigenvalues`` holds Λ then the patches' own stiffness (diag PᵀKP, for
-    reports); ``info`` holds the whole stiffness ("stiffness", (m+p, m+p)) and what rebuilds it
-    ({"global_modes", "patch_radius_m", "patch_reach_m", "patch_nodes"}), which
-    :func:`augmented_model` and :meth:`tonguevis.sim.Motion.load` use.
+    its load), then, with ``hump`` ((flat, reach) m; "scaled": :data:`HUMP_FLAT`, :data:`HUMP_REACH`
+    scaled as ``radius`` is from :data:`PATCH_RADIUS`; None: none, as motions saved before them),
+    twelve more per sensor in ``humped`` (indices into ``nodes``; None: all): its hump (:func:`hump_shapes`).  ``eigenvalues`` holds Λ then the patches'
+    own stiffness (diag PᵀKP, for reports); ``info`` holds the whole stiffness ("stiffness", (m+p, m+p))
+    and what rebuilds it ({"global_modes", "patch_radius_m", "patch_reach_m", "patch_nodes", "hump_m"}),
+    which :func:`augmented_model` and :meth:`tonguevis.sim.Motion.load` use.
     """
     import scipy.sparse.linalg as spla
 
@@ -87,6 +100,13 @@ def augmented_basis(model, basis: ModalBasis, nodes: np.ndarray, radius: float =
     patches[free] = solved
     for k, node in enumerate(nodes):
         patches[:, 3 * k:3 * k + 3] *= np.repeat(window(points, points[node], radius, reach), 3)[:, None]
+    if isinstance(hump, str):
+        hump = (HUMP_FLAT * radius / PATCH_RADIUS, HUMP_REACH * radius / PATCH_RADIUS)
+    humped = list(range(len(nodes))) if humped is None else [int(k) for k in humped]
+    if hump is not None and humped:
+        patches = np.hstack([patches, hump_shapes(points, nodes[humped], free, *hump)])
+    else:
+        hump = None
     full = np.hstack([basis.phi, patches])
     k_full = model.stiffness @ patches
     coupling = basis.phi.T @ k_full
@@ -94,9 +114,65 @@ def augmented_basis(model, basis: ModalBasis, nodes: np.ndarray, radius: float =
     reduced = np.block([[np.diag(basis.eigenvalues), coupling], [coupling.T, 0.5 * (own + own.T)]])
     node_list = [int(v) for v in nodes]
     key = f"{basis.key}-patches-{radius:.6f}-{reach:.6f}-{'-'.join(map(str, node_list))}"
+    if hump is not None:
+        key += f"-hump-{hump[0]:.6f}-{hump[1]:.6f}-{'-'.join(map(str, humped))}"
     info = {"global_modes": basis.n_modes, "patch_radius_m": float(radius), "patch_reach_m": float(reach),
-            "patch_nodes": node_list, "stiffness": reduced}
+            "patch_nodes": node_list, "stiffness": reduced,
+            "hump_m": None if hump is None else [float(hump[0]), float(hump[1])],
+            "humped": humped if hump is not None else []}
     return ModalBasis(full, np.concatenate([basis.eigenvalues, np.diag(own)]), free, key, info)
+
+
+#: The sensors without a hump: the tongue tip is thin and free, a /t/ closure presses it onto the palate
+#: (:mod:`tonguevis.sim.closures`), and a hump under its coil would carry the pressed tip back down with it
+#: (on the shared /ta/ 009 the tip then touched at 0 of 2 closures instead of 2).
+UNHUMPED = ("TT",)
+
+
+def humped_sensors(names) -> list[int]:
+    """The indices of the sensors (``names``) that get a hump: all but :data:`UNHUMPED`."""
+    return [k for k, name in enumerate(names) if name not in UNHUMPED]
+
+
+def hump_shapes(points: np.ndarray, nodes: np.ndarray, free: np.ndarray, flat: float, reach: float) -> np.ndarray:
+    """(3n, 12S) each sensor node's hump: per axis, every node of the mesh (inside too, so the tissue under a
+    rising dorsum rises with it) moved along that axis by :func:`window` (1 within ``flat`` m of the sensor
+    node, a cosine down to 0 at ``reach``), then the same tilted: the window times each of the three offsets
+    from the sensor node over ``flat`` (so a hump can lean, e.g. follow the palate down behind the coil).
+    Columns per sensor: x, y, z, then for each axis its three tilts.  The fixed degrees of freedom (not in
+    ``free``) stay.  Kinematic shapes: their stiffness is the mesh's own (PᵀKP, in the basis' stiffness)."""
+    n = len(points)
+    per = 3 * (1 + HUMP_TILTS)
+    shapes = np.zeros((3 * n, per * len(nodes)))
+    for k, node in enumerate(np.asarray(nodes, dtype=np.int64)):
+        w = window(points, points[node], flat, reach)
+        d = (points - points[node]) / flat
+        # the leans: the offsets (a tilt) and their products (a bend: a hump rounder or flatter than the window)
+        lean = np.column_stack([d, d[:, 0] ** 2, d[:, 1] ** 2, d[:, 0] * d[:, 1], d[:, 2] * d[:, 0],
+                                d[:, 2] * d[:, 1], d[:, 2] ** 2])[:, :HUMP_TILTS]
+        for axis in range(3):
+            shapes[axis::3, per * k + axis] = w
+            for b in range(HUMP_TILTS):
+                shapes[axis::3, per * k + 3 + 3 * axis + b] = w * lean[:, b]
+    fixed = np.ones(3 * n, dtype=bool)
+    fixed[free] = False
+    shapes[fixed] = 0.0
+    return shapes
+
+
+def patch_costs(basis: ModalBasis, nodes: np.ndarray) -> np.ndarray:
+    """(p,) what one unit of each patch coordinate costs in :func:`close_sensor_gaps`: the square of how far
+    it moves its own sensor node (a metre of hump or of local shape, whatever the column's scale) times
+    :data:`LOCAL_COST` for the local shapes, :data:`TILT_COST` a metre of lean at ``flat`` from the node."""
+    m = basis.info["global_modes"]
+    s = len(nodes)
+    dofs = (3 * np.asarray(nodes, dtype=np.int64)[:, None] + np.arange(3)).ravel()
+    local = np.abs(basis.phi[dofs, m + np.arange(3 * s)])
+    cost = [LOCAL_COST * np.maximum(local, 1e-12) ** 2]
+    humps = len(basis.info.get("humped") or [])
+    if humps:
+        cost.append(np.tile(np.concatenate([np.ones(3), np.full(3 * HUMP_TILTS, TILT_COST)]), humps))
+    return np.concatenate(cost)
 
 
 def augmented_model(model, basis: ModalBasis):
@@ -133,18 +209,20 @@ def accumulated_rotations(w: np.ndarray) -> np.ndarray:
 
 
 def close_sensor_gaps(basis: ModalBasis, rotation: np.ndarray, nodes: np.ndarray, q: np.ndarray,
-                      measured: np.ndarray, warping: bool = True, weight: np.ndarray | None = None) -> np.ndarray:
-    """(F, 3S) patch coordinates that put each measured sensor on its node, frame by frame.
+                      measured: np.ndarray, warping: bool = True, weight: np.ndarray | None = None,
+                      local_only: bool = False) -> np.ndarray:
+    """(F, p) patch coordinates that put each measured sensor on its node, frame by frame.
 
     basis : the augmented basis (:func:`augmented_basis`) of the sensor ``nodes`` (S,);
-    rotation : its W (3n, m + 3S); q : (F, m) the modes' coordinates from the dynamics;
+    rotation : its W (3n, m + p); q : (F, m) the modes' coordinates from the dynamics;
     measured : (F, S, 3) m displacements of the sensors from rest (NaN: not measured; that
     sensor's patch stays at rest).  With warping, node s moves by R̃_s(Φ_s q + P_s c) with R̃_s
-    from the modes alone, so P_s c = R̃_s⁻¹ measured_s - Φ_s q: 3S equations in the 3S patch
-    coordinates, solved exactly (a patch reaches other sensors only when they are closer than
-    its reach).  ``weight`` (F, S) in [0, 1]: each sensor's engagement (:func:`tonguevis.sim.dropouts.engagement`:
-    a sensor back from a dropout is taken up over 0.1 s): its gap is closed by that share, so its patch
-    eases in with its spring instead of jumping in one frame.
+    from the modes alone, so P_s c = R̃_s⁻¹ measured_s - Φ_s q: 3S equations.  With the local
+    shapes alone (p = 3S) they are solved exactly; with the humps too (p = 6S) by the cheapest
+    coordinates (:func:`patch_costs`: the humps first).  ``weight`` (F, S) in [0, 1]: each sensor's
+    engagement (:func:`tonguevis.sim.dropouts.engagement`: a sensor back from a dropout is taken up
+    over 0.1 s): its gap is closed by that share, so its patch eases in with its spring instead of
+    jumping in one frame.
     """
     m = basis.info["global_modes"]
     nodes = np.asarray(nodes, dtype=np.int64)
@@ -161,9 +239,34 @@ def close_sensor_gaps(basis: ModalBasis, rotation: np.ndarray, nodes: np.ndarray
     gap = np.where(acting, (wanted - linear).reshape(len(q), 3 * s), 0.0)
     if weight is not None:
         gap = gap * np.repeat(np.clip(np.asarray(weight, dtype=np.float64), 0.0, 1.0), 3, axis=1)
-    # A sensor not measured: its patch at rest (its row and column replaced by the identity).
-    mats = np.where(acting[:, :, None] & acting[:, None, :], patch_s[None], 0.0)
+    p = patch_s.shape[1]
+    if local_only and p > 3 * s:  # the humps at rest
+        out = np.zeros((len(q), p))
+        out[:, :3 * s] = _local(patch_s[:, :3 * s], acting, gap)
+        return out
+    if p == 3 * s:  # the local shapes alone: as many as the gaps, solved exactly
+        return _local(patch_s, acting, gap)
+    # Humps and local shapes: the cheapest coordinates (patch_costs) that close the gaps, c = C⁻¹Aᵀ(AC⁻¹Aᵀ)⁻¹g;
+    # a sensor not measured has its columns out (its coordinates 0) and its row the identity.
+    column_acting = np.hstack([acting, np.repeat(acting[:, ::3][:, basis.info["humped"]], 3 * (1 + HUMP_TILTS),
+                                                 axis=1)])  # (F, p): each column's sensor measured
+    a = np.where(acting[:, :, None] & column_acting[:, None, :], patch_s[None], 0.0)  # (F, 3S, p)
+    inverse_cost = 1.0 / patch_costs(basis, nodes)
+    humped = basis.info["humped"]
+    inverse_cost[3 * s:] *= np.tile(np.r_[np.ones(3), np.zeros(3 * HUMP_TILTS)], len(humped))  # tilts: the palate's
+    mats = np.einsum("fip,p,fjp->fij", a, inverse_cost, a)
     idx = np.arange(3 * s)
+    mats[:, idx, idx] += np.where(acting, 0.0, 1.0)
+    y = np.linalg.solve(mats, gap[:, :, None])[:, :, 0]
+    return np.einsum("fip,p,fi->fp", a, inverse_cost, y)
+
+
+def _local(patch_s: np.ndarray, acting: np.ndarray, gap: np.ndarray) -> np.ndarray:
+    """(F, 3S) the local shapes' coordinates closing ``gap`` (F, 3S) exactly with their rows ``patch_s``
+    (3S, 3S); a sensor not measured (``acting`` (F, 3S) False): its patch at rest (its row and column the
+    identity)."""
+    mats = np.where(acting[:, :, None] & acting[:, None, :], patch_s[None], 0.0)
+    idx = np.arange(patch_s.shape[0])
     mats[:, idx, idx] += np.where(acting, 0.0, 1.0)
     return np.linalg.solve(mats, gap[:, :, None])[:, :, 0]
 

@@ -73,6 +73,11 @@ class RunSettings:
         1e-7 domains).
     closures : with a palate, at each stop's closure found on the recording the tip and blade are pressed onto
         the palate (:mod:`tonguevis.sim.closures`); False: only the sensors and the contact.
+    humps : with sensor patches, each sensor but the tip also moves the tissue around it as a hump (flat within
+        6 model-mm, gone by 15 mm) before the local shapes close what is left, and with a palate the humps are
+        flattened against it (:mod:`tonguevis.sim.patch_contact`): a dorsum at /k/ rises as a whole instead of
+        in a cone under its coil.  Opt-in: the humps are kinematic shapes, which change the volume by up to
+        2-4 % on the real recordings (the local shapes alone: under 1 %; see the README).
     """
 
     mesh: str | None = None
@@ -93,6 +98,7 @@ class RunSettings:
     smooth_window: int | None = None
     tolerance: float | None = None
     closures: bool = True
+    humps: bool = False
 
     def __post_init__(self) -> None:
         from tonguevis.sensor_stiffness import sensor_stiffness_value
@@ -131,7 +137,7 @@ class RunSettings:
             raise SimulationError(f"smooth_window must be at least 3 samples or None, got {self.smooth_window}")
         if self.tolerance is not None and not float(self.tolerance) > 0:
             raise SimulationError(f"tolerance must be a positive length in metres or None, got {self.tolerance}")
-        for name in ("keep_volume", "rest_fit", "closures"):
+        for name in ("keep_volume", "rest_fit", "closures", "humps"):
             object.__setattr__(self, name, bool(getattr(self, name)))
 
     @classmethod

@@ -244,7 +244,11 @@ def _simulate_modal(recording, settings, placed, progress, preview, preview_seco
             base = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * k_ref)
             result.q, corrected = keep_below_palate(result.q, contact, schedule, basis, phi_s, base)
             schedule["corrected_frames"] = run.schedule["corrected_frames"] = corrected
-        if run.patches:
+        if run.patches and contact is not None and run.basis.info.get("hump_m") is not None:
+            from tonguevis.sim.patch_contact import humps_under_palate
+
+            result.q = humps_under_palate(run, result.q, contact, schedule)
+        elif run.patches:
             result.q = np.hstack([result.q, run.patch_coordinates(result.q, 0, len(result.q))])
         report(progress, 2, 3, "reconstructing the mesh")
         # Chunk by chunk: the full-mesh displacement of every frame is never held at once.

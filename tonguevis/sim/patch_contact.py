@@ -1,0 +1,185 @@
+"""The sensor patches kept below the palate: where a hump would push the tongue into the palate, the palate stops it.
+
+The modes are kept below the palate during the dynamics (:mod:`tonguevis.sim.contact`); the sensor patches come
+after them (:func:`tonguevis.sim.patches.close_sensor_gaps`), and a hump is broad: at a /k/ closure the dorsum
+around the TD coil rises with it, and where the palate comes down behind the coil (the velum, the back of the
+vault) the hump would go through it.  Here each frame where it does is projected onto the nearest patch
+coordinates, in the patches' own cost metric (:func:`tonguevis.sim.patches.patch_costs`), that keep every sensor
+node where the patches put it and every surface node below the palate: the same QP as the contact's
+(:func:`tonguevis.sim.contact._active_set`), with the patch coordinates for the modes.  The hump flattens against
+the palate and the local shapes hold the sensor: the tongue fills the vault instead of going through it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tonguevis.sim.contact import BAND, CONFLICT_RADIUS, MARGIN, MAX_PASSES, clearance_at
+from tonguevis.sim.modal import ModalBasis
+
+#: A closure's pull engaged this far (0-1) has handed its sensors' neighbourhood over to the local shapes.
+PULL_HANDOVER = 0.5
+
+
+def allowed_candidates(contact: dict, conflicts, n_frames: int, candidates: np.ndarray) -> np.ndarray:
+    """(F, k) bool: which of the ``candidates`` (k,) nodes the palate may hold, frame by frame: all but those
+    within :data:`CONFLICT_RADIUS` of a sensor that went above the palate in that frame (``conflicts``: (frame,
+    sensor) pairs; the sensor wins there) and the sensor nodes themselves (each is where its sensor is, held
+    under the palate by the drive, perhaps nearer than the margin: a constraint of its own beside the equality
+    holding it would be infeasible, as it was at the first /k/ closure of the shared 007, TD 0.08 mm under)."""
+    pts, sensors = contact["points"], np.asarray(contact["sensor_nodes"])
+    near = np.linalg.norm(pts[candidates][:, None] - pts[sensors][None], axis=2) < CONFLICT_RADIUS
+    allowed = np.ones((n_frames, len(candidates)), dtype=bool)
+    for f, s in conflicts:
+        if f < n_frames and s < near.shape[1]:
+            allowed[f] &= ~near[:, s]
+    allowed &= ~np.isin(candidates, sensors)[None]
+    return allowed
+
+
+def humps_under_palate(run, q: np.ndarray, contact: dict, schedule: dict) -> np.ndarray:
+    """(F, m + p) the modes' coordinates ``q`` (F, m) with the patches' of a run with humps and a palate.
+
+    run : the :class:`~tonguevis.sim.motion_builder.MotionBuilder` (its ``patch_coordinates``, ``basis``,
+    ``rotation``, ``model``, ``prep``, ``warping``); schedule : the drive's (``conflicts``; ``pull_weight`` where
+    a closure presses the tip).  Where a closure's pull acts the local shapes take over from the humps by its
+    engagement (a hump under the blade's coils carried the pressed tip back down with it: on the shared /ta/ 009
+    the tip then touched at 1 of 2 closures, 2 without humps); every frame not fully pulled is then kept below
+    the palate (:func:`patches_below_palate`, the contact's candidates: the dorsal surface), a
+    frame it cannot solve falling back to the local shapes alone.  ``schedule["humps_flattened"]`` says how
+    many frames the palate flattened."""
+    n = len(q)
+    humped = run.patch_coordinates(q, 0, n)
+    local = run.patch_coordinates(q, 0, n, local_only=True)
+    pull = schedule.get("pull_weight")
+    weight = np.zeros(n) if pull is None or np.size(pull) == 0 else np.clip(np.max(pull, axis=1) / PULL_HANDOVER, 0.0, 1.0)[:n]
+    coordinates = (1.0 - weight)[:, None] * humped + weight[:, None] * local
+    candidates = np.asarray(contact["candidates"], dtype=np.int64)
+    allowed = allowed_candidates(contact, schedule.get("conflicts", []), n, candidates) & (weight < 1.0)[:, None]
+    out, flattened = patches_below_palate(np.hstack([q, coordinates]), run.basis, run.prep.nodes, contact,
+                                          candidates, allowed, fallback=local,
+                                          rotation=run.rotation if run.warping else None)
+    schedule["humps_flattened"] = int(len(flattened))
+    return out
+
+
+def patches_below_palate(q: np.ndarray, basis: ModalBasis, nodes: np.ndarray, contact: dict, candidates: np.ndarray,
+                         allowed: np.ndarray | None = None, margin: float = MARGIN,
+                         fallback: np.ndarray | None = None,
+                         rotation: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(q with its patch coordinates projected below the palate (F, m + p), the frames projected).
+
+    q : (F, m + p) the modes' coordinates then the patches' (:func:`~tonguevis.sim.patches.close_sensor_gaps`);
+    basis : the augmented basis (``info["global_modes"]`` = m); nodes : (S,) the sensor nodes;
+    contact : the run's contact context (points, palate, jaw_offset with the velum's lift);
+    candidates : (k,) the nodes kept below the palate; allowed : (F, k) those the palate may hold in each frame
+    (:func:`allowed_candidates`; None: all).
+    fallback : (F, p) patch coordinates for a frame whose projection finds no shape below the palate (the
+    local shapes alone, :func:`~tonguevis.sim.patches.close_sensor_gaps` ``local_only``); None: kept as is.
+    rotation : the basis' rotation matrix W (3n, m + p) with warping (None: linear): a node moves by
+    R̃_i (Φ_i q + P_i c), R̃_i from the modes alone, so the clearances are those of the shape drawn and still
+    linear in the patch coordinates c.  The sensor nodes stay to 1e-9 m.
+    """
+    from tonguevis.sim.patches import accumulated_rotations, patch_costs
+
+    q = np.array(q, dtype=np.float64, copy=True)
+    m = basis.info["global_modes"]
+    cand = np.asarray(candidates, dtype=np.int64)
+    dofs = (3 * cand[:, None] + np.arange(3)).ravel()
+    phi_modes = basis.phi[dofs, :m]
+    phi_patch = np.ascontiguousarray(basis.phi[dofs, m:]).reshape(len(cand), 3, -1)
+    sensor_dofs = (3 * np.asarray(nodes, dtype=np.int64)[:, None] + np.arange(3)).ravel()
+    rows = basis.phi[sensor_dofs, m:]  # (3S, p)
+    cost = patch_costs(basis, nodes)
+    base = contact["points"][cand]
+    offsets = np.asarray(contact["jaw_offset"])
+    w_rows = None if rotation is None else rotation[dofs, :m]
+
+    def placed(frames) -> tuple[np.ndarray, np.ndarray | None]:
+        """(the candidates' modal displacement (f, k, 3), the modes' rotations there (f, k, 3, 3) or None)."""
+        modal = (q[frames, :m] @ phi_modes.T).reshape(-1, len(cand), 3)
+        if w_rows is None:
+            return modal, None
+        return modal, accumulated_rotations((q[frames, :m] @ w_rows.T).reshape(-1, len(cand), 3))
+
+    allowed = np.ones((len(q), len(cand)), dtype=bool) if allowed is None else allowed[:len(q)]
+    low = np.full(len(q), np.inf)
+    for start in range(0, len(q), 256):  # chunks: the rotations of every surface node are 72 bytes a frame
+        part = slice(start, min(start + 256, len(q)))
+        modal, turns = placed(part)
+        moved = modal + np.einsum("kcp,fp->fkc", phi_patch, q[part, m:])
+        if turns is not None:
+            moved = np.einsum("fkab,fkb->fka", turns, moved)
+        gap, _ = clearance_at(contact["palate"], base[None] + moved, offsets[part])
+        gap = np.where(allowed[part] & np.isfinite(gap), gap, np.inf)
+        low[part] = gap.min(axis=1)
+    frames = np.flatnonzero(low < margin - 1e-7)
+    null = _null_space(rows, cost)
+    done = []
+    for f in frames:
+        modal, turns = placed([f])
+        if turns is not None:
+            start = base + np.einsum("kab,kb->ka", turns[0], modal[0])
+            shapes = np.einsum("kab,kbp->kap", turns[0], phi_patch)
+        else:
+            start, shapes = base + modal[0], phi_patch
+        c = _held_below(null, shapes, start, contact["palate"], offsets[f], q[f, m:], allowed[f], margin)
+        if c is not None:
+            q[f, m:] = c
+            done.append(f)
+        elif fallback is not None:
+            q[f, m:] = fallback[f]
+    return q, np.asarray(done, dtype=np.int64)
+
+
+def _null_space(rows: np.ndarray, cost: np.ndarray) -> np.ndarray:
+    """(p, p - r) N with rows @ N = 0 and N^T diag(cost) N = I (r = rank of rows (3S, p))."""
+    scale = 1.0 / np.sqrt(cost)
+    _, sv, vt = np.linalg.svd(rows * scale, full_matrices=True)
+    rank = int(np.sum(sv > sv.max() * 1e-10)) if sv.size else 0
+    return scale[:, None] * vt[rank:].T
+
+
+def _least_distance(g: np.ndarray, h: np.ndarray) -> np.ndarray | None:
+    """The shortest z with ``g @ z >= h`` (g (a, n), h (a,)), None if there is none: least distance
+    programming by one NNLS (Lawson & Hanson 1974, "Solving Least Squares Problems", ch. 23)."""
+    from scipy.optimize import nnls
+
+    n = g.shape[1]
+    e = np.vstack([g.T, h[None]])
+    f = np.zeros(n + 1)
+    f[n] = 1.0
+    u = nnls(e, f, maxiter=50 * max(len(h), 1))[0]
+    r = e @ u - f
+    if not np.isfinite(r).all() or abs(r[n]) < 1e-12:
+        return None
+    return -r[:n] / r[n]
+
+
+def _held_below(null, phi_patch, points, palate, offset, c0, ok, margin):
+    """One frame's patch coordinates below the palate (None: none found within 2 x :data:`MAX_PASSES` passes).
+
+    The nearest coordinates to ``c0`` in the cost metric keeping the sensor nodes are c0 + N z with N =
+    ``null`` (the sensors' rows' null space, N^T C N = I), so each pass is a least distance problem in z.  Unlike
+    :func:`tonguevis.sim.contact._active_set`, each pass keeps every earlier pass's linearisation (cutting
+    planes): a hump moves a wide region under a curved palate, and a node linearised at one shape alone sent
+    the next pass elsewhere (passes that oscillated by 5-10 mm on the shared /ka/ 007)."""
+    c = c0
+    g_all, h_all = np.zeros((0, null.shape[1])), np.zeros(0)
+    phi_null = np.einsum("kcp,pz->kcz", phi_patch, null)
+    for _ in range(2 * MAX_PASSES):
+        gap, normal = clearance_at(palate, points + np.einsum("kcp,p->kc", phi_patch, c), offset)
+        usable = ok & np.isfinite(gap)
+        if not np.any(usable & (gap < margin - 1e-7)):
+            return c
+        near = np.flatnonzero(usable & (gap < margin + BAND))
+        # clearance(c0 + N z) ~ gap + n . Φ N (z - z_now) >= margin
+        rows = np.einsum("kc,kcz->kz", normal[near], phi_null[near])
+        z_now = np.linalg.lstsq(null, c - c0, rcond=None)[0]
+        g_all = np.vstack([g_all, rows])
+        h_all = np.concatenate([h_all, margin - gap[near] + rows @ z_now])
+        z = _least_distance(g_all, h_all)
+        if z is None:
+            return None
+        c = c0 + null @ z
+    return None
