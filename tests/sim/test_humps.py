@@ -147,4 +147,25 @@ def test_on_real_ka_the_dorsum_rises_as_a_hump_under_the_palate(osn12_palate):
         gap = motion.palate_at(f).clearance(pos[dorsum])[0]
         assert np.nanmin(gap) > -1e-3
     assert checked >= 5
+    assert motion.metadata["plausibility"]["volume_change_max_percent"] < 1.0  # drawn in: 2.2 % without
     assert np.nanmax(motion.sensor_residual) <= 1e-3 + 1e-9  # on the surface: the issue's misfit bound
+
+
+def test_the_humps_keep_the_volume_to_first_order(model):
+    """Each hump column's first-order volume change (the volume gradient times the shape) is zero: the rest of
+    the surface draws in by what a hump lifts; the kinematic shapes alone change it."""
+    from tonguevis.sim.patches import hump_shapes, volume_neutral
+    from tonguevis.sim.volume import volume_gradients
+
+    base, nodes, aug, _ = _basis(model)
+    m, s = 30, len(nodes)
+    points, tets = model.mesh.points, np.asarray(model.mesh.tets)
+    gradient = np.zeros((len(points), 3))
+    np.add.at(gradient, tets.ravel(), volume_gradients(points, tets).reshape(-1, 3))
+    g = gradient.ravel()
+    humps = aug.phi[:, m + 3 * s:]
+    raw = hump_shapes(points, nodes, base.free_dofs, *aug.info["hump_m"])
+    assert np.abs(g @ humps).max() < 1e-12 * np.abs(g @ raw).max()
+    assert np.abs(g @ raw).max() > 1e-6  # lifting the tissue alone would change the volume
+    np.testing.assert_allclose(volume_neutral(raw, model, base.free_dofs), humps, atol=1e-15)
+
