@@ -80,7 +80,8 @@ def patches_below_palate(q: np.ndarray, basis: ModalBasis, nodes: np.ndarray, co
     R̃_i (Φ_i q + P_i c), R̃_i from the modes alone, so the clearances are those of the shape drawn and still
     linear in the patch coordinates c.  The sensor nodes stay to 1e-9 m.
     """
-    from tonguevis.sim.patches import accumulated_rotations, patch_costs
+    from tonguevis.sim.patches import patch_costs
+    from tonguevis.sim.rotation import accumulated_rotation_matrix as accumulated_rotations
 
     q = np.array(q, dtype=np.float64, copy=True)
     m = basis.info["global_modes"]

@@ -153,7 +153,7 @@ def volume_subspace(model, phi: np.ndarray, rotation: np.ndarray | None, q: np.n
     displacement is then R̃(Wq)(Φq + B c) (warped) or Φq + B c.  The returned dict says the key
     frames, K and the whole-volume change before and after (max |ΔV/V|).
     """
-    from tonguevis.sim.patches import accumulated_rotations
+    from tonguevis.sim.rotation import accumulated_rotation_matrix as accumulated_rotations
 
     q = np.atleast_2d(np.asarray(q, dtype=np.float64))
     points, tets = model.mesh.points, np.asarray(model.mesh.tets, dtype=np.int64)
