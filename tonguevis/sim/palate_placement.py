@@ -183,13 +183,11 @@ def contact_context(palate, prep, model, basis, recording) -> dict:
 
 def keep_below_palate(q, contact, schedule, basis, phi_s, compliance: float):
     """The dynamic shapes projected out of the palate where inertia carried them in (see contact.correct_frames)."""
-    from tonguevis.sim.contact import CONFLICT_RADIUS, correct_frames
+    from tonguevis.sim.contact import correct_frames
+    from tonguevis.sim.patch_contact import allowed_candidates
 
     cand, pts = contact["candidates"], contact["points"]
-    near = np.linalg.norm(pts[cand][:, None] - pts[contact["sensor_nodes"]][None], axis=2) < CONFLICT_RADIUS
-    allowed = np.ones((len(q), len(cand)), dtype=bool)
-    for f, s in schedule["conflicts"]:
-        allowed[f] &= ~near[:, s]
+    allowed = allowed_candidates(contact, schedule["conflicts"], len(q), cand, sensors_free=False)
     return correct_frames(basis.eigenvalues, contact["phi_nodes"], phi_s, q, pts, cand, contact["palate"],
                           contact["jaw_offset"], allowed, compliance=compliance,
                           backend=contact.get("backend", "warp"))

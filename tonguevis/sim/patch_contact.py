@@ -21,19 +21,22 @@ from tonguevis.sim.modal import ModalBasis
 PULL_HANDOVER = 0.5
 
 
-def allowed_candidates(contact: dict, conflicts, n_frames: int, candidates: np.ndarray) -> np.ndarray:
+def allowed_candidates(contact: dict, conflicts, n_frames: int, candidates: np.ndarray,
+                       sensors_free: bool = True) -> np.ndarray:
     """(F, k) bool: which of the ``candidates`` (k,) nodes the palate may hold, frame by frame: all but those
     within :data:`CONFLICT_RADIUS` of a sensor that went above the palate in that frame (``conflicts``: (frame,
     sensor) pairs; the sensor wins there) and the sensor nodes themselves (each is where its sensor is, held
     under the palate by the drive, perhaps nearer than the margin: a constraint of its own beside the equality
-    holding it would be infeasible, as it was at the first /k/ closure of the shared 007, TD 0.08 mm under)."""
+    holding it would be infeasible, as it was at the first /k/ closure of the shared 007, TD 0.08 mm under;
+    ``sensors_free=False`` keeps them, for the modes' correction, whose sensors are held by springs)."""
     pts, sensors = contact["points"], np.asarray(contact["sensor_nodes"])
     near = np.linalg.norm(pts[candidates][:, None] - pts[sensors][None], axis=2) < CONFLICT_RADIUS
     allowed = np.ones((n_frames, len(candidates)), dtype=bool)
     for f, s in conflicts:
         if f < n_frames and s < near.shape[1]:
             allowed[f] &= ~near[:, s]
-    allowed &= ~np.isin(candidates, sensors)[None]
+    if sensors_free:
+        allowed &= ~np.isin(candidates, sensors)[None]
     return allowed
 
 

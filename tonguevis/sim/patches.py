@@ -219,11 +219,9 @@ def global_part(motion):
 
 def accumulated_rotations(w: np.ndarray) -> np.ndarray:
     """(..., 3, 3) the matrices R̃(w) of modal warping for rotation vectors w (..., 3)."""
-    from tonguevis.sim.rotation import rotate_accumulated
+    from tonguevis.sim.rotation import accumulated_rotation_matrix
 
-    eye = np.eye(3)
-    columns = [rotate_accumulated(w, np.broadcast_to(eye[c], w.shape).copy()) for c in range(3)]
-    return np.stack(columns, axis=-1)
+    return accumulated_rotation_matrix(w)
 
 
 def close_sensor_gaps(basis: ModalBasis, rotation: np.ndarray, nodes: np.ndarray, q: np.ndarray,
