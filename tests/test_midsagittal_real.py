@@ -56,7 +56,8 @@ def test_the_velum_is_drawn_lifted_and_the_status_line_says_where_the_tongue_tou
     up = draw_frame(session, lifted).context_shapes["palate"]
     down = draw_frame(session, still).context_shapes["palate"]
     rise = up[:, 2] - down[:, 2]
-    assert rise.max() == pytest.approx(palate.lift[lifted] * palate.share.max(), rel=1e-5)
+    # to the drawing's float32 (0.1 µm): since the estimated roof is raised broadly the velum lifts µm on 009
+    assert rise.max() == pytest.approx(palate.lift[lifted] * palate.share.max(), abs=1e-7)
     assert np.all(rise >= -1e-9) and np.array_equal(up[:, :2], down[:, :2])
     assert np.mean(rise > 1e-6) < 0.5  # only the velum rises, not the hard palate
     # at the closures the tip touches: the status line says where

@@ -129,8 +129,11 @@ def test_motion_segmentation_validation_equal_the_commands(corpus, serial, tmp_p
 
     assert main(["simulate", recording, "--out", str(tmp_path / "sim"), *CLI_MODEL]) in (0, 1)
     theirs, ours = Motion.load(tmp_path / "sim" / "motion.npz"), Motion.load(mine / "motion.npz")
-    for field in ("times", "q", "energy", "volume_change", "sensor_residual", "targets"):
+    for field in ("times", "q", "volume_change", "sensor_residual", "targets"):
         np.testing.assert_array_equal(getattr(ours, field), getattr(theirs, field), err_msg=field)
+    # with the sensor humps the energy ½qᵀKq (K: the patches' full stiffness) differs in the last bit on half the
+    # frames though q is bit-equal: equal to 1e-14
+    np.testing.assert_allclose(ours.energy, theirs.energy, rtol=1e-14, atol=0, err_msg="energy")
     row = _table(mine / "simulation.parquet")
     assert row["peak_energy_mJ"][0] == pytest.approx(1e3 * ours.energy.max(), rel=1e-12)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from tonguevis.io import read_recording
 from tonguevis.sim import Motion, simulate
@@ -118,15 +119,17 @@ def test_the_null_space_keeps_the_sensors_in_the_cost_metric(model):
     np.testing.assert_allclose(null.T @ (cost[:, None] * null), np.eye(null.shape[1]), atol=1e-9)
 
 
-def test_on_real_ka_the_dorsum_rises_as_a_hump_under_the_palate(osn12_palate):
-    """The shared /ka/ 006 with the speaker's palate: with the humps the TD node moves at most 1.25 times as far
-    as the dorsum within 10 mm of it at every closure found (1.49 without: a cone), the sensors stay on their
-    nodes, and the humps flattened against the palate leave the dorsum at most 1 mm inside it there."""
+@pytest.mark.parametrize("name", ["006_OSN12_Kah_nofb_natural_take2_HR", "007_OSN12_Kah_withFb_natural_HR"])
+def test_on_real_ka_the_dorsum_rises_as_a_hump_under_the_palate(osn12_palate, name):
+    """The shared /ka/ 006 and 007 with the speaker's palate, at the defaults (humps, the estimated roof raised
+    broadly): the TD node moves at most 1.25 times as far as the dorsum within 10 mm of it at every closure found
+    and wherever TD is highest (1.49 and 1.75 before: a cone), the sensors stay on their nodes, and the humps
+    flattened against the palate leave the dorsum at most 1 mm inside it there."""
     from tests.conftest import shared_file
     from tonguevis.mesh import dorsal_surface_nodes
 
-    recording = read_recording(shared_file("ema", "optispeech", "006_OSN12_Kah_nofb_natural_take2_HR.tsv"))
-    motion = simulate(recording, palate=str(osn12_palate), humps=True)
+    recording = read_recording(shared_file("ema", "optispeech", f"{name}.tsv"))
+    motion = simulate(recording, palate=str(osn12_palate))
     assert motion.metadata["sensor_patches"]["hump_mm"] is not None
     points = motion.model.mesh.points
     dorsum = dorsal_surface_nodes(motion.model.mesh)
@@ -167,5 +170,59 @@ def test_the_humps_keep_the_volume_to_first_order(model):
     raw = hump_shapes(points, nodes, base.free_dofs, *aug.info["hump_m"])
     assert np.abs(g @ humps).max() < 1e-12 * np.abs(g @ raw).max()
     assert np.abs(g @ raw).max() > 1e-6  # lifting the tissue alone would change the volume
-    np.testing.assert_allclose(volume_neutral(raw, model, base.free_dofs), humps, atol=1e-15)
+    neutral = volume_neutral(raw, model, base.free_dofs)
+    width = 3 * (1 + HUMP_TILTS)
+    for k, node in enumerate(nodes):  # the translations combined to move their own node by the identity
+        cols = slice(k * width, k * width + 3)
+        at_node = slice(3 * node, 3 * node + 3)
+        np.testing.assert_allclose(humps[at_node, cols], np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(humps[:, cols], neutral[:, cols] @ np.linalg.inv(neutral[at_node, cols]),
+                                   atol=1e-12)
+        leans = slice(k * width + 3, (k + 1) * width)
+        np.testing.assert_allclose(humps[:, leans], neutral[:, leans], atol=1e-15)
 
+
+
+def test_the_projection_equals_its_plain_reference(model):
+    """patches_below_palate's frames (the step in the null space, the rows rotated once per pass) equal the plain
+    per-frame reference (held_below_reference: the shapes rotated whole, the step recovered by least squares)
+    to rounding, on humps raising three sensors 4 mm under a roof that comes down behind them (the dorsum behind the
+    hindmost goes through it), warped."""
+    from tonguevis.mesh import dorsal_surface_nodes
+    from tonguevis.palate import PalateSurface
+    from tonguevis.sim.patch_contact import held_below_reference, patches_below_palate
+    from tonguevis.sim.patches import patch_costs
+    from tonguevis.sim.rotation import accumulated_rotation_matrix
+
+    base, nodes, aug, rotation = _basis(model)
+    m, frames = 30, 5
+    pts = model.mesh.points
+    rng = np.random.default_rng(5)
+    q = rng.normal(0, 2e-5, (frames, m))
+    measured = np.tile([0.0, 0.0, 4e-3], (frames, len(nodes), 1)) + rng.normal(0, 3e-4, (frames, len(nodes), 3))
+    c = close_sensor_gaps(aug, rotation, nodes, q, measured, warping=True)
+    full = np.hstack([q, c])
+    # a roof 4.3 mm over the highest sensor at the hindmost sensor, coming down behind it (a velum)
+    back = pts[nodes, 0].min()
+    x, y = np.arange(-0.1, 0.1, 1e-3), np.arange(-0.05, 0.05, 1e-3)
+    roof = pts[nodes, 2].max() + 4.3e-3 + 0.4 * np.minimum(x - back, 0.0)
+    palate = PalateSurface(x, y, np.tile(roof, (len(y), 1)), metadata={"frame": "model"})
+    candidates = dorsal_surface_nodes(model.mesh)
+    allowed = np.tile(~np.isin(candidates, nodes), (frames, 1))
+    contact = {"points": pts, "palate": palate, "jaw_offset": np.zeros((frames, 3))}
+    fast, done = patches_below_palate(full, aug, nodes, contact, candidates, allowed, rotation=rotation)
+    assert len(done) >= 3  # the humps went through the palate and were projected
+
+    dofs = (3 * candidates[:, None] + np.arange(3)).ravel()
+    phi_modes, phi_patch = aug.phi[dofs, :m], aug.phi[dofs, m:].reshape(len(candidates), 3, -1)
+    sensor_dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
+    null = _null_space(aug.phi[sensor_dofs, m:], patch_costs(aug, nodes))
+    for f in range(frames):
+        turns = accumulated_rotation_matrix((rotation[dofs, :m] @ q[f]).reshape(-1, 3))
+        start = pts[candidates] + np.einsum("kab,kb->ka", turns, (phi_modes @ q[f]).reshape(-1, 3))
+        shapes = np.einsum("kab,kbp->kap", turns, phi_patch)
+        ref = held_below_reference(null, shapes, start, palate, np.zeros(3), c[f], allowed[f], 1e-4)
+        if f in done:
+            np.testing.assert_allclose(fast[f, m:], ref, atol=1e-9 * np.abs(ref).max())
+        else:
+            assert ref is None or np.allclose(ref, c[f])

@@ -56,6 +56,36 @@ def test_traced_kept_where_no_sensor_goes_above_and_raised_only_where_one_does()
     assert lift.shape == (frames,) and not lift.any()  # no velum: all traced, nothing behind it
 
 
+def test_the_estimated_roof_is_raised_broadly_and_the_traced_palate_narrowly():
+    """A sensor 3 mm above the generic roof beside the traced vault (y = -20 mm, no trace there) raises the
+    estimated roof as a broad roof (cells 8 mm from it by over half the need: no groove along the sensor's
+    path, the cause of the /k/ cone), while traced cells beyond RAISE_REACH of it stay where they were traced."""
+    from tonguevis.sim.speaker_palate import ESTIMATE_RAISE_FLAT, ESTIMATE_RAISE_REACH, RAISE_REACH
+
+    traced = fit_palate(_vault(back=-0.03), midline_y=0.0)
+    roof = _generic_roof()
+    at = np.array([-0.010, -0.020, 0.0])
+    base = roof._interp(roof._to_own(at[None])[:, :2])[0][0]
+
+    def heights(z_sensor, cells):
+        sensors = np.tile(at + [0.0, 0.0, z_sensor], (20, 1, 1))
+        surface, _, info = speaker_palate(traced, roof, sensors)
+        return surface._interp(surface._to_own(cells)[:, :2])[0], info
+
+    estimated = np.array([[-0.010, -0.020, 0.0], [-0.018, -0.020, 0.0], [-0.002, -0.020, 0.0]])
+    traced_cells = np.array([[-0.010, -0.0125, 0.0], [-0.019, -0.014, 0.0]])  # 7.5 and 10.8 mm away
+    low, _ = heights(base - 0.010, np.vstack([estimated, traced_cells]))
+    high, info = heights(base + 0.003, np.vstack([estimated, traced_cells]))
+    raised = high - low
+    need = base + 0.003 + COIL_HALF - low[0]  # above the roof as joined to the traced edge
+    assert need > 0.002 and raised[0] == pytest.approx(need, abs=2e-4)  # met in full at the sensor
+    assert ESTIMATE_RAISE_FLAT < 0.008 < ESTIMATE_RAISE_REACH
+    assert np.all(raised[1:3] > 0.5 * need)  # 8 mm away, where a 6 mm raise would have left the roof as it was
+    assert np.all(np.abs(raised[3:]) < 1e-9) and np.all(np.linalg.norm(traced_cells - at, axis=1) > RAISE_REACH)
+    assert np.all(high[:3] <= base + 0.003 + COIL_HALF + 1e-9)  # raised towards the coil's top, never above it
+    assert info["estimated_raised_mm"] >= 1e3 * need - 0.2 and info["traced_raised_mm"] < 1e-6
+
+
 def test_the_velum_behind_the_traced_palate_lifts_for_the_dorsum_frame_by_frame():
     """Traced to x = -30 mm; the generic roof behind; a dorsum sensor at x = -40 mm going 4 mm above the
     roof there in frames 20-29: the velum lifts just enough there (the least lift, to the sensor's coil),

@@ -259,7 +259,7 @@ class Motion:
             basis = augmented_basis(model, model.basis(int(patches["global_modes"])), np.array(patches["nodes"]),
                                     1e-3 * float(patches["radius_mm"]), 1e-3 * float(patches["reach_mm"]),
                                     None if not patches.get("hump_mm") else tuple(1e-3 * np.asarray(patches["hump_mm"])),
-                                    patches.get("humped"))
+                                    patches.get("humped"), unit=bool(patches.get("unit_at_node", False)))
             model = augmented_model(model, basis)
         domains = meta["metadata"].get("domains")
         if meta["metadata"].get("method") == "domains" and domains:  # q is z: the same domain subspace again

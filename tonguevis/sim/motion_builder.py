@@ -55,7 +55,7 @@ class MotionBuilder:
                         "shapes": int(basis.n_modes - basis.info["global_modes"]),
                         "nodes": basis.info["patch_nodes"], "global_modes": int(basis.info["global_modes"]),
                         "hump_mm": None if basis.info["hump_m"] is None else [1e3 * v for v in basis.info["hump_m"]],
-                        "humped": basis.info["humped"]}
+                        "humped": basis.info["humped"], "unit_at_node": basis.info["unit_at_node"]}
 
     def patch_coordinates(self, q: np.ndarray, start: int, end: int, local_only: bool = False) -> np.ndarray:
         """(end - start, p) patch coordinates closing the sensors' gaps in frames start..end-1 whose

@@ -119,15 +119,19 @@ def patches_below_palate(q: np.ndarray, basis: ModalBasis, nodes: np.ndarray, co
         low[part] = gap.min(axis=1)
     frames = np.flatnonzero(low < margin - 1e-7)
     null = _null_space(rows, cost)
+    shapes_null = (phi_patch.reshape(-1, phi_patch.shape[2]) @ null).reshape(len(cand), 3, -1)  # Φ_P N (k, 3, z)
     done = []
     for f in frames:
         modal, turns = placed([f])
+        c0 = q[f, m:]
+        own = (phi_patch.reshape(-1, len(c0)) @ c0).reshape(len(cand), 3)  # Φ_P c0, in the modes' frame
         if turns is not None:
-            start = base + np.einsum("kab,kb->ka", turns[0], modal[0])
-            shapes = np.einsum("kab,kbp->kap", turns[0], phi_patch)
+            start = base + np.matmul(turns[0], (modal[0] + own)[:, :, None])[:, :, 0]
         else:
-            start, shapes = base + modal[0], phi_patch
-        c = _held_below(null, shapes, start, contact["palate"], offsets[f], q[f, m:], allowed[f], margin)
+            start = base + modal[0] + own
+        z = _held_below(shapes_null, None if turns is None else turns[0], start, contact["palate"], offsets[f],
+                        allowed[f], margin)
+        c = None if z is None else c0 + null @ z
         if c is not None:
             q[f, m:] = c
             done.append(f)
@@ -160,14 +164,46 @@ def _least_distance(g: np.ndarray, h: np.ndarray) -> np.ndarray | None:
     return -r[:n] / r[n]
 
 
-def _held_below(null, phi_patch, points, palate, offset, c0, ok, margin):
-    """One frame's patch coordinates below the palate (None: none found within 2 x :data:`MAX_PASSES` passes).
+def _held_below(shapes_null, turns, start, palate, offset, ok, margin):
+    """One frame's step z below the palate (None: none found within 2 x :data:`MAX_PASSES` passes).
 
-    The nearest coordinates to ``c0`` in the cost metric keeping the sensor nodes are c0 + N z with N =
-    ``null`` (the sensors' rows' null space, N^T C N = I), so each pass is a least distance problem in z.  Unlike
-    :func:`tonguevis.sim.contact._active_set`, each pass keeps every earlier pass's linearisation (cutting
-    planes): a hump moves a wide region under a curved palate, and a node linearised at one shape alone sent
-    the next pass elsewhere (passes that oscillated by 5-10 mm on the shared /ka/ 007)."""
+    The nearest patch coordinates to the frame's c0 in the cost metric keeping the sensor nodes are c0 + N z with
+    N the sensors' rows' null space (N^T C N = I), so each pass is a least distance problem in z.
+    shapes_null : (k, 3, z) Φ_P N, the candidates' patch shapes in the null space (the modes' frame);
+    turns : (k, 3, 3) the modes' rotations R̃ at the candidates (None: linear); start : (k, 3) the candidates at
+    c0 (rotated), m.  A node at c0 + N z is at start + R̃ Φ_P N z, so its clearance's row is (R̃ᵀ n)ᵀ Φ_P N.
+    Unlike :func:`tonguevis.sim.contact._active_set`, each pass keeps every earlier pass's linearisation
+    (cutting planes): a hump moves a wide region under a curved palate, and a node linearised at one shape alone
+    sent the next pass elsewhere (passes that oscillated by 5-10 mm on the shared /ka/ 007).
+    :func:`held_below_reference` is the same, written out plainly (tests/sim/test_humps.py)."""
+    k, _, width = shapes_null.shape
+    flat = shapes_null.reshape(3 * k, width)
+    z = np.zeros(width)
+    g_all, h_all = np.zeros((0, width)), np.zeros(0)
+    for _ in range(2 * MAX_PASSES):
+        step = (flat @ z).reshape(k, 3)
+        if turns is not None:
+            step = np.matmul(turns, step[:, :, None])[:, :, 0]
+        gap, normal = clearance_at(palate, start + step, offset)
+        usable = ok & np.isfinite(gap)
+        if not np.any(usable & (gap < margin - 1e-7)):
+            return z
+        near = np.flatnonzero(usable & (gap < margin + BAND))
+        # clearance(z') ~ gap + n . R̃ Φ_P N (z' - z) >= margin
+        n_own = normal[near] if turns is None else np.matmul(normal[near][:, None, :], turns[near])[:, 0]
+        rows = np.matmul(n_own[:, None, :], shapes_null[near])[:, 0]
+        g_all = np.vstack([g_all, rows])
+        h_all = np.concatenate([h_all, margin - gap[near] + rows @ z])
+        z = _least_distance(g_all, h_all)
+        if z is None:
+            return None
+    return None
+
+
+def held_below_reference(null, phi_patch, points, palate, offset, c0, ok, margin):
+    """:func:`_held_below` written out plainly (the reference of tests/sim/test_humps.py): the patch shapes
+    ``phi_patch`` (k, 3, p) already rotated, ``points`` (k, 3) the candidates at ``c0`` less its patch part
+    (as placed by the modes), the step recovered from c by least squares each pass; returns c or None."""
     c = c0
     g_all, h_all = np.zeros((0, null.shape[1])), np.zeros(0)
     phi_null = np.einsum("kcp,pz->kcz", phi_patch, null)
@@ -177,7 +213,6 @@ def _held_below(null, phi_patch, points, palate, offset, c0, ok, margin):
         if not np.any(usable & (gap < margin - 1e-7)):
             return c
         near = np.flatnonzero(usable & (gap < margin + BAND))
-        # clearance(c0 + N z) ~ gap + n . Φ N (z - z_now) >= margin
         rows = np.einsum("kc,kcz->kz", normal[near], phi_null[near])
         z_now = np.linalg.lstsq(null, c - c0, rcond=None)[0]
         g_all = np.vstack([g_all, rows])

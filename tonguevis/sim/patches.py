@@ -77,7 +77,7 @@ def window(points: np.ndarray, centre: np.ndarray, radius: float, reach: float) 
 
 def augmented_basis(model, basis: ModalBasis, nodes: np.ndarray, radius: float = PATCH_RADIUS,
                     reach: float = PATCH_REACH, hump: tuple[float, float] | None | str = None,
-                    humped: list[int] | None = None) -> ModalBasis:
+                    humped: list[int] | None = None, unit: bool = True) -> ModalBasis:
     """``basis`` extended by the patch shapes of the sensor ``nodes`` (see the module docstring).
 
     The first ``basis.n_modes`` columns are ``basis``'s own, then three per sensor (x, y, z of
@@ -86,7 +86,10 @@ def augmented_basis(model, basis: ModalBasis, nodes: np.ndarray, radius: float =
     twelve more per sensor in ``humped`` (indices into ``nodes``; None: all): its hump (:func:`hump_shapes`).  ``eigenvalues`` holds Λ then the patches'
     own stiffness (diag PᵀKP, for reports); ``info`` holds the whole stiffness ("stiffness", (m+p, m+p))
     and what rebuilds it ({"global_modes", "patch_radius_m", "patch_reach_m", "patch_nodes", "hump_m"}),
-    which :func:`augmented_model` and :meth:`tonguevis.sim.Motion.load` use.
+    which :func:`augmented_model` and :meth:`tonguevis.sim.Motion.load` use.  With humps and ``unit`` (info
+    "unit_at_node"), each sensor's three local shapes and three hump translations are combined so that they move
+    their own node by the identity (:func:`_unit_at_own_node`): their costs (:func:`patch_costs`) are then the
+    squared metres the node moves, whatever the frame's axes (False: as motions saved before 2026-12-07's).
     """
     import scipy.sparse.linalg as spla
 
@@ -107,6 +110,8 @@ def augmented_basis(model, basis: ModalBasis, nodes: np.ndarray, radius: float =
     humped = list(range(len(nodes))) if humped is None else [int(k) for k in humped]
     if hump is not None and humped:
         patches = np.hstack([patches, volume_neutral(hump_shapes(points, nodes[humped], free, *hump), model, free)])
+        if unit:
+            patches = _unit_at_own_node(patches, nodes, humped)
     else:
         hump = None
     full = np.hstack([basis.phi, patches])
@@ -117,12 +122,28 @@ def augmented_basis(model, basis: ModalBasis, nodes: np.ndarray, radius: float =
     node_list = [int(v) for v in nodes]
     key = f"{basis.key}-patches-{radius:.6f}-{reach:.6f}-{'-'.join(map(str, node_list))}"
     if hump is not None:
-        key += f"-hump-{hump[0]:.6f}-{hump[1]:.6f}-{'-'.join(map(str, humped))}"
+        key += f"-hump-{hump[0]:.6f}-{hump[1]:.6f}-{'-'.join(map(str, humped))}" + ("-unit" if unit else "")
     info = {"global_modes": basis.n_modes, "patch_radius_m": float(radius), "patch_reach_m": float(reach),
             "patch_nodes": node_list, "stiffness": reduced,
             "hump_m": None if hump is None else [float(hump[0]), float(hump[1])],
-            "humped": humped if hump is not None else []}
+            "humped": humped if hump is not None else [], "unit_at_node": bool(hump is not None and unit)}
     return ModalBasis(full, np.concatenate([basis.eigenvalues, np.diag(own)]), free, key, info)
+
+
+def _unit_at_own_node(patches: np.ndarray, nodes: np.ndarray, humped: list[int]) -> np.ndarray:
+    """``patches`` (3n, p) with each sensor's local block (3 columns) and each humped sensor's three hump
+    translations right-multiplied by the inverse of their 3 x 3 values at the sensor's own node, so that they move
+    it by the identity.  The least-cost split between the humps and the local shapes (:func:`close_sensor_gaps`)
+    then does not depend on the frame's axes: costed per column, a local block whose node values are not a multiple
+    of the identity made a speaker-frame run differ from the model-frame run seen through the fit by 4 µm."""
+    out = np.array(patches, copy=True)
+    s = len(nodes)
+    dofs = 3 * np.asarray(nodes, dtype=np.int64)[:, None] + np.arange(3)
+    blocks = [(k, 3 * k) for k in range(s)] + [(k, 3 * s + j * 3 * (1 + HUMP_TILTS)) for j, k in enumerate(humped)]
+    for k, start in blocks:
+        cols = slice(start, start + 3)
+        out[:, cols] = out[:, cols] @ np.linalg.inv(out[dofs[k], cols])
+    return out
 
 
 #: The sensors without a hump: the tongue tip is thin and free, a /t/ closure presses it onto the palate
@@ -238,7 +259,8 @@ def close_sensor_gaps(basis: ModalBasis, rotation: np.ndarray, nodes: np.ndarray
     coordinates (:func:`patch_costs`: the humps first).  ``weight`` (F, S) in [0, 1]: each sensor's
     engagement (:func:`tonguevis.sim.dropouts.engagement`: a sensor back from a dropout is taken up
     over 0.1 s): its gap is closed by that share, so its patch eases in with its spring instead of
-    jumping in one frame.
+    jumping in one frame (with the humps: its node eased from where the other sensors' humps put it to
+    its own target, see below).
     """
     m = basis.info["global_modes"]
     nodes = np.asarray(nodes, dtype=np.int64)
@@ -252,9 +274,10 @@ def close_sensor_gaps(basis: ModalBasis, rotation: np.ndarray, nodes: np.ndarray
         w = np.einsum("scm,fm->fsc", rotation[dofs, :m].reshape(s, 3, m), q)
         wanted = np.linalg.solve(accumulated_rotations(w), wanted[..., None])[..., 0]
     acting = np.repeat(np.all(np.isfinite(measured), axis=2), 3, axis=1)  # (F, 3S)
-    gap = np.where(acting, (wanted - linear).reshape(len(q), 3 * s), 0.0)
-    if weight is not None:
-        gap = gap * np.repeat(np.clip(np.asarray(weight, dtype=np.float64), 0.0, 1.0), 3, axis=1)
+    full_gap = np.where(acting, (wanted - linear).reshape(len(q), 3 * s), 0.0)
+    engaged = np.ones_like(full_gap) if weight is None else np.repeat(
+        np.clip(np.asarray(weight, dtype=np.float64), 0.0, 1.0), 3, axis=1)
+    gap = full_gap * engaged
     p = patch_s.shape[1]
     if local_only and p > 3 * s:  # the humps at rest
         out = np.zeros((len(q), p))
@@ -262,14 +285,34 @@ def close_sensor_gaps(basis: ModalBasis, rotation: np.ndarray, nodes: np.ndarray
         return out
     if p == 3 * s:  # the local shapes alone: as many as the gaps, solved exactly
         return _local(patch_s, acting, gap)
-    # Humps and local shapes: the cheapest coordinates (patch_costs) that close the gaps, c = C⁻¹Aᵀ(AC⁻¹Aᵀ)⁻¹g;
-    # a sensor not measured has its columns out (its coordinates 0) and its row the identity.
-    column_acting = np.hstack([acting, np.repeat(acting[:, ::3][:, basis.info["humped"]], 3 * (1 + HUMP_TILTS),
-                                                 axis=1)])  # (F, p): each column's sensor measured
-    a = np.where(acting[:, :, None] & column_acting[:, None, :], patch_s[None], 0.0)  # (F, 3S, p)
     inverse_cost = 1.0 / patch_costs(basis, nodes)
     humped = basis.info["humped"]
     inverse_cost[3 * s:] *= np.tile(np.r_[np.ones(3), np.zeros(3 * HUMP_TILTS)], len(humped))  # tilts: the palate's
+    out = _least_cost(patch_s, inverse_cost, humped, acting, gap)
+    # A sensor being taken up (or let go) around a dropout: its row's target eases from where the others' humps
+    # put its node without it to its own gap.  Closing "w x its gap" instead pinned its node where the modes had
+    # it the moment it came back, and every overlapping hump jumped to make room (2.6 mm a frame on the shared
+    # /ka/ 006 with TB lost for 1 s; 0.8 mm with the local shapes alone).
+    partial = acting & (engaged < 1.0)
+    frames = np.flatnonzero(partial.any(axis=1))
+    if len(frames):
+        free = _least_cost(patch_s, inverse_cost, humped, acting[frames] & ~partial[frames], full_gap[frames])
+        there = free @ patch_s.T  # (f, 3S) what the patches do at each sensor's node without the easing ones
+        w = engaged[frames]
+        eased = np.where(partial[frames], w * full_gap[frames] + (1.0 - w) * there, full_gap[frames])
+        out[frames] = _least_cost(patch_s, inverse_cost, humped, acting[frames], eased)
+    return out
+
+
+def _least_cost(patch_s: np.ndarray, inverse_cost: np.ndarray, humped: list, acting: np.ndarray,
+                gap: np.ndarray) -> np.ndarray:
+    """(F, p) the cheapest patch coordinates (inverse costs ``inverse_cost`` (p,), 0: a column left out) closing
+    ``gap`` (F, 3S) at the sensors' rows ``patch_s`` (3S, p), c = C⁻¹Aᵀ(AC⁻¹Aᵀ)⁻¹g; a sensor not ``acting``
+    (F, 3S) has its columns out (its coordinates 0) and its row the identity."""
+    s = patch_s.shape[0] // 3
+    column_acting = np.hstack([acting, np.repeat(acting[:, ::3][:, humped], 3 * (1 + HUMP_TILTS),
+                                                 axis=1)])  # (F, p): each column's sensor measured
+    a = np.where(acting[:, :, None] & column_acting[:, None, :], patch_s[None], 0.0)  # (F, 3S, p)
     mats = np.einsum("fip,p,fjp->fij", a, inverse_cost, a)
     idx = np.arange(3 * s)
     mats[:, idx, idx] += np.where(acting, 0.0, 1.0)

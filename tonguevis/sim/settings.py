@@ -76,8 +76,8 @@ class RunSettings:
     humps : with sensor patches, each sensor but the tip also moves the tissue around it as a hump (flat within
         6 model-mm, gone by 15 mm) before the local shapes close what is left, and with a palate the humps are
         flattened against it (:mod:`tonguevis.sim.patch_contact`): a dorsum at /k/ rises as a whole instead of
-        in a cone under its coil.  Opt-in: the humps are kinematic shapes (volume-neutral to first order); the
-        raised dorsum is a ridge more than a dome and a hump's rim can move further than any sensor (the README).
+        in a cone under its coil.  The humps are kinematic shapes, volume-neutral to first order; False: the
+        local shapes alone (a peak under each coil at a constriction; the README's figures).
     """
 
     mesh: str | None = None
@@ -98,7 +98,7 @@ class RunSettings:
     smooth_window: int | None = None
     tolerance: float | None = None
     closures: bool = True
-    humps: bool = False
+    humps: bool = True
 
     def __post_init__(self) -> None:
         from tonguevis.sensor_stiffness import sensor_stiffness_value

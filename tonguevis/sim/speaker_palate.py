@@ -15,8 +15,9 @@ never met it at /t/.  Here (:func:`speaker_palate`):
   recorded without shared head references, the blade sensor went 2-7 mm above the densely traced palate 27 mm
   behind the tip's place while the tip stayed 1-3 mm under it: the sittings' head frames differ by a tilt);
 * **estimated**: behind and beside it, the generic roof joined to the traced edge
-  (:func:`tonguevis.palate.joined_palate`), raised the same way wherever the sensors went above it and, on
-  the soft palate, wherever the tongue at rest lies above it;
+  (:func:`tonguevis.palate.joined_palate`), raised wherever the sensors went above it, broadly
+  (:data:`ESTIMATE_RAISE_REACH`: a roof, not a groove along the sensors' path) and, on the soft palate,
+  wherever the tongue at rest lies above it;
 * **velum**: behind the traced hard palate's posterior end (the hinge), ``lift_shape`` rises from 0 to 1 over
   :data:`VELUM_RAMP`; each frame's lift (m) is the least that keeps every sensor over the soft palate
   :data:`COIL_HALF` under it (held over a few frames: the velum does not flicker), so the dorsum's own
@@ -44,6 +45,12 @@ MIN_VELUM_SHARE = 0.5
 #: m: a point's need to raise the palate is met in full within RAISE_FLAT of it (x, y; more than a grid cell's
 #: half-diagonal, so the cells around it all reach it) and fades out by RAISE_REACH.
 RAISE_FLAT, RAISE_REACH = 1.5e-3, 6e-3
+#: m: on the estimated palate (no trace there) a point's need is met in full within ESTIMATE_RAISE_FLAT and fades
+#: out by ESTIMATE_RAISE_REACH.  The generic roof lies up to 10 mm under the dorsum's path at /k/ (OSN12); raised
+#: within 6 mm it became a groove along that path whose walls held the dorsum beside TD down while TD rose into it:
+#: the cone (TD moving 1.4-1.8x its neighbours at the closures).  A roof raised over 15 mm lets the dorsum rise as a
+#: whole (1.06-1.12) and still meets the dorsum at 8-10 of 10 closures.  The traced palate keeps the narrow raise.
+ESTIMATE_RAISE_FLAT, ESTIMATE_RAISE_REACH = 4e-3, 15e-3
 #: Frames either side over which a lift is held (the velum moves with the tongue, not with each sample's noise).
 LIFT_HOLD = 2
 #: Per sensor, the share of its samples highest above the palate left out of the envelope: a glitch of the
@@ -86,6 +93,9 @@ def speaker_palate(placed: PalateSurface, generic: PalateSurface | None, sensors
         rest = np.asarray(rest_points, dtype=np.float64)
         lifted.append(rest[_at(whole, shape, rest) > 0.0])
     raise_by = _raise_to(gx, gy, z, np.concatenate(lifted), np.isfinite(z))
+    # where nothing was traced the sensors raise the roof broadly (ESTIMATE_RAISE_REACH says why)
+    raise_by = np.maximum(raise_by, _raise_to(gx, gy, z, lifted[0], np.isfinite(z) & ~traced,
+                                              ESTIMATE_RAISE_REACH, ESTIMATE_RAISE_FLAT))
     z = z + raise_by
     rest_surface = whole.with_grid(z, traced=traced, lift_shape=shape, support=None,
                                    metadata={**placed.metadata, **{k: v for k, v in whole.metadata.items()
@@ -185,9 +195,11 @@ def _at(palate: PalateSurface, grid: np.ndarray, points: np.ndarray) -> np.ndarr
     return palate._interp(own[:, :2], grid)[0]
 
 
-def _raise_to(gx: np.ndarray, gy: np.ndarray, z: np.ndarray, points: np.ndarray, allowed: np.ndarray) -> np.ndarray:
+def _raise_to(gx: np.ndarray, gy: np.ndarray, z: np.ndarray, points: np.ndarray, allowed: np.ndarray,
+              reach: float = RAISE_REACH, flat: float = RAISE_FLAT) -> np.ndarray:
     """(ny, nx) m: how far to raise each allowed cell so that every point lies under the surface, the raise
-    fading out over :data:`RAISE_REACH` around each point (the largest any point asks for; zero elsewhere)."""
+    met in full within ``flat`` (m, x-y distance) of each point and fading out by ``reach`` (the largest any
+    point asks for; zero elsewhere)."""
     from scipy.spatial import cKDTree
 
     out = np.zeros_like(z)
@@ -204,13 +216,13 @@ def _raise_to(gx: np.ndarray, gy: np.ndarray, z: np.ndarray, points: np.ndarray,
     heights = z.ravel()[where]
     tree = cKDTree(cells)
     best = np.zeros(len(where))
-    for p, near in zip(points, tree.query_ball_point(points[:, :2], RAISE_REACH)):
+    for p, near in zip(points, tree.query_ball_point(points[:, :2], reach)):
         if not near:
             continue
         near = np.asarray(near)
         d = np.linalg.norm(cells[near] - p[:2], axis=1)
-        fade = np.clip((d - RAISE_FLAT) / (RAISE_REACH - RAISE_FLAT), 0.0, 1.0)
-        weight = 1.0 - fade * fade * (3.0 - 2.0 * fade)  # 1 within RAISE_FLAT, a smooth step down to 0
+        fade = np.clip((d - flat) / (reach - flat), 0.0, 1.0)
+        weight = 1.0 - fade * fade * (3.0 - 2.0 * fade)  # 1 within flat, a smooth step down to 0
         # the cell nearest the point must reach it; the others ease down with distance
         want = (p[2] - heights[near]) * weight
         best[near] = np.maximum(best[near], want)
