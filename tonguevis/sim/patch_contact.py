@@ -120,23 +120,21 @@ def patches_below_palate(q: np.ndarray, basis: ModalBasis, nodes: np.ndarray, co
     frames = np.flatnonzero(low < margin - 1e-7)
     null = _null_space(rows, cost)
     shapes_null = (phi_patch.reshape(-1, phi_patch.shape[2]) @ null).reshape(len(cand), 3, -1)  # Φ_P N (k, 3, z)
+    patch_flat = phi_patch.reshape(3 * len(cand), -1)
     done = []
-    for f in frames:
-        modal, turns = placed([f])
-        c0 = q[f, m:]
-        own = (phi_patch.reshape(-1, len(c0)) @ c0).reshape(len(cand), 3)  # Φ_P c0, in the modes' frame
-        if turns is not None:
-            start = base + np.matmul(turns[0], (modal[0] + own)[:, :, None])[:, :, 0]
-        else:
-            start = base + modal[0] + own
-        z = _held_below(shapes_null, None if turns is None else turns[0], start, contact["palate"], offsets[f],
-                        allowed[f], margin)
-        c = None if z is None else c0 + null @ z
-        if c is not None:
-            q[f, m:] = c
-            done.append(f)
-        elif fallback is not None:
-            q[f, m:] = fallback[f]
+    for first in range(0, len(frames), 256):  # chunks, as above
+        chunk = frames[first:first + 256]
+        modal, turns = placed(chunk)
+        own = (q[chunk, m:] @ patch_flat.T).reshape(len(chunk), len(cand), 3)  # Φ_P c0, in the modes' frame
+        moved = modal + own
+        start = base[None] + (moved if turns is None else np.matmul(turns, moved[..., None])[..., 0])
+        steps = _held_below(shapes_null, turns, start, contact["palate"], offsets[chunk], allowed[chunk], margin)
+        for j, f in enumerate(chunk):
+            if np.all(np.isfinite(steps[j])):
+                q[f, m:] = q[f, m:] + null @ steps[j]
+                done.append(f)
+            elif fallback is not None:
+                q[f, m:] = fallback[f]
     return q, np.asarray(done, dtype=np.int64)
 
 
@@ -164,40 +162,53 @@ def _least_distance(g: np.ndarray, h: np.ndarray) -> np.ndarray | None:
     return -r[:n] / r[n]
 
 
-def _held_below(shapes_null, turns, start, palate, offset, ok, margin):
-    """One frame's step z below the palate (None: none found within 2 x :data:`MAX_PASSES` passes).
+def _held_below(shapes_null, turns, start, palate, offsets, ok, margin) -> np.ndarray:
+    """(f, z) each frame's step z below the palate (NaN: none found within 2 x :data:`MAX_PASSES` passes).
 
-    The nearest patch coordinates to the frame's c0 in the cost metric keeping the sensor nodes are c0 + N z with
+    The nearest patch coordinates to a frame's c0 in the cost metric keeping the sensor nodes are c0 + N z with
     N the sensors' rows' null space (N^T C N = I), so each pass is a least distance problem in z.
     shapes_null : (k, 3, z) Φ_P N, the candidates' patch shapes in the null space (the modes' frame);
-    turns : (k, 3, 3) the modes' rotations R̃ at the candidates (None: linear); start : (k, 3) the candidates at
-    c0 (rotated), m.  A node at c0 + N z is at start + R̃ Φ_P N z, so its clearance's row is (R̃ᵀ n)ᵀ Φ_P N.
-    Unlike :func:`tonguevis.sim.contact._active_set`, each pass keeps every earlier pass's linearisation
-    (cutting planes): a hump moves a wide region under a curved palate, and a node linearised at one shape alone
-    sent the next pass elsewhere (passes that oscillated by 5-10 mm on the shared /ka/ 007).
-    :func:`held_below_reference` is the same, written out plainly (tests/sim/test_humps.py)."""
-    k, _, width = shapes_null.shape
+    turns : (f, k, 3, 3) the modes' rotations R̃ at the candidates (None: linear); start : (f, k, 3) the candidates
+    at c0 (rotated), m; offsets : (f, 3|4); ok : (f, k) the candidates the palate may hold.  A node at c0 + N z is
+    at start + R̃ Φ_P N z, so its clearance's row is (R̃ᵀ n)ᵀ Φ_P N.  The frames take their passes in step (one
+    clearance query a pass for all those still going), each its own least distance problems.  Unlike
+    :func:`tonguevis.sim.contact._active_set`, each pass keeps every earlier pass's linearisation (cutting
+    planes): a hump moves a wide region under a curved palate, and a node linearised at one shape alone sent
+    the next pass elsewhere (passes that oscillated by 5-10 mm on the shared /ka/ 007).
+    :func:`held_below_reference` is one frame's, written out plainly (tests/sim/test_humps.py)."""
+    n, k = start.shape[:2]
+    width = shapes_null.shape[2]
     flat = shapes_null.reshape(3 * k, width)
-    z = np.zeros(width)
-    g_all, h_all = np.zeros((0, width)), np.zeros(0)
+    z = np.zeros((n, width))
+    out = np.full((n, width), np.nan)
+    planes = [(np.zeros((0, width)), np.zeros(0)) for _ in range(n)]
+    going = np.arange(n)
     for _ in range(2 * MAX_PASSES):
-        step = (flat @ z).reshape(k, 3)
+        if len(going) == 0:
+            break
+        step = (z[going] @ flat.T).reshape(len(going), k, 3)
         if turns is not None:
-            step = np.matmul(turns, step[:, :, None])[:, :, 0]
-        gap, normal = clearance_at(palate, start + step, offset)
-        usable = ok & np.isfinite(gap)
-        if not np.any(usable & (gap < margin - 1e-7)):
-            return z
-        near = np.flatnonzero(usable & (gap < margin + BAND))
-        # clearance(z') ~ gap + n . R̃ Φ_P N (z' - z) >= margin
-        n_own = normal[near] if turns is None else np.matmul(normal[near][:, None, :], turns[near])[:, 0]
-        rows = np.matmul(n_own[:, None, :], shapes_null[near])[:, 0]
-        g_all = np.vstack([g_all, rows])
-        h_all = np.concatenate([h_all, margin - gap[near] + rows @ z])
-        z = _least_distance(g_all, h_all)
-        if z is None:
-            return None
-    return None
+            step = np.matmul(turns[going], step[..., None])[..., 0]
+        gap, normal = clearance_at(palate, start[going] + step, offsets[going])
+        usable = ok[going] & np.isfinite(gap)
+        inside = np.any(usable & (gap < margin - 1e-7), axis=1)
+        out[going[~inside]] = z[going[~inside]]
+        still = []
+        for j in np.flatnonzero(inside):
+            i = going[j]
+            near = np.flatnonzero(usable[j] & (gap[j] < margin + BAND))
+            # clearance(z') ~ gap + n . R̃ Φ_P N (z' - z) >= margin
+            n_own = normal[j, near] if turns is None else np.matmul(normal[j, near][:, None, :], turns[i, near])[:, 0]
+            rows = np.matmul(n_own[:, None, :], shapes_null[near])[:, 0]
+            g_all = np.vstack([planes[i][0], rows])
+            h_all = np.concatenate([planes[i][1], margin - gap[j, near] + rows @ z[i]])
+            planes[i] = (g_all, h_all)
+            found = _least_distance(g_all, h_all)
+            if found is not None:
+                z[i] = found
+                still.append(i)
+        going = np.asarray(still, dtype=np.int64)
+    return out
 
 
 def held_below_reference(null, phi_patch, points, palate, offset, c0, ok, margin):
