@@ -42,6 +42,17 @@ the contact probe (~100 ms, 40 more than without), and the contact (~190-280 ms)
 an all-frames clearance scan per stage (u = Φq and the query, ~25 ms each), the later
 passes' queries (~40 ms), the guessed sets' rounds (~50-90 ms: a node a place added a round,
 up to 6 rounds where 5 nodes press), the push guard (~12 ms).
+2026-12-07 (issue 36, the palate at least half as fast as without it), the machine loaded
+(load average 3.6-4.3 on the 2 cores, so the ratios say more than the rates): the guessed
+rounds on K's factors, no (m, m) product per row or per sensor pattern (/ta/ 009 has 57),
+10 rounds instead of 6 (passes left to the NNLS 122 -> 10 and 211 -> 4): /ta/ 009 815 against
+1,498 frames/s without the palate (0.54; 975cf01 in the same session 791/1,582, 0.50), /ka/ 006
+1,379/2,712 (0.51; 975cf01 1,149/2,495, 0.46); alternating runs in one process, best of 7, gave
+0.48-0.57 wall and 0.53-0.54 CPU-time ratios (975cf01: 0.38-0.49, 0.44-0.49).  What bounds the
+palate's share now (/ka/ 006, of ~0.7 s more than without it): the guessed rounds (~0.3 s over both
+stages: the batched eigenvalues and solves, the product with Φ for w), the clearance queries of the
+later passes with the products Φq before them (~0.15 s: warp's CPU kernel ~36 ns a point), the
+correction after the dynamics (~0.2 s, the same solve again) and the figures' contact probe.
 
 Domains (issue 26 item 5): ``domains_fps`` is simulate(method="domains") end to end on the
 demo (--recording) and our shipped tongue, default settings, best of 3 after a first call

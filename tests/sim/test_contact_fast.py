@@ -241,12 +241,12 @@ def test_contact_area_is_the_surface_the_touching_nodes_stand_for():
 @pytest.fixture(scope="module")
 def first_passes(demo):
     """Every frame's first QP pass on the demo against the generic palate 6 mm lower (all sensors held):
-    (K, phi_nodes, q0 (F, m), gap (F, k), normal (F, k, 3), ok (F, k)) of the frames with a candidate
+    (the sensors' operator, phi_nodes, q0 (F, m), gap (F, k), normal (F, k, 3), ok (F, k)) of the frames with a candidate
     inside the margin, (2, F) bool: whether each frame's QP is well posed (the active block's condition
     number below 1e4, no force below 1e-4 of the largest, no other near candidate within 1e-4 of the
     largest |residual| of the margin) and whether it is ambiguous (condition number above 1e8 or a
     force below 1e-8 of the largest), and the reference's pass of each (NNLS: λ > 0, their candidates, q)."""
-    from tonguevis.sim.contact import BAND, MARGIN, _contact_pass_fast, _sensor_inverse, _sensor_operator
+    from tonguevis.sim.contact import BAND, MARGIN, _contact_pass_fast, _contact_response, sensor_operator
     from tonguevis.sim.contact_kernel import Clearance
 
     rec, model, prep, basis, phi_s, w_s, context = demo
@@ -254,7 +254,7 @@ def first_passes(demo):
     lam = basis.eigenvalues
     P = phi_s.reshape(-1, len(lam))
     gram = (P / lam) @ P.T
-    k_mat = _sensor_operator(lam, P, _sensor_inverse(gram, np.zeros(len(P)), np.ones(len(P), bool)))
+    operator = sensor_operator(lam, P, gram, np.zeros(len(P)), np.ones(len(P), bool))
     measured = np.all(np.isfinite(prep.displacement.reshape(len(prep.displacement), -1)), axis=1)
     targets = prep.displacement[measured].reshape(int(measured.sum()), -1)
     q0 = (np.linalg.solve(gram, targets.T).T @ P) / lam  # the sensors where measured, least elastic energy
@@ -268,18 +268,18 @@ def first_passes(demo):
     ok = np.isfinite(gap)
     ref, posed = [], []
     for j in range(len(frames)):
-        lam_a, rows, q = _contact_pass_fast(lam, k_mat, phi_nodes, q0[j], q0[j], gap[j], normal[j], ok[j], MARGIN)
+        lam_a, rows, q = _contact_pass_fast(operator, phi_nodes, q0[j], q0[j], gap[j], normal[j], ok[j], MARGIN)
         near = np.flatnonzero(ok[j] & (gap[j] < MARGIN + BAND))
         on = lam_a > 0
         ref.append((lam_a[on], near[on], q))
-        m_mat = -rows @ (k_mat @ rows.T)
+        m_mat = _contact_response(rows, operator)[0]
         r = gap[j, near] - MARGIN
         eig = np.linalg.eigvalsh(m_mat[np.ix_(on, on)])
         w = (m_mat @ lam_a + r)[~on]
         posed.append((eig[0] > 1e-4 * eig[-1] and lam_a[on].min() > 1e-4 * lam_a.max()
                       and (w.min(initial=np.inf) > 1e-4 * np.abs(r).max()),
                       eig[0] < 1e-8 * eig[-1] or lam_a[on].min() < 1e-8 * lam_a.max()))
-    return k_mat, phi_nodes, q0, gap, normal, ok, np.array(posed).T, ref
+    return operator, phi_nodes, q0, gap, normal, ok, np.array(posed).T, ref
 
 
 def guessed(first_passes, stale):
@@ -287,10 +287,10 @@ def guessed(first_passes, stale):
     ``stale`` (F, k) bool: (done (F,), q (F, m), λ per frame (its positive ones), support (F, k))."""
     from tonguevis.sim.contact import MARGIN, _guessed_passes
 
-    k_mat, phi_nodes, q0, gap, normal, ok = first_passes[:6]
+    operator, phi_nodes, q0, gap, normal, ok = first_passes[:6]
     n = len(q0)
     q, forces, external = q0.copy(), stale.astype(np.float64), np.zeros_like(q0)
-    done = _guessed_passes([k_mat] * n, np.arange(n), phi_nodes, q, q0, gap, normal, ok, MARGIN, forces, external)
+    done = _guessed_passes([operator] * n, np.arange(n), phi_nodes, q, q0, gap, normal, ok, MARGIN, forces, external)
     return done, q, [f[f > 0] for f in forces], forces > 0
 
 
@@ -383,3 +383,33 @@ def test_real_speech_on_the_speakers_palate_is_solved_as_the_reference_does(name
                 "sensors_above_palate", "conflicts"):
         assert c[key] == r[key]
     assert rel_diff(ref.q, fast.q) < REL
+
+
+def test_the_contact_response_keeps_its_digits_where_the_sensors_nearly_hold_a_node(demo):
+    """M = -AKAᵀ (K: a contact force's move with the hard sensors re-balanced) of rows at the candidates
+    nearest the sensors, where M is a small remainder of AΛ⁻¹Aᵀ: _contact_response's M within 1e-12 of
+    the exact one (40 digits), where forming -AKAᵀ directly was off by up to 1e-10 and more; and its
+    B = KAᵀ moves no sensor."""
+    mp = pytest.importorskip("mpmath")
+    from tonguevis.sim.contact import _contact_response, sensor_operator
+
+    rec, model, prep, basis, phi_s, w_s, context = demo
+    lam = basis.eigenvalues
+    P = phi_s.reshape(-1, len(lam))
+    operator = sensor_operator(lam, P, (P / lam) @ P.T, np.zeros(len(P)), np.ones(len(P), bool))
+    cand = context["points"][context["candidates"]]
+    sensors = context["points"][context["sensor_nodes"]]
+    nearest = np.argsort(np.linalg.norm(cand[:, None] - sensors[None], axis=2).min(axis=1))[:8]
+    normal = np.random.default_rng(5).normal(size=(len(nearest), 3))
+    a_rows = -np.einsum("kc,kcm->km", normal / np.linalg.norm(normal, axis=1)[:, None], context["phi_nodes"][nearest])
+    m_mat, b_mat = _contact_response(a_rows, operator)
+    mp.mp.dps = 40
+    a_m, p_m = mp.matrix(a_rows.tolist()), mp.matrix(P.tolist())
+    inv_lam = mp.diag([1 / mp.mpf(float(x)) for x in lam])
+    y = a_m * inv_lam * p_m.T
+    exact = a_m * inv_lam * a_m.T - y * (p_m * inv_lam * p_m.T) ** -1 * y.T
+    exact = np.array(exact.tolist(), dtype=float)
+    held = np.diag(exact) / np.einsum("km,km->k", a_rows / lam, a_rows)
+    assert held.min() < 1e-3  # the sensors hold these nodes: M a small remainder
+    assert np.abs(m_mat - exact).max() < 1e-12 * np.abs(exact).max()
+    assert np.abs(P @ b_mat).max() < 1e-12 * np.abs(P).max() * np.abs(b_mat).max()

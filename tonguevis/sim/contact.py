@@ -28,7 +28,7 @@ NumPy clearances (:func:`_active_set`); ``"warp"`` (the default), every
 frame's clearances in one compiled pass (:mod:`tonguevis.sim.contact_kernel`),
 the active set only in the frames where a candidate it may constrain is inside
 the margin, those frames' passes in step (one compiled query a pass), the
-sensors' elimination one matrix per sensor pattern (:func:`_active_sets`), and
+sensors' elimination by its factors per sensor pattern (:class:`SensorOperator`), and
 each pass's QP solved for all those frames at once from a guessed active set
 (the frame's set after its last pass, else its deepest node), taken only where
 it provably is the QP's one solution, corrected a few times where it is not
@@ -42,6 +42,8 @@ whole-array work around them (scripts/bench_simulation.py).
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
@@ -168,8 +170,7 @@ def _active_set(lam, P, gram, phi_nodes, cand_pts, palate, offset, c, comp, acti
     hold by construction.  Passes repeat until no candidate is closer than
     the margin (the palate is curved), at most MAX_PASSES.
     """
-    p_act = P[np.flatnonzero(acting)]
-    solve_g = _sensor_inverse(gram, comp, acting)
+    operator = sensor_operator(lam, P, gram, comp, acting)
     q, lam_a, rows = q0, None, None
     for _ in range(MAX_PASSES):
         u = np.einsum("kcm,m->kc", phi_nodes, q)
@@ -177,7 +178,7 @@ def _active_set(lam, P, gram, phi_nodes, cand_pts, palate, offset, c, comp, acti
         ok = allowed & np.isfinite(gap)
         if not np.any(ok & (gap < margin - 1e-7)):
             break
-        lam_a, rows, q = _contact_pass(lam, p_act, solve_g, phi_nodes, q, q0, gap, normal, ok, margin)
+        lam_a, rows, q = _contact_pass(operator, phi_nodes, q, q0, gap, normal, ok, margin)
     if lam_a is None or not np.any(lam_a > 0):
         return q0, None, None
     # A contact push moves the surface about as far as it was inside the palate: a solve that moves it
@@ -191,19 +192,18 @@ def _active_set(lam, P, gram, phi_nodes, cand_pts, palate, offset, c, comp, acti
     return q, lam_a[used], rows[used]
 
 
-def _contact_pass(lam, p_act, solve_g, phi_nodes, q, q0, gap, normal, ok, margin):
+def _contact_pass(operator, phi_nodes, q, q0, gap, normal, ok, margin):
     """One pass of :func:`_active_set`: the QP linearised at ``q`` (the clearances ``gap`` (k,) and
-    ``normal`` (k, 3) there; ok : (k,) the candidates that may get a constraint) solved exactly.
+    ``normal`` (k, 3) there; ok : (k,) the candidates that may get a constraint) solved exactly, with
+    the sensors of ``operator`` (:class:`SensorOperator`) re-balanced.
     Returns (contact forces λ (a,), their rows A (a, m), the new q)."""
     from scipy.optimize import nnls
 
     near = np.flatnonzero(ok & (gap < margin + BAND))
     a_rows = -np.einsum("kc,kcm->km", normal[near], phi_nodes[near])
     rhs = gap[near] - margin + a_rows @ q
-    # q(λ) = q₀ + Bλ with the sensors re-balanced: B = Λ⁻¹(Pᵀ G⁻¹ P Λ⁻¹ Aᵀ - Aᵀ).
-    at_l = (a_rows / lam).T  # Λ⁻¹Aᵀ (m, a)
-    b_mat = (p_act.T @ (solve_g @ (p_act @ at_l))) / lam[:, None] - at_l
-    m_mat = -a_rows @ b_mat
+    # q(λ) = q₀ + Bλ with the sensors re-balanced, and the QP's matrix M = -AB (:func:`_contact_response`)
+    m_mat, b_mat = _contact_response(a_rows, operator)
     r = rhs - a_rows @ q0
     chol = _cholesky(0.5 * (m_mat + m_mat.T))
     lam_a = nnls(chol.T, -np.linalg.lstsq(chol, r, rcond=None)[0], maxiter=50 * len(r))[0]
@@ -215,19 +215,16 @@ def _contact_pass(lam, p_act, solve_g, phi_nodes, q, q0, gap, normal, ok, margin
     return lam_a, a_rows, q0 + b_mat @ lam_a
 
 
-def _contact_pass_fast(lam, k_mat, phi_nodes, q, q0, gap, normal, ok, margin):
-    """:func:`_contact_pass` with the sensors' elimination folded into one (m, m) matrix
-    K = Λ⁻¹(Pᵀ G⁻¹ P Λ⁻¹ - I) (:func:`_sensor_operator`, shared by the frames with the same acting
-    sensors and springs), so B = K Aᵀ is one product, and the small solves by LAPACK directly (the
-    NNLS's right-hand side a triangular solve; the polish a Cholesky solve where the block is positive
-    definite, else least squares as the reference): the same QP, the same result to rounding."""
+def _contact_pass_fast(operator, phi_nodes, q, q0, gap, normal, ok, margin):
+    """:func:`_contact_pass` with the small solves by LAPACK directly (the NNLS's right-hand side a
+    triangular solve; the polish a Cholesky solve where the block is positive definite, else least
+    squares as the reference): the same QP, the same result to rounding."""
     from scipy.linalg.lapack import dpotrf, dpotrs, dtrtrs
     from scipy.optimize import nnls
 
     near = np.flatnonzero(ok & (gap < margin + BAND))
     a_rows = -np.einsum("kc,kcm->km", normal[near], phi_nodes[near])
-    b_mat = k_mat @ a_rows.T
-    m_mat = -a_rows @ b_mat
+    m_mat, b_mat = _contact_response(a_rows, operator)
     r = gap[near] - margin + a_rows @ (q - q0)
     chol, lower = _factor(0.5 * (m_mat + m_mat.T))
     if lower:
@@ -262,16 +259,60 @@ def _factor(matrix: np.ndarray) -> tuple[np.ndarray, bool]:
     return _cholesky(matrix), False
 
 
-def _sensor_operator(lam, p_act, solve_g):
-    """K = Λ⁻¹(Pᵀ G⁻¹ P Λ⁻¹ - I) (m, m): a contact force f moves the shape by K f with the sensors re-balanced."""
-    return ((p_act.T @ solve_g @ p_act) / lam[:, None] - np.eye(len(lam))) / lam[None, :]
+class SensorOperator(NamedTuple):
+    """How contact forces move the shape with the sensors re-balanced, for one pattern of acting sensors
+    and springs: a force f (m,) in modal space moves it by K f, K = Λ⁻¹(PᵀG⁻¹PΛ⁻¹ - I), G = PΛ⁻¹Pᵀ + C
+    over the acting sensors; kept as its factors, -K = Λ^-½(I - XᵀG⁻¹X)Λ^-½ with X = PΛ^-½
+    (:func:`_contact_response`)."""
+
+    x_mat: np.ndarray  # (3S, m) X = PΛ^-½, every sensor's rows
+    g_inv: np.ndarray  # (3S, 3S) G⁻¹ of the acting sensors (:func:`_sensor_inverse`), zero at the others
+    spring_root: np.ndarray  # (3S,) √C of the acting sensors' springs (m/N), zero at the others
+    eigenvalues: np.ndarray  # (m,) Λ
+    g_mat: np.ndarray  # (3S, 3S) G = XXᵀ + C of the acting sensors, zero at the others
+
+
+def sensor_operator(lam, P, gram, comp, acting) -> SensorOperator:
+    """:class:`SensorOperator` of the ``acting`` (3S,) sensor rows of ``P`` (3S, m), springs ``comp`` (3S,) m/N;
+    gram : PΛ⁻¹Pᵀ (3S, 3S)."""
+    act = np.flatnonzero(acting)
+    g_inv = np.zeros((len(P), len(P)))
+    g_inv[np.ix_(act, act)] = _sensor_inverse(gram, comp, acting)
+    spring = np.zeros(len(P))
+    spring[act] = np.where(np.isfinite(comp[act]), comp[act], 0.0)  # as _sensor_inverse's
+    g_mat = np.zeros((len(P), len(P)))
+    g_mat[np.ix_(act, act)] = gram[np.ix_(act, act)] + np.diag(spring[act])
+    return SensorOperator(P / np.sqrt(lam), g_inv, np.sqrt(spring), lam, g_mat)
+
+
+def _response_rows(a_root: np.ndarray, operator: SensorOperator):
+    """Of contact rows Ã = AΛ^-½ (a, m): (Ã⊥ = Ã(I - XᵀG⁻¹X) (a, m), YG⁻¹ (a, 3S), YG⁻¹√C (a, 3S)), Y = ÃXᵀ."""
+    y = a_root @ operator.x_mat.T
+    y_g = y @ operator.g_inv
+    # once refined (YG⁻¹ G = Y to rounding): G is ill-conditioned (sensors the modes barely tell apart),
+    # and what YG⁻¹ misses there would move the sensors (some 10⁻⁹ of a push)
+    y_g += (y - y_g @ operator.g_mat) @ operator.g_inv
+    return a_root - y_g @ operator.x_mat, y_g, y_g * operator.spring_root
+
+
+def _contact_response(a_rows: np.ndarray, operator: SensorOperator) -> tuple[np.ndarray, np.ndarray]:
+    """(M = -AKAᵀ (a, a), B = KAᵀ (m, a)) of contact rows A (a, m): the shape moves by Bλ under contact
+    forces λ, the rows' clearances by -Mλ.
+
+    As M = Ã⊥Ã⊥ᵀ + YG⁻¹CG⁻¹Yᵀ (:func:`_response_rows`; I - XᵀG⁻¹X = (I - XᵀG⁻¹X)² + XᵀG⁻¹CG⁻¹X, as
+    G = XXᵀ + C): two positive parts.  -AKAᵀ formed directly loses digits where the sensors nearly hold
+    a node (M some 10⁻⁶ of AΛ⁻¹Aᵀ): its forces were 3e-10 from the exact ones on the demo, these 1e-15
+    (tests/sim/test_contact_fast.py)."""
+    inv_root = 1.0 / np.sqrt(operator.eigenvalues)
+    perp, _, sprung = _response_rows(a_rows * inv_root, operator)
+    return perp @ perp.T + sprung @ sprung.T, -(perp * inv_root).T
 
 
 def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, margin, gap0, normal0,
                  guess: bool = True):
     """:func:`_active_set` of several frames at once, with what the caller already has.
 
-    solves : per frame, :func:`_sensor_operator` of its acting sensors (shared by the frames with
+    solves : per frame, the :class:`SensorOperator` of its acting sensors (shared by the frames with
     the same acting sensors and springs); q0 : (n, m); allowed : (n, k); offsets : (n, 3); gap0 (n, k)
     and normal0 (n, k, 3): the clearances at q0 (from the compiled pass over every frame);
     query : a :class:`~tonguevis.sim.contact_kernel.Clearance` of the candidates.  The frames
@@ -308,7 +349,7 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
             done = np.zeros(len(js), dtype=bool)
         for j in np.flatnonzero(~done):  # the others: the QP by NNLS, as the reference
             i = going[js[j]]
-            lam_a, rows, q[i] = _contact_pass_fast(lam, solves[i], phi_nodes, q[i], q0[i], gap[js[j]],
+            lam_a, rows, q[i] = _contact_pass_fast(solves[i], phi_nodes, q[i], q0[i], gap[js[j]],
                                                    normal[js[j]], ok[j], margin)
             near = np.flatnonzero(ok[j] & (gap[js[j]] < margin + BAND))
             used = lam_a > 0
@@ -331,7 +372,7 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
 #: (so neither the 1e-12 jitter of the reference's factor nor rounding can move it: λ equal to 1e-10).
 GUESS_MARGIN = 1e-5
 GUESS_CONDITION = 1e4
-GUESS_ROUNDS = 6  # guesses a frame tries (each corrected from the last) before the NNLS takes it
+GUESS_ROUNDS = 10  # guesses a frame tries (each corrected from the last) before the NNLS takes it
 GUESS_MAX = 24  # largest active set guessed; more goes to the NNLS
 GUESS_SPREAD = 8e-3  # m: candidates this far apart at rest press on the palate in different places
 
@@ -340,6 +381,7 @@ def _guessed_passes(solves, frames, phi_nodes, q, q0, gap, normal, ok, margin, f
                     points=None):
     """One pass of :func:`_active_sets` for the frames whose QP a guessed active set solves; the rest untouched.
 
+    solves : per frame (row of q), its :class:`SensorOperator`;
     frames : (F,) the frames (rows of q, q0 (n, m), forces (n, k), external (n, m)) taking a pass;
     gap (F, k) m, normal (F, k, 3), ok (F, k) their clearances at q and the candidates that may
     get a constraint; forces: each frame's λ over the candidates after its last pass (its active set
@@ -358,6 +400,12 @@ def _guessed_passes(solves, frames, phi_nodes, q, q0, gap, normal, ok, margin, f
     have q, forces and external (-Aᵀλ) filled; returns (F,) bool, which.  Vectorised over the frames:
     one pass's Python costs a few microseconds a frame instead of some 90 (most frames'
     first guess holds: consecutive frames press on the same few nodes).
+
+    K applied by its factors (-K = Λ^-½(I - XᵀG⁻¹X)Λ^-½, :class:`SensorOperator`): with the guessed
+    rows Ã = AΛ^-½, Y = ÃXᵀ and Ã⊥ = Ã - YG⁻¹X, M_SS = Ã⊥Ã⊥ᵀ + YG⁻¹CG⁻¹Yᵀ and the move
+    Bλ = KAᵀλ = -Λ^-½Ã⊥ᵀλ, so a row costs m + 3S numbers once a call, no (m, m) product per row
+    and none per sensor pattern; and M_SS is a sum of two positive parts, where -AKAᵀ loses
+    digits (a node the sensors nearly hold: M some 10⁻⁶ of AΛ⁻¹Aᵀ): within 10⁻¹⁵ of M in 40 digits.
     """
     n_f, k = gap.shape
     m = q.shape[1]
@@ -371,6 +419,21 @@ def _guessed_passes(solves, frames, phi_nodes, q, q0, gap, normal, ok, margin, f
     near, gap, normal = near[:, cols], gap[:, cols], normal[:, cols]
     phi_nodes = phi_nodes[cols]
     phi_flat = phi_nodes.reshape(3 * k, m)
+    normal_flat = normal.reshape(n_f, 3 * k)
+    # each frame's sensor pattern (frames with the same acting sensors and springs share an operator)
+    pattern_of: dict = {}
+    pattern = np.array([pattern_of.setdefault(id(solves[i]), len(pattern_of)) for i in frames], dtype=np.int64)
+    operators = [None] * len(pattern_of)
+    for j, i in enumerate(frames):
+        if operators[pattern[j]] is None:
+            operators[pattern[j]] = solves[i]
+    x_mat = operators[0].x_mat  # PΛ^-½: the same for every pattern
+    inv_root = 1.0 / np.sqrt(operators[0].eigenvalues)  # Λ^-½
+    n_y = len(x_mat)
+    # each (frame, candidate)'s Ã⊥, YG⁻¹ and YG⁻¹√C, formed once a call (a guess keeps most of its last)
+    slot = np.full((n_f, k), -1, dtype=np.int64)
+    store = np.empty((8 * n_f, m + 2 * n_y))
+    buffer = store[:0]
     # r = gap - margin + A(q - q0) at every candidate, A's row i being -n_iᵀΦ_i
     r_all = gap - margin
     if not first:
@@ -394,49 +457,73 @@ def _guessed_passes(solves, frames, phi_nodes, q, q0, gap, normal, ok, margin, f
         if len(pending) == 0:
             break
         g = guess[pending]
-        n_p, width = len(pending), int(g.sum(axis=1).max())
-        idx = np.argsort(~g, axis=1, kind="stable")[:, :width]  # the guessed candidates, ascending (as NNLS's rows)
-        valid = np.take_along_axis(g, idx, axis=1)
-        nrm = normal[pending[:, None], idx]  # (P, s, 3)
-        a = -np.einsum("psc,pscm->psm", nrm, phi_nodes[idx])  # (P, s, m) the guessed rows of A
-        a[~valid] = 0.0
-        bt = np.empty_like(a)  # rows K aᵢ (B = K Aᵀ, transposed), one product per sensor pattern
-        patterns: dict = {}
-        for j, i in enumerate(frames[pending]):
-            patterns.setdefault(id(solves[i]), (solves[i], []))[1].append(j)
-        for k_mat, members in patterns.values():
-            members = np.asarray(members)
-            bt[members] = (a[members].reshape(-1, m) @ k_mat.T).reshape(len(members), width, m)
-        m_ss = -np.matmul(a, bt.transpose(0, 2, 1))  # (P, s, s) M_SS
-        r_s = np.where(valid, np.take_along_axis(r_all[pending], idx, axis=1), 0.0)
-        # padding: λ = 0 there, the block's eigenvalues those of the guess and its mean diagonal
-        diag = np.einsum("pii->pi", m_ss)
-        mean = np.sum(np.where(valid, diag, 0.0), axis=1) / np.maximum(valid.sum(axis=1), 1)
-        m_ss += np.where(valid, 0.0, mean[:, None])[:, :, None] * np.eye(width)[None]
-        eig = np.linalg.eigvalsh(0.5 * (m_ss + m_ss.transpose(0, 2, 1)))
-        top_eig = np.maximum(eig[:, -1], 1e-300)
-        well = eig[:, 0] * GUESS_CONDITION > top_eig  # to be taken
-        solvable = eig[:, 0] > 1e-10 * top_eig  # to guide the next guess
-        with np.errstate(all="ignore"):
-            lam_s = np.linalg.solve(np.where(solvable[:, None, None], m_ss, np.eye(width)[None]),
-                                    -r_s[:, :, None])[:, :, 0]
-        dq = np.einsum("ps,psm->pm", lam_s, bt)  # B λ
-        w = r_all[pending] + np.einsum("pkc,pkc->pk", normal[pending], (dq @ phi_flat.T).reshape(n_p, k, 3))
+        n_p = len(pending)
+        # the guessed (frame, candidate) pairs, frame by frame, candidates ascending (as NNLS's rows)
+        rows, cand = np.nonzero(g)
+        counts = np.bincount(rows, minlength=n_p)
+        first_pair = np.cumsum(counts) - counts
+        at_frame = pending[rows]
+        fresh_pairs = np.flatnonzero(slot[at_frame, cand] < 0)  # rows not formed in an earlier round
+        if len(fresh_pairs):
+            f_new, c_new = at_frame[fresh_pairs], cand[fresh_pairs]
+            formed = -np.einsum("nc,ncm->nm", normal[f_new, c_new], phi_nodes[c_new]) * inv_root  # Ã, as _contact_response's
+            new_rows = np.empty((len(formed), m + 2 * n_y))
+            for p, op in enumerate(operators):  # each pair with its frame's sensors
+                of = np.flatnonzero(pattern[f_new] == p) if len(operators) > 1 else slice(None)
+                for part, part_of in zip(np.split(new_rows, [m, m + n_y], axis=1), _response_rows(formed[of], op)):
+                    part[of] = part_of
+            used = len(buffer)
+            if used + len(fresh_pairs) > len(store):
+                grown = np.empty((2 * (used + len(fresh_pairs)), store.shape[1]))
+                grown[:used] = buffer
+                store = grown
+            store[used:used + len(fresh_pairs)] = new_rows
+            slot[f_new, c_new] = np.arange(used, used + len(fresh_pairs))
+            buffer = store[:used + len(fresh_pairs)]
+        held = slot[at_frame, cand]  # each pair's row in the store
+        r_pairs = r_all[at_frame, cand]
+        lam_pairs = np.empty(len(rows))
+        u = np.empty((n_p, m))  # Ã⊥ᵀλ
+        z = np.empty((n_p, n_y))  # G⁻¹Yᵀλ
+        well, solvable = np.empty(n_p, dtype=bool), np.empty(n_p, dtype=bool)
+        for size in np.unique(counts):  # the frames with as many guessed as one block each: no padding
+            of = np.flatnonzero(counts == size)
+            pairs = first_pair[of][:, None] + np.arange(size)
+            block = buffer[held[pairs]]  # (n, s, m + 2·3S)
+            perp, y_g, sprung = block[:, :, :m], block[:, :, m:m + n_y], block[:, :, m + n_y:]
+            # M_SS = Ã(I - XᵀG⁻¹X)Ãᵀ = Ã⊥Ã⊥ᵀ + YG⁻¹CG⁻¹Yᵀ: two positive parts, no cancellation
+            m_ss = np.matmul(perp, perp.transpose(0, 2, 1)) + np.matmul(sprung, sprung.transpose(0, 2, 1))
+            m_ss = 0.5 * (m_ss + m_ss.transpose(0, 2, 1))
+            eig = np.linalg.eigvalsh(m_ss)
+            top_eig = np.maximum(eig[:, -1], 1e-300)
+            well[of] = eig[:, 0] * GUESS_CONDITION > top_eig  # to be taken
+            solvable[of] = eig[:, 0] > 1e-10 * top_eig  # to guide the next guess
+            with np.errstate(all="ignore"):
+                lam_of = np.linalg.solve(np.where(solvable[of, None, None], m_ss, np.eye(size)[None]),
+                                         -r_pairs[pairs][:, :, None])[:, :, 0]
+            lam_pairs[pairs] = lam_of
+            u[of] = np.matmul(lam_of[:, None, :], perp)[:, 0]
+            z[of] = np.matmul(lam_of[:, None, :], y_g)[:, 0]
+        dq = -u * inv_root  # Bλ = KAᵀλ = -Λ^-½Ã⊥ᵀλ (P, m)
+        moved = (dq @ phi_flat.T) * normal_flat[pending]  # the candidates' moves along their normals
+        w = r_all[pending] + (moved[:, 0::3] + moved[:, 1::3] + moved[:, 2::3])
         off = near[pending] & ~g
-        top = np.max(np.where(valid, lam_s, -np.inf), axis=1)
+        top = np.maximum.reduceat(lam_pairs, first_pair)
         scale = np.max(np.where(near[pending], np.abs(r_all[pending]), 0.0), axis=1)
-        positive = np.all(~valid | (lam_s > GUESS_MARGIN * top[:, None]), axis=1) & (top > 0)
+        positive = (np.bincount(rows, lam_pairs <= GUESS_MARGIN * top[rows], minlength=n_p) == 0) & (top > 0)
         feasible = np.all(~off | (w > GUESS_MARGIN * scale[:, None]), axis=1)
-        taken = well & positive & feasible & np.all(np.isfinite(lam_s), axis=1)
+        finite = np.bincount(rows, ~np.isfinite(lam_pairs), minlength=n_p) == 0
+        taken = well & positive & feasible & finite
         got = frames[pending[taken]]
         q[got] = q0[got] + dq[taken]
         forces[got] = 0.0
-        forces[got[:, None], cols[idx[taken]]] = np.where(valid[taken], lam_s[taken], 0.0)
-        external[got] = -np.einsum("ps,psm->pm", np.where(valid[taken], lam_s[taken], 0.0), a[taken])
+        pairs = np.flatnonzero(taken[rows])
+        forces[frames[at_frame[pairs]], cols[cand[pairs]]] = lam_pairs[pairs]
+        external[got] = -(u[taken] / inv_root + z[taken] @ x_mat / inv_root)  # -Aᵀλ = -Λ^½(Ã⊥ᵀλ + XᵀG⁻¹Yᵀλ)
         done[pending[taken]] = True
         # the next guess: the forces that came out negative leave, the candidate furthest inside joins
         lam_full = np.zeros((n_p, k))
-        np.put_along_axis(lam_full, idx, np.where(valid, lam_s, 0.0), axis=1)
+        lam_full[rows, cand] = lam_pairs
         fixed = g & (lam_full > 0)
         w_off = np.where(off, w, np.inf)
         worst = np.argmin(w_off, axis=1)
@@ -456,15 +543,17 @@ def _guessed_passes(solves, frames, phi_nodes, q, q0, gap, normal, ok, margin, f
 def _spread(guess: np.ndarray, inside: np.ndarray, score: np.ndarray, apart: np.ndarray, places: int = 2) -> np.ndarray:
     """``guess`` (P, k) bool with, up to ``places`` times, the lowest-``score`` candidate of ``inside`` (P, k)
     that is ``apart`` (k, k) bool from every member added to it."""
-    close = (~apart).astype(np.float64)
+    close = ~apart
+    # the candidates close to a member (float32: exact for these counts, and half a float64 product's time)
+    blocked = (guess.astype(np.float32) @ close.astype(np.float32)) > 0
     for _ in range(places):
-        free = inside & ~guess & ((guess.astype(np.float64) @ close) == 0)
-        pick = np.where(free, score, np.inf)
+        pick = np.where(inside & ~guess & ~blocked, score, np.inf)
         best = np.argmin(pick, axis=1)
         rows = np.flatnonzero(np.isfinite(pick[np.arange(len(pick)), best]))
         if len(rows) == 0:
             break
         guess[rows, best[rows]] = True
+        blocked[rows] |= close[best[rows]]
     return guess
 
 
@@ -498,14 +587,13 @@ def _solve_frames_fast(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset, c_
     inside = np.any(allowed & np.isfinite(gap[low]) & (gap[low] < margin - 1e-7), axis=1)
     frames, allowed = low[inside], allowed[inside]
     _, normals = query(u[frames], jaw_offset[frames], normals=True)
-    inverses: dict = {}
+    operators: dict = {}
     solves = []
     for f in frames:
         key = (acting[f].tobytes(), comp3[f][acting[f]].tobytes())
-        if key not in inverses:
-            inverses[key] = _sensor_operator(lam, P[np.flatnonzero(acting[f])],
-                                             _sensor_inverse(gram, comp3[f], acting[f]))
-        solves.append(inverses[key])
+        if key not in operators:
+            operators[key] = sensor_operator(lam, P, gram, comp3[f], acting[f])
+        solves.append(operators[key])
     q, pushed, count = _active_sets(lam, solves, phi_nodes, phi_flat, query, jaw_offset[frames], q_all[frames],
                                     allowed, margin, gap[frames], normals)
     kept = count > 0
@@ -588,11 +676,10 @@ def _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offse
     frames = np.flatnonzero(np.fmin.reduce(gap, axis=1, initial=np.inf) < margin - 1e-7)
     if len(frames) == 0:
         return out, frames
-    ones = np.ones(len(P), dtype=bool)
-    solve_g = _sensor_inverse(gram, np.full(len(P), compliance), ones)
+    operator = sensor_operator(lam, P, gram, np.full(len(P), compliance), np.ones(len(P), dtype=bool))
     _, normals = query(u[frames], jaw_offset[frames], normals=True)
     ok = np.ones((len(frames), k), bool) if allowed is None else allowed[frames]
-    out[frames] = _active_sets(lam, [_sensor_operator(lam, P, solve_g)] * len(frames), phi_nodes, phi_flat, query,
+    out[frames] = _active_sets(lam, [operator] * len(frames), phi_nodes, phi_flat, query,
                                jaw_offset[frames], q[frames], ok, margin, gap[frames], normals)[0]
     return out, frames
 
