@@ -53,6 +53,12 @@ palate's share now (/ka/ 006, of ~0.7 s more than without it): the guessed round
 stages: the batched eigenvalues and solves, the product with Φ for w), the clearance queries of the
 later passes with the products Φq before them (~0.15 s: warp's CPU kernel ~36 ns a point), the
 correction after the dynamics (~0.2 s, the same solve again) and the figures' contact probe.
+Later on 2026-12-07 the sensor humps became the default (and the estimated roof is raised broadly, so
+more frames touch: 1,151 and 2,277 solved): the palate run now also projects the humps below the
+palate (tonguevis.sim.patch_contact), and on a quiet machine /ta/ 009 runs at 483 against 1,832
+frames/s (0.26) and /ka/ 006 at 647 against 3,035 (0.21).  Of /ka/ 006's 3.3 s with the palate the
+projection takes 1.9 s (3,224 least distance problems on ~1,000 frames, NNLS ~0.3 ms each: 1.0 s),
+the contact 0.7 s; --no-humps gives the figures above.
 
 Domains (issue 26 item 5): ``domains_fps`` is simulate(method="domains") end to end on the
 demo (--recording) and our shipped tongue, default settings, best of 3 after a first call
