@@ -18,6 +18,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pq = pytest.importorskip("pyarrow.parquet")
@@ -112,7 +113,14 @@ def assert_same_tables(a, b):
     for name in TIMED:
         ta, tb = pq.read_table(a / f"{name}.parquet"), pq.read_table(b / f"{name}.parquet")
         assert ta.schema == tb.schema and ta.num_rows == tb.num_rows > 0, name
-        assert ta.drop_columns(["seconds"]).equals(tb.drop_columns(["seconds"])), name
+        ta, tb = ta.drop_columns(["seconds"]).to_pydict(), tb.drop_columns(["seconds"]).to_pydict()
+        for column in ta:  # floats to 1e-12: with the sensor humps the patch shapes' last bits follow the BLAS
+            x, y = ta[column], tb[column]  # threads of the process (a SLURM job's against the command's)
+            if x and isinstance(next((v for v in x if v is not None), ""), float):
+                np.testing.assert_allclose(np.array(x, dtype=float), np.array(y, dtype=float), rtol=1e-12, atol=0,
+                                           err_msg=f"{name}.{column}")
+            else:
+                assert x == y, f"{name}.{column}"
 
 
 def manifest(out, file) -> dict:
