@@ -356,14 +356,21 @@ def _height_field(points, tris, step, metadata) -> PalateSurface:
 
 
 def bend_curvature(z: np.ndarray, step: float) -> float:
-    """The largest principal curvature (1/m) of a height field z (ny, nx) on a grid of ``step`` m
-    (finite differences of the Hessian; NaN cells and their neighbours left out); 0 without any."""
+    """The largest principal curvature (1/m) of the surface z(x, y) (ny, nx) on a grid of ``step`` m, the
+    surface's own (the shape operator's eigenvalues from central differences; NaN cells and their neighbours
+    left out); 0 without any.  Not the height field's Hessian, which overstates a bend by (1 + slope²)^1.5
+    where the surface is steep (behind the incisors)."""
+    zx = (z[1:-1, 2:] - z[1:-1, :-2]) / (2 * step)
+    zy = (z[2:, 1:-1] - z[:-2, 1:-1]) / (2 * step)
     zxx = (z[1:-1, 2:] - 2 * z[1:-1, 1:-1] + z[1:-1, :-2]) / step ** 2
     zyy = (z[2:, 1:-1] - 2 * z[1:-1, 1:-1] + z[:-2, 1:-1]) / step ** 2
     zxy = (z[2:, 2:] - z[2:, :-2] - z[:-2, 2:] + z[:-2, :-2]) / (4 * step ** 2)
-    half = 0.5 * (zxx + zyy)
-    spread = np.sqrt(np.maximum(half ** 2 - (zxx * zyy - zxy ** 2), 0.0))
-    k = np.maximum(np.abs(half + spread), np.abs(half - spread))
+    w2 = 1.0 + zx ** 2 + zy ** 2
+    # a graph's mean and Gaussian curvature (do Carmo, "Differential Geometry of Curves and Surfaces", 3-3)
+    mean = ((1 + zy ** 2) * zxx - 2 * zx * zy * zxy + (1 + zx ** 2) * zyy) / (2 * w2 ** 1.5)
+    gauss = (zxx * zyy - zxy ** 2) / w2 ** 2
+    spread = np.sqrt(np.maximum(mean ** 2 - gauss, 0.0))
+    k = np.maximum(np.abs(mean + spread), np.abs(mean - spread))
     k = k[np.isfinite(k)]
     return float(k.max()) if k.size else 0.0
 

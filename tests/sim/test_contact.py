@@ -308,6 +308,17 @@ def test_a_fitted_palate_has_no_fold_and_says_its_bound():
     assert bounded.metadata["rms_m"] < 1e-3  # still on the traces
 
 
+def test_the_bend_is_the_surface_s_own_where_it_is_steep():
+    """A cylinder of radius 5 mm about the x axis, its height field sampled up to slope 2.3: every cell bends
+    with radius 5 mm (the height field's Hessian says 1 / (5 mm x (1 + slope²)^1.5), 0.4 mm at the steepest)."""
+    from tonguevis.palate import bend_curvature
+
+    step, radius = 1e-4, 5e-3
+    y = np.arange(-4.6e-3, 4.6e-3 + step / 2, step)
+    z = np.sqrt(radius ** 2 - y ** 2)[:, None] * np.ones((1, 12))
+    assert bend_curvature(z, step) == pytest.approx(1.0 / radius, rel=0.02)
+
+
 def test_a_traced_palate_is_joined_to_the_generic_one_behind_it():
     """A palate traced over the front only: placed for a simulation it becomes a whole roof, the
     traced part where it was traced, the generic palate (moved to meet it) behind and beside it,
