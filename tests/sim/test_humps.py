@@ -251,3 +251,36 @@ def test_a_sensor_taken_up_again_starts_where_the_other_humps_put_its_node(model
     assert np.abs(there[:, 0]).max() > 1e-4  # the others' humps do move it: the test is not of a node at rest
     for k in (0, 2):  # the other sensors on their gaps whatever the weight
         np.testing.assert_allclose(aug.phi[3 * nodes[k] + np.arange(3), m:] @ eased.T, measured[:, k].T, atol=1e-12)
+
+
+def test_a_motion_saved_before_the_unit_normalisation_loads_with_its_own_basis(model, demo, tmp_path):
+    """A motion saved with humps before commit 42fa05e has patch coordinates on the basis without
+    :func:`~tonguevis.sim.patches._unit_at_own_node` (no ``unit_at_node`` in its metadata): it loads on that
+    basis and draws the shape it was saved with (on the newer basis the same numbers draw another shape)."""
+    import json
+
+    motion = simulate(demo, model, modes=40, humps=True)
+    info = motion.metadata["sensor_patches"]
+    assert info["unit_at_node"]
+    path = tmp_path / "new.npz"
+    motion.save(path)
+    with np.load(path, allow_pickle=False) as data:
+        arrays = {k: np.array(data[k]) for k in data.files}
+    meta = json.loads(str(arrays["meta"]))
+    # the same shapes written as an older tonguevis wrote them: coordinates on the basis without the normalisation
+    m, nodes = info["global_modes"], np.array(info["nodes"])
+    base = motion.model.base_model  # the placed tongue
+    args = (base, base.basis(m), nodes, 1e-3 * info["radius_mm"], 1e-3 * info["reach_mm"],
+            tuple(1e-3 * np.asarray(info["hump_mm"])), info["humped"])
+    shapes_new = augmented_basis(*args, unit=True).phi[:, m:]
+    shapes_old = augmented_basis(*args, unit=False).phi[:, m:]
+    q = arrays["q"].copy()
+    q[:, m:] = np.linalg.lstsq(shapes_old, shapes_new @ q[:, m:].T, rcond=None)[0].T
+    assert np.abs(q[:, m:] - arrays["q"][:, m:]).max() > 1e-3 * np.abs(arrays["q"][:, m:]).max()
+    del meta["metadata"]["sensor_patches"]["unit_at_node"]
+    arrays.update(q=q, meta=np.array(json.dumps(meta)))
+    old = tmp_path / "old.npz"
+    np.savez(old, **arrays)
+    again = Motion.load(old)
+    for i in (0, 40, len(motion.times) - 1):
+        np.testing.assert_allclose(again.displacement(i), motion.displacement(i), atol=1e-9)
