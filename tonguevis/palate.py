@@ -600,3 +600,54 @@ def midline_of(recording) -> float | None:
         both = np.concatenate([recording.sensors["TL"], recording.sensors["TR"]])
         return float(np.nanmean(both[:, 1]))
     return None
+
+
+#: Traces recorded without head references are registered to each other by their shape
+#: (:func:`rigid_fit_to_surface`); a trace's tilt about an axis is estimated only where its overlap with the
+#: others spreads this far (std, m) across that axis: a line drawn across the palate cannot tell its pitch.
+MIN_TILT_SPREAD = 5e-3
+#: Trace points a trace must share with the others (within SUPPORT_RADIUS, x-y) to be registered to them.
+MIN_OVERLAP = 50
+
+
+def rigid_fit_to_surface(points: np.ndarray, surface: PalateSurface, others: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, dict] | None:
+    """The small rigid motion (rotation (3, 3), translation (3,), info) that lays ``points`` (k, 3) onto
+    ``surface`` where they overlap the trace points ``others`` (n, 3) (within :data:`SUPPORT_RADIUS` in x-y):
+    a vertical shift, and a pitch and a roll about the overlap's centre where it spreads at least
+    :data:`MIN_TILT_SPREAD` across their axes, by least squares on the vertical gaps (points more than 3
+    robust sigmas off left out, as in the fit).  None with fewer than :data:`MIN_OVERLAP` points in the overlap.
+    info: ``overlap`` (points), ``shift_mm``, ``pitch_deg``, ``roll_deg``, ``rms_before_mm``, ``rms_after_mm``
+    (the vertical gaps of the points kept).  ``surface`` as :func:`fit_palate` makes it (its own frame the
+    traces'); metres."""
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(points, dtype=np.float64)
+    height, _ = surface._interp(pts[:, :2])  # a surface fitted in the traces' frame: its own is the query frame
+    near = cKDTree(np.asarray(others)[:, :2]).query(pts[:, :2], distance_upper_bound=SUPPORT_RADIUS)[0]
+    ok = np.isfinite(height) & (near <= SUPPORT_RADIUS)
+    if ok.sum() < MIN_OVERLAP:
+        return None
+    p, gap = pts[ok], height[ok] - pts[ok, 2]
+    centre = p.mean(axis=0)
+    tilts = [axis for axis in (0, 1) if np.std(p[:, axis]) >= MIN_TILT_SPREAD]  # 0: pitch (along x), 1: roll
+    design = np.column_stack([np.ones(len(p))] + [p[:, axis] - centre[axis] for axis in tilts])
+    keep = np.ones(len(p), dtype=bool)
+    for _ in range(4):
+        coef = np.linalg.lstsq(design[keep], gap[keep], rcond=None)[0]
+        resid = gap - design @ coef
+        scale = 1.4826 * np.median(np.abs(resid[keep] - np.median(resid[keep])))
+        new = np.abs(resid - np.median(resid[keep])) <= OUTLIER_SIGMAS * max(scale, 1e-5)
+        if np.array_equal(new, keep):
+            break
+        keep = new
+    slope = dict(zip(tilts, coef[1:]))
+    pitch = -np.arcsin(np.clip(slope.get(0, 0.0), -1, 1))  # z gains slope·(x - x̄): a turn about y
+    roll = np.arcsin(np.clip(slope.get(1, 0.0), -1, 1))  # z gains slope·(y - ȳ): a turn about x
+    cp, sp, cr, sr = np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
+    rotation = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]]) @ np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    translation = centre - rotation @ centre + np.array([0.0, 0.0, coef[0]])
+    info = {"overlap": int(ok.sum()), "shift_mm": float(1e3 * coef[0]), "pitch_deg": float(np.degrees(pitch)),
+            "roll_deg": float(np.degrees(roll)), "rms_before_mm": float(1e3 * np.sqrt(np.mean(gap[keep] ** 2))),
+            "rms_after_mm": float(1e3 * np.sqrt(np.mean(resid[keep] ** 2)))}
+    return rotation, translation, info

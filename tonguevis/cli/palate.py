@@ -40,6 +40,11 @@ def run(args: argparse.Namespace) -> int:
     surface = palate_from_traces(args.traces, args.probe, args.sensors, read_options=parse_options(args.option))
     for path, count in surface.metadata["samples"].items():
         print(f"{path}: {count} probe samples")
+    for path, said in (surface.metadata.get("trace_registration_mm") or {}).items():
+        if isinstance(said, dict):  # registered to the other traces by its shape (or not: too far off)
+            print(f"{path}: {said['by']}: moved up to {said['largest_move_mm']:.1f} mm, turned "
+                  f"{said['turn_deg']:.1f}°; RMS to the other traces {said['rms_to_the_others_mm'][0]:.2f} -> "
+                  f"{said['rms_to_the_others_mm'][1]:.2f} mm")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     surface.save(args.out)
     meta = surface.metadata
