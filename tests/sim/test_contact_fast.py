@@ -66,8 +66,9 @@ def demo():
     return rec, model, prep, basis, phi_s, w_s, contact_context("generic", prep, model, basis, rec)
 
 
-def both_backends(demo, palate, sensor_stiffness):
-    """The drive (contact solve), the dynamics and the correction after them, on each backend."""
+def both_backends(demo, palate, sensor_stiffness, drawn=False):
+    """The drive (contact solve), the dynamics and the correction after them, on each backend (drawn: the
+    correction also of the warped shape drawn, keep_below_palate's rotation rows)."""
     from tonguevis.sim.constrained import point_stiffness
     from tonguevis.sim.newmark import NewmarkSettings
     from tonguevis.sim.newmark_kernel import integrate_compiled
@@ -85,9 +86,29 @@ def both_backends(demo, palate, sensor_stiffness):
         if backend == "numpy":  # the same dynamics for both: only the contact differs
             q = integrate_compiled(basis.eigenvalues, phi_s, w_s, targets, settings, compliance=compliance,
                                    external=schedule["external"], rates=False).q
-        corrected, frames = keep_below_palate(q, contact, schedule, basis, phi_s, base)
+        rows = _candidate_rotation_rows(model, basis, contact) if drawn else None
+        corrected, frames = keep_below_palate(q, contact, schedule, basis, phi_s, base, rows)
         out[backend] = targets, schedule, corrected, frames
     return out["numpy"], out["warp"]
+
+
+def _candidate_rotation_rows(model, basis, contact):
+    dofs = (3 * np.asarray(contact["candidates"])[:, None] + np.arange(3)).ravel()
+    return model.rotation_matrix(basis)[dofs]
+
+
+def _drawn_gaps(demo, palate, q):
+    """(F, k) the candidates' clearances as drawn (modal warping: R̃(Wq) Φq)."""
+    from tonguevis.sim.contact import clearance_at
+    from tonguevis.sim.rotation import rotate_accumulated
+
+    rec, model, prep, basis, phi_s, w_s, context = demo
+    cand = np.asarray(context["candidates"])
+    rows = _candidate_rotation_rows(model, basis, context)
+    k = len(cand)
+    d = (q @ context["phi_nodes"].reshape(3 * k, -1).T).reshape(len(q), k, 3)
+    drawn = rotate_accumulated((q @ rows.T).reshape(len(q), k, 3), d)
+    return clearance_at(palate, model.mesh.points[cand][None] + drawn, context["jaw_offset"])[0]
 
 
 def assert_same(ref, fast):
@@ -116,6 +137,26 @@ def test_many_frames_in_contact_are_solved_as_the_reference_does(demo):
     ref, fast = both_backends(demo, low, 20.0)
     assert np.sum(ref[1]["active"] > 0) > 100 and len(ref[1]["conflicts"]) > 100 and len(ref[3]) > 100
     assert_same(ref, fast)
+
+
+def test_the_drawn_shape_is_corrected_as_the_reference_does(demo):
+    """The correction held to the warped shape drawn (keep_below_palate's rotation rows, the rotation's part
+    held fixed: correct_frames' shift) gives the same on both backends, and it does correct: frames the linear
+    correction left in as drawn are moved, and their drawn shape goes less deep."""
+    low = demo[-1]["palate"].transformed(np.eye(3), 1.0, np.array([0.0, 0.0, -0.006]))
+    ref, fast = both_backends(demo, low, None, drawn=True)
+    assert_same(ref, fast)
+    linear = both_backends(demo, low, None)[0]
+    moved = np.flatnonzero(np.any(ref[2] != linear[2], axis=1))
+    assert len(moved) > 20
+    from tonguevis.sim.patch_contact import allowed_candidates
+
+    context = demo[-1]
+    held = allowed_candidates(context, ref[1]["conflicts"], len(ref[2]), np.asarray(context["candidates"]),
+                              sensors_free=False)[moved]  # as the correction counts them
+    before = np.nanmin(np.where(held, _drawn_gaps(demo, low, linear[2])[moved], np.nan), axis=1)
+    after = np.nanmin(np.where(held, _drawn_gaps(demo, low, ref[2])[moved], np.nan), axis=1)
+    assert np.all(after > before)
 
 
 def test_a_palate_the_tongue_never_reaches_costs_no_solve(demo):
@@ -376,7 +417,8 @@ def test_real_speech_on_the_speakers_palate_is_solved_as_the_reference_does(name
             return _f(*a, **{**k, "backend": "numpy"})
         monkeypatch.setattr(contact, solve, reference)
     ref = simulate(rec, model, palate=palate)
-    assert len(on_numpy) == 2  # both stages on the reference
+    # both stages on the reference (the correction also for the drawn shape: keep_below_palate's warping rounds)
+    assert {f.__name__ for f in on_numpy} == {"solve_contact", "correct_frames"}
     c, r = fast.metadata["contact"], ref.metadata["contact"]
     assert r["frames_with_contact_forces"] > 200 and r["frames_corrected_after_the_dynamics"] > 200
     for key in ("frames_in_contact", "frames_with_contact_forces", "frames_corrected_after_the_dynamics",

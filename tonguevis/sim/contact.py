@@ -309,7 +309,7 @@ def _contact_response(a_rows: np.ndarray, operator: SensorOperator) -> tuple[np.
 
 
 def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, margin, gap0, normal0,
-                 guess: bool = True):
+                 guess: bool = True, shift: np.ndarray | None = None):
     """:func:`_active_set` of several frames at once, with what the caller already has.
 
     solves : per frame, the :class:`SensorOperator` of its acting sensors (shared by the frames with
@@ -321,6 +321,8 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
     the same result to rounding (tests/sim/test_contact_fast.py).  Each pass's QP: from a guessed
     active set for every frame at once (:func:`_guessed_passes`), by NNLS
     (:func:`_contact_pass_fast`) where no guess holds; guess=False: by NNLS everywhere.
+    shift : (n, k, 3) m or None, added to every candidate's displacement Φq (the part of the drawn shape that
+    is not linear in q, held fixed: :func:`correct_frames`).
     Returns (q (n, m), the modal contact force -Aᵀλ (n, m), the number of contact forces (n,)):
     q0, 0 and 0 where the frame keeps its contact-free shape.
     """
@@ -335,7 +337,8 @@ def _active_sets(lam, solves, phi_nodes, phi_flat, query, offsets, q0, allowed, 
         if len(going) == 0:
             break
         if n_pass:
-            gap, normal = query((q[going] @ phi_flat.T).reshape(len(going), -1, 3), offsets[going], normals=True)
+            u = (q[going] @ phi_flat.T).reshape(len(going), -1, 3)
+            gap, normal = query(u if shift is None else u + shift[going], offsets[going], normals=True)
         else:
             gap, normal = gap0[going], normal0[going]
         # a frame goes on while a candidate it may constrain is inside the margin (NaN: off the palate)
@@ -621,7 +624,7 @@ def _cholesky(matrix: np.ndarray) -> np.ndarray:
 
 def correct_frames(eigenvalues, phi_nodes, phi_s, q, points, candidates, palate, jaw_offset, allowed=None,
                    margin: float = MARGIN, compliance: float = 0.0,
-                   backend: str = "warp") -> tuple[np.ndarray, np.ndarray]:
+                   backend: str = "warp", shift: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Dynamic shapes (F, m) moved out of the palate where they went in: (corrected q, frames corrected).
 
     The integrator does not see the palate (only the contact forces of the
@@ -635,6 +638,8 @@ def correct_frames(eigenvalues, phi_nodes, phi_s, q, points, candidates, palate,
     backend : "warp" (default): every frame's clearances in one compiled pass and the frames
     that went in solved together (:func:`_active_sets`); "numpy": the
     reference (the same q to rounding).
+    shift : (F, k, 3) m or None: added to each candidate's displacement Φq, held fixed (modal warping's
+    rotation of the shape, R̃Φq - Φq at a nearby q: the candidates are then kept out as drawn).
     """
     lam = np.asarray(eigenvalues, dtype=np.float64)
     n_s = phi_s.shape[0]
@@ -646,8 +651,8 @@ def correct_frames(eigenvalues, phi_nodes, phi_s, q, points, candidates, palate,
 
         with single_threaded_blas():  # as solve_contact's
             return _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offset, allowed, margin,
-                                        compliance)
-    u = np.einsum("kcm,fm->fkc", phi_nodes, q)
+                                        compliance, shift)
+    u = np.einsum("kcm,fm->fkc", phi_nodes, q) + (0.0 if shift is None else shift)
     gap, _ = clearance_at(palate, cand_pts[None] + u, jaw_offset)
     if allowed is not None:
         gap = np.where(allowed, gap, np.nan)
@@ -656,12 +661,14 @@ def correct_frames(eigenvalues, phi_nodes, phi_s, q, points, candidates, palate,
     ones = np.ones(3 * n_s, dtype=bool)
     for f in frames:
         ok = np.ones(len(candidates), bool) if allowed is None else allowed[f]
-        out[f] = _active_set(lam, P, gram, phi_nodes, cand_pts, palate, jaw_offset[f], P @ q[f], np.full(3 * n_s, compliance),
+        at = cand_pts if shift is None else cand_pts + shift[f]  # a fixed shift is a moved rest, frame by frame
+        out[f] = _active_set(lam, P, gram, phi_nodes, at, palate, jaw_offset[f], P @ q[f], np.full(3 * n_s, compliance),
                              ones, q[f], ok, margin)[0]
     return out, frames
 
 
-def _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offset, allowed, margin, compliance):
+def _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offset, allowed, margin, compliance,
+                         shift=None):
     """:func:`correct_frames` on the compiled clearances (see there)."""
     from tonguevis.sim.contact_kernel import Clearance
 
@@ -669,6 +676,8 @@ def _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offse
     phi_flat = np.ascontiguousarray(phi_nodes.reshape(3 * k, m))
     query = Clearance(palate, cand_pts)
     u = (q @ phi_flat.T).reshape(n_frames, k, 3)
+    if shift is not None:
+        u = u + shift
     gap, _ = query(u, jaw_offset)
     if allowed is not None:
         gap = np.where(allowed, gap, np.nan)
@@ -680,7 +689,8 @@ def _correct_frames_fast(lam, P, gram, phi_nodes, q, cand_pts, palate, jaw_offse
     _, normals = query(u[frames], jaw_offset[frames], normals=True)
     ok = np.ones((len(frames), k), bool) if allowed is None else allowed[frames]
     out[frames] = _active_sets(lam, [operator] * len(frames), phi_nodes, phi_flat, query,
-                               jaw_offset[frames], q[frames], ok, margin, gap[frames], normals)[0]
+                               jaw_offset[frames], q[frames], ok, margin, gap[frames], normals,
+                               shift=None if shift is None else shift[frames])[0]
     return out, frames
 
 

@@ -5,6 +5,8 @@ contact report of a motion.  The solves themselves are :mod:`tonguevis.sim.conta
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from tonguevis._logging import logger
@@ -181,16 +183,63 @@ def contact_context(palate, prep, model, basis, recording) -> dict:
             "jaw_offset": offsets, "lift": lift, "palate_info": info}
 
 
-def keep_below_palate(q, contact, schedule, basis, phi_s, compliance: float):
-    """The dynamic shapes projected out of the palate where inertia carried them in (see contact.correct_frames)."""
-    from tonguevis.sim.contact import correct_frames
+def keep_below_palate(q, contact, schedule, basis, phi_s, compliance: float, rotation_rows=None):
+    """The dynamic shapes projected out of the palate where inertia carried them in (see contact.correct_frames).
+
+    rotation_rows : (3k, m) the rotation matrix W's rows at the candidates (modal warping), or None (linear).
+    The contact holds Φq below the palate; the shape drawn is R̃(Wq)Φq, which where a closure bends the
+    dorsum hard lies further up (on the shared /ka/ 007 with the dorsum pulled onto the palate, one node behind
+    TD 1.2 mm inside it where Φq was 0.1 mm under).  So the frames whose drawn shape goes in are corrected again,
+    from the same dynamic shape, with the rotation's part R̃Φq - Φq of the last correction held fixed
+    (:data:`WARP_ROUNDS` rounds)."""
+    from tonguevis.sim.contact import clearance_at, correct_frames
     from tonguevis.sim.patch_contact import allowed_candidates
 
     cand, pts = contact["candidates"], contact["points"]
     allowed = allowed_candidates(contact, schedule["conflicts"], len(q), cand, sensors_free=False)
-    return correct_frames(basis.eigenvalues, contact["phi_nodes"], phi_s, q, pts, cand, contact["palate"],
-                          contact["jaw_offset"], allowed, compliance=compliance,
-                          backend=contact.get("backend", "warp"))
+    solve = functools.partial(correct_frames, basis.eigenvalues, contact["phi_nodes"], phi_s, points=pts,
+                              candidates=cand, palate=contact["palate"], compliance=compliance,
+                              backend=contact.get("backend", "warp"))
+    out, corrected = solve(q, jaw_offset=contact["jaw_offset"], allowed=allowed)
+    if rotation_rows is None:
+        return out, corrected
+    from tonguevis.sim.contact import MARGIN
+    from tonguevis.sim.rotation import rotate_accumulated
+
+    k = len(cand)
+    phi_flat = contact["phi_nodes"].reshape(3 * k, -1)
+    offsets = contact["jaw_offset"]
+
+    def drawn(qs, frames):
+        """(linear Φq (f, k, 3), drawn R̃Φq (f, k, 3), the least allowed clearance as drawn (f,)) of ``frames``."""
+        linear = (qs @ phi_flat.T).reshape(len(qs), k, 3)
+        shown = rotate_accumulated((qs @ rotation_rows.T).reshape(len(qs), k, 3), linear)
+        gap, _ = clearance_at(contact["palate"], pts[cand][None] + shown, offsets[frames])
+        return linear, shown, np.nanmin(np.where(allowed[frames] & np.isfinite(gap), gap, np.inf), axis=1)
+
+    redone: set = set()
+    every = np.arange(len(out))
+    for _ in range(WARP_ROUNDS):
+        least = np.full(len(out), np.inf)
+        parts = {}
+        for start in range(0, len(out), 512):  # chunks: the drawn candidates are 24 bytes a node and frame
+            part = every[start:start + 512]
+            linear, shown, least[part] = drawn(out[part], part)
+            inside = part[least[part] < MARGIN - 1e-7]
+            parts.update({int(f): (shown[j] - linear[j]) for j, f in enumerate(part) if f in set(inside.tolist())})
+        frames = np.flatnonzero(least < MARGIN - 1e-7)
+        if len(frames) == 0:
+            break
+        shift = np.stack([parts[int(f)] for f in frames])
+        tried = solve(q[frames], jaw_offset=offsets[frames], allowed=allowed[frames], shift=shift)[0]
+        better = drawn(tried, frames)[2] > least[frames]  # a correction that failed (the guard's q0) is not taken
+        out[frames[better]] = tried[better]
+        redone.update(frames[better].tolist())
+    return out, np.union1d(corrected, np.fromiter(redone, dtype=np.int64, count=len(redone)))
+
+
+#: Rounds of correcting the drawn (warped) shape after the linear one (:func:`keep_below_palate`).
+WARP_ROUNDS = 1
 
 
 def contact_probe(contact, schedule, model):

@@ -242,7 +242,9 @@ def _simulate_modal(recording, settings, placed, progress, preview, preview_seco
             result.q = static_at_closures(result.q, basis.eigenvalues, held_rows[0], targets, schedule)
         if contact is not None:
             base = 0.0 if sensor_stiffness is None else 1.0 / (sensor_stiffness * k_ref)
-            result.q, corrected = keep_below_palate(result.q, contact, schedule, basis, phi_s, base)
+            cand_dofs = (3 * np.asarray(contact["candidates"])[:, None] + np.arange(3)).ravel()
+            result.q, corrected = keep_below_palate(result.q, contact, schedule, basis, phi_s, base,
+                                                    run.rotation[cand_dofs, :basis.n_modes] if warping else None)
             schedule["corrected_frames"] = run.schedule["corrected_frames"] = corrected
         if run.patches and contact is not None and run.basis.info.get("hump_m") is not None:
             from tonguevis.sim.patch_contact import humps_under_palate
