@@ -1,5 +1,5 @@
-"""A stop is a closure (issue 36): the tip pressed on the palate at each /t/ closure found; a rest the palate
-cuts through is passed over for the next still stretch."""
+"""A stop is a closure (issue 36): the tip pressed on the palate at each /t/ closure found, the dorsum at each /k/
+closure; a rest the palate cuts through is passed over for the next still stretch."""
 
 from __future__ import annotations
 
@@ -17,11 +17,11 @@ def ta():
     return read_recording(DATA_DIR / "spk1_ta.tsv")
 
 
-def _closure_gaps(motion, frames):
+def _closure_gaps(motion, frames, articulator="TT"):
     from tonguevis.sim.closures import constricting_region
 
-    node = motion.sensor_nodes[motion.sensor_names.index("TT")]
-    region = constricting_region(motion.model, int(node), "TT")
+    node = motion.sensor_nodes[motion.sensor_names.index(articulator)]
+    region = constricting_region(motion.model, int(node), articulator)
     out = []
     for f in frames:
         points = motion.model.mesh.points + motion.displacement(f) + motion.jaw_offset[f]
@@ -45,12 +45,23 @@ def test_the_tip_is_pressed_on_the_palate_at_each_closure_and_stays_out_of_it(ta
     assert pressed.metadata["plausibility"]["amplification"] < 2.0
 
 
-def test_no_closure_is_pressed_without_a_palate_or_on_a_dorsal_stop():
+def test_the_dorsum_is_pressed_on_the_palate_at_each_dorsal_closure_and_nothing_without_a_palate():
+    """At a /k/ the dorsum about its coil is pressed onto the palate (the summary says "the dorsum touches");
+    without a palate nothing is pressed."""
     from tonguevis.sim import simulate
+    from tonguevis.sim.plausibility import contact_line
 
     ka = read_recording(DATA_DIR / "spk1_ka.tsv")
-    motion = simulate(ka, modes=40, palate="generic")
-    assert "closures" not in motion.metadata["contact"]  # the dorsum's closure is its own node's, on the velum
+    pressed = simulate(ka, modes=40, palate="generic")
+    closures = pressed.metadata["contact"]["closures"]
+    frames = closures["maximum_constriction_frames"]
+    assert closures["articulator"] == "TD" and closures["closures"] == len(frames) >= 20
+    free = simulate(ka, modes=40, palate="generic", closures=False)
+    with_pull, without = _closure_gaps(pressed, frames, "TD"), _closure_gaps(free, frames, "TD")
+    assert np.median(with_pull) < 1e-3 and np.median(with_pull) < 0.4 * np.median(without)
+    assert pressed.penetration.max() < 5e-4
+    assert f"the dorsum touches at {pressed.metadata['contact']['closures_touching']} of" in contact_line(
+        pressed.metadata)
     assert "contact" not in simulate(ka, modes=40).metadata
 
 

@@ -150,8 +150,28 @@ def test_on_real_ka_the_dorsum_rises_as_a_hump_under_the_palate(osn12_palate, na
         gap = motion.palate_at(f).clearance(pos[dorsum])[0]
         assert np.nanmin(gap) > -1e-3
     assert checked >= 5
-    assert motion.metadata["plausibility"]["volume_change_max_percent"] < 1.0  # drawn in: 2.2 % without
+    # drawn in: 2.2 % without the projection; 0.2-0.3 % before the dorsum was pressed at the closures, 0.6 and 1.3 %
+    # with it (the pull raises the dorsum 2-5 mm onto the roof: the /ta/ 009's tip pull gives 1.2 %)
+    assert motion.metadata["plausibility"]["volume_change_max_percent"] < 1.5
     assert np.nanmax(motion.sensor_residual) <= 1e-3 + 1e-9  # on the surface: the issue's misfit bound
+    # Nothing drawn inside the palate anywhere (the dorsum pressed at the closures, the pulled nodes held out
+    # of it with the rest: 2.9 mm inside on 006 when the humps' projection left the pulled frames alone), and
+    # the dorsum about TD within 0.5 mm of it at 8 or more of the 10 hand-labelled /k/ closures (7 and 8 of 10
+    # when only TD's own node was drawn up to the roof).
+    assert motion.penetration.max() < 0.2e-3
+    textgrid = pytest.importorskip("praatio.textgrid")
+    labelled = [e.time for e in textgrid.openTextgrid(str(shared_file("ema", "optispeech", f"{name}.labels.TextGrid")),
+                                                     False).getTier("closure").entries]
+    region = dorsum[(np.abs(points[dorsum, 0] - points[node, 0]) <= 10e-3)
+                    & (np.abs(points[dorsum, 1] - points[node, 1]) <= 8e-3)]
+    touching = 0
+    for t in labelled:
+        gaps = []
+        for f in range(motion.frame_at(t - 0.03), motion.frame_at(t + 0.03) + 1):
+            pos = points + motion.displacement(f) + motion.jaw_offset[f]
+            gaps.append(np.nanmin(motion.palate_at(f).clearance(pos[region])[0]))
+        touching += min(gaps) <= 0.5e-3
+    assert touching >= 8 and len(labelled) == 10
 
 
 def test_the_humps_keep_the_volume_to_first_order(model):

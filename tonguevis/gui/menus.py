@@ -79,7 +79,8 @@ class MenusMixin:
         self.closures_action = QAction("&Press the closures onto the palate", self)
         self.closures_action.setCheckable(True)
         self.closures_action.setToolTip("with a palate: at each /t/ closure the part of the tongue ahead of the tip "
-                                        "sensor is pressed onto the palate (off: tonguevis simulate --no-closures)")
+                                        "sensor, at each /k/ closure the dorsum about its sensor, is pressed onto "
+                                        "the palate (off: tonguevis simulate --no-closures)")
         self.closures_action.triggered.connect(self.set_closures)
         simulation.addAction(self.closures_action)
         self.humps_action = QAction("Move the tissue around each sensor as a &hump", self)

@@ -2,10 +2,12 @@
 
 The sensors say where the tongue is at a /t/ or /k/ closure, not where the tip or the dorsum around the sensor
 touches: a tongue-tip coil sits some 10 mm behind the tip, and on the shared OSN12 /ta/ it stayed 1-4 mm under
-the palate at the closures while the tip ahead of it made the closure.  With a palate, :func:`closure_contacts`
+the palate at the closures while the tip ahead of it made the closure; on the shared /ka/ 006 the dorsum coil was
+2-3.5 mm under the speech's own roof at 3 of the 10 /k/ closures (the speaker holds the dorsum as high between
+syllables, where it raised that roof).  With a palate, :func:`closure_contacts`
 finds the productions' closures on the recording (:func:`tonguevis.preprocess.productions.find_productions`:
 MVIEW's landmarks, the nucleus NONS-NOFFS around the maximum constriction, on the constricting articulator),
-takes the constricting region of the tongue (the tip and blade ahead of TT), and
+takes the constricting region of the tongue (the tip and blade ahead of TT; the dorsum about TD), and
 during each closure pulls its :data:`CLOSURE_NODES` nodes that come nearest the palate onto it: springs
 (:data:`tonguevis.sim.drive.PULL_STIFFNESS` times the sensors') towards where the region, carried by its sensor's
 motion, meets the palate above it, eased in and out as a sensor returning from a dropout is
@@ -20,11 +22,15 @@ from dataclasses import dataclass
 import numpy as np
 
 #: How many of the region's nodes nearest the palate are pulled onto it at a closure (a closure seals across
-#: the tongue's width, at /t/ around the tip's rim: more than one point).
-CLOSURE_NODES = 3
+#: the tongue's width, at /t/ around the tip's rim: more than one point).  With 3, the /t/ tip of the shared
+#: 009 stayed 0.57 mm short at one closure once the drawn (warped) shape was kept out of the palate: the sides
+#: of the blade, on the palate, held it down; with 5 the tip seals at both.
+CLOSURE_NODES = 5
 #: m: the constricting region about its sensor's node: the tip and blade ahead of TT (from REGION_BEHIND behind
-#: it, within REGION_SIDE of it sideways); the dorsum within REGION_AROUND of TD or TB (front-back and sideways).
-REGION_BEHIND, REGION_SIDE, REGION_AROUND = 2e-3, 6e-3, 10e-3
+#: it, within REGION_SIDE of it sideways); the dorsum within REGION_AROUND of TD or TB (front-back and sideways:
+#: the dorsum around the coil, not the back of the tongue, which pulled from 10 mm away bent 1-1.3 mm into the
+#: velum on the shared /ka/ 007).
+REGION_BEHIND, REGION_SIDE, REGION_AROUND = 2e-3, 6e-3, 6e-3
 #: s: a closure whose nucleus (NONS-NOFFS) was not found is taken as this either side of its maximum constriction.
 HALF_CLOSURE = 0.03
 #: m: the nodes pulled are no further than this from the palate where their sensor's motion carries them at the
@@ -33,11 +39,14 @@ CLOSURE_REACH = 6e-3
 #: m: how far past the palate a closure's pull aims (the contact stops the tongue at the palate: it presses on
 #: it); under :data:`tonguevis.sim.contact.CONFLICT_TOLERANCE`, so a pull never counts as a sensor above it.
 PRESS = 0.4e-3
-#: The tongue sensors whose closures are made with a region of the tongue ahead of them: the tip's, whose coil
-#: sits some 10 mm behind the tip that closes.  A dorsum sensor's closure is its own node's on the velum, which
-#: the speaker's palate lifts onto it (:mod:`tonguevis.sim.speaker_palate`): pulling the dorsum around it up as
-#: well moved it 7-9 mm on the real /ka/ and pushed the back of the tongue 6 mm into the roof.
-ARTICULATORS = ("TT",)
+#: The tongue sensors whose closures are pressed: the tip's (its coil sits some 10 mm behind the tip that
+#: closes) and the dorsum's (the roof where nothing was traced is the speech's own envelope, raised by the
+#: dorsum's highest samples over the session: at a /k/ the coil can be millimetres under it).  The dorsum was
+#: left to its own node on the velum while the estimated roof was raised narrowly along the sensors' path:
+#: pulling the dorsum around it up then moved it 7-9 mm and pushed the back of the tongue 6 mm into the roof;
+#: on the broad roof (:data:`tonguevis.sim.speaker_palate.ESTIMATE_RAISE_REACH`) the pulls are 2-5 mm and the
+#: dorsum touches at 10 of 10 closures of the shared /ka/ 006 and 007 (7 and 8 without).
+ARTICULATORS = ("TT", "TD")
 
 
 @dataclass

@@ -79,7 +79,7 @@ class MotionBuilder:
     def _contact_places(self, q, contact_area, contact, warping) -> dict:
         """Where the tongue touches the palate (:func:`tonguevis.sim.palate_regions.place_of`): at the frame of the
         largest contact area ("largest_contact_where") and, at each closure's maximum constriction, where the
-        region pressed for the closure (the tip and blade) touches: the place said most ("closures_where", with
+        region pressed for the closure (the tip and blade; the dorsum) touches: the place said most ("closures_where", with
         "closures_touching": at how many closures that region touches).  Not the whole tongue's contact there:
         at a /t/ the sides and back of the tongue touch too, over a larger area, and "the closures touch (back)"
         said of a /t/ misled."""

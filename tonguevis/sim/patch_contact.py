@@ -47,8 +47,8 @@ def humps_under_palate(run, q: np.ndarray, contact: dict, schedule: dict) -> np.
     ``rotation``, ``model``, ``prep``, ``warping``); schedule : the drive's (``conflicts``; ``pull_weight`` where
     a closure presses the tip).  Where a closure's pull acts the local shapes take over from the humps by its
     engagement (a hump under the blade's coils carried the pressed tip back down with it: on the shared /ta/ 009
-    the tip then touched at 1 of 2 closures, 2 without humps); every frame not fully pulled is then kept below
-    the palate (:func:`patches_below_palate`, the contact's candidates: the dorsal surface), a
+    the tip then touched at 1 of 2 closures, 2 without humps); every frame is then kept below the palate
+    (:func:`patches_below_palate`, the contact's candidates: the dorsal surface, the pulled nodes included), a
     frame it cannot solve falling back to the local shapes alone.  ``schedule["humps_flattened"]`` says how
     many frames the palate flattened."""
     n = len(q)
@@ -58,7 +58,11 @@ def humps_under_palate(run, q: np.ndarray, contact: dict, schedule: dict) -> np.
     weight = np.zeros(n) if pull is None or np.size(pull) == 0 else np.clip(np.max(pull, axis=1) / PULL_HANDOVER, 0.0, 1.0)[:n]
     coordinates = (1.0 - weight)[:, None] * humped + weight[:, None] * local
     candidates = np.asarray(contact["candidates"], dtype=np.int64)
-    allowed = allowed_candidates(contact, schedule.get("conflicts", []), n, candidates) & (weight < 1.0)[:, None]
+    # The closures' pulled nodes are held below the palate as every other candidate (not freed as the sensors'
+    # nodes are): the modes press them onto it, and the local shapes closing the sensors' gaps on top of that
+    # pushed them 0.6-2 mm into it on the shared /ka/ 006 when the pulled frames were left unprojected.
+    sensors_only = {**contact, "sensor_nodes": np.asarray(run.prep.nodes)}
+    allowed = allowed_candidates(sensors_only, schedule.get("conflicts", []), n, candidates)
     out, flattened = patches_below_palate(np.hstack([q, coordinates]), run.basis, run.prep.nodes, contact,
                                           candidates, allowed, fallback=local,
                                           rotation=run.rotation if run.warping else None)

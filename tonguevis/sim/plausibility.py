@@ -107,7 +107,8 @@ def contact_line(metadata: dict) -> str:
     if closures:
         where = c.get("closures_where")
         touching = c.get("closures_touching", 0)
-        text += (f"; the tip touches at {touching} of {closures['closures']} stop closures"
+        part = "the tip" if closures.get("articulator", "TT") == "TT" else "the dorsum"
+        text += (f"; {part} touches at {touching} of {closures['closures']} stop closures"
                  + (f" ({where}), pressed on the palate there" if touching else
                     ": pulled towards the palate there, short of it"))
     if c.get("closures_dropped"):

@@ -71,8 +71,9 @@ class RunSettings:
     smooth_window : Savitzky-Golay window (samples) of the sensor trajectories, None: not smoothed.
     tolerance : the Newton tolerance of the constraint solve (m); None: the method's own (1e-8 modal,
         1e-7 domains).
-    closures : with a palate, at each stop's closure found on the recording the tip and blade are pressed onto
-        the palate (:mod:`tonguevis.sim.closures`); False: only the sensors and the contact.
+    closures : with a palate, at each stop's closure found on the recording the tip and blade (/t/) or the
+        dorsum about its coil (/k/) are pressed onto the palate (:mod:`tonguevis.sim.closures`); False: only the
+        sensors and the contact.
     humps : with sensor patches, each sensor but the tip also moves the tissue around it as a hump (flat within
         6 model-mm, gone by 15 mm) before the local shapes close what is left, and with a palate the humps are
         flattened against it (:mod:`tonguevis.sim.patch_contact`): a dorsum at /k/ rises as a whole instead of
