@@ -1,6 +1,6 @@
 """The replay's midsagittal picture and the 3D palate on a real /ta/ (OSN12 009) with the speaker's palate fitted
 from the traces 002-004 (issues 35 and 36): the palate's section told apart where traced and where estimated, the
-velum drawn lifted frame by frame, the status line saying where the tongue touches."""
+velum drawn lifted frame by frame (on the /ka/ 007), the status line saying where the tongue touches."""
 
 from __future__ import annotations
 
@@ -10,14 +10,18 @@ import pytest
 from tests.conftest import shared_file
 
 
-@pytest.fixture(scope="module")
-def session(osn12_palate):
+def _simulated(name: str, palate):
     from tonguevis.sim.settings import RunSettings
     from tonguevis.workflows.session import load_session
     from tonguevis.workflows.simulation import simulate_session
 
-    path = shared_file("ema", "optispeech", "009_OSN12_Tah_withFb_natural_HR.tsv")
-    return simulate_session(load_session(path), RunSettings(palate=str(osn12_palate)))
+    path = shared_file("ema", "optispeech", f"{name}.tsv")
+    return simulate_session(load_session(path), RunSettings(palate=str(palate)))
+
+
+@pytest.fixture(scope="module")
+def session(osn12_palate):
+    return _simulated("009_OSN12_Tah_withFb_natural_HR", osn12_palate)
 
 
 def _traced_at(surface, points: np.ndarray) -> np.ndarray:
@@ -46,9 +50,11 @@ def test_the_palate_section_is_traced_in_front_and_estimated_behind(session):
     assert [line.split()[0] for line in picture.lines()] == [c[0] for c in picture.constrictions]
 
 
-def test_the_velum_is_drawn_lifted_and_the_status_line_says_where_the_tongue_touches(session):
-    from tonguevis.render.drawing import contact_at, contact_line, draw_frame
+def test_the_velum_is_drawn_lifted(osn12_palate):
+    """On the /ka/ 007 (on the /ta/ 009 the broad estimated roof already clears the dorsum: no lift)."""
+    from tonguevis.render.drawing import draw_frame
 
+    session = _simulated("007_OSN12_Kah_withFb_natural_HR", osn12_palate)
     palate = session.shown_palate
     assert palate.lift is not None and palate.lift.max() > 0
     lifted = int(np.argmax(palate.lift))
@@ -56,10 +62,15 @@ def test_the_velum_is_drawn_lifted_and_the_status_line_says_where_the_tongue_tou
     up = draw_frame(session, lifted).context_shapes["palate"]
     down = draw_frame(session, still).context_shapes["palate"]
     rise = up[:, 2] - down[:, 2]
-    # to the drawing's float32 (0.1 µm): since the estimated roof is raised broadly the velum lifts µm on 009
+    # to the drawing's float32 (0.1 µm): since the estimated roof is raised broadly the velum lifts µm to 0.1 mm
     assert rise.max() == pytest.approx(palate.lift[lifted] * palate.share.max(), abs=1e-7)
     assert np.all(rise >= -1e-9) and np.array_equal(up[:, :2], down[:, :2])
     assert np.mean(rise > 1e-6) < 0.5  # only the velum rises, not the hard palate
+
+
+def test_the_status_line_says_where_the_tongue_touches(session):
+    from tonguevis.render.drawing import contact_at, contact_line
+
     # at the closures the tip touches: the status line says where
     closure = session.frames.frame_at(0.689)
     found = [contact_at(session, f)["place"] for f in range(closure - 3, closure + 4)]
