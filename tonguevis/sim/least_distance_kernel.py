@@ -22,6 +22,7 @@ _lock = threading.Lock()
 _kernel = None
 _wp = None
 BIG = 1e300  # no step (infinity)
+CANDIDATES = 32  # violated rows a scan keeps, to join before the next scan
 
 
 def _build():  # noqa: C901 - one kernel, kept whole
@@ -41,7 +42,7 @@ def _build():  # noqa: C901 - one kernel, kept whole
                             max_steps: int, independent: f64, negative: f64, big: f64,
                             active: wp.array2d(dtype=int), v: wp.array2d(dtype=f64), count: wp.array(dtype=int),
                             inverse: wp.array3d(dtype=f64), z: wp.array(dtype=Any), u: wp.array2d(dtype=f64),
-                            r: wp.array2d(dtype=f64), status: wp.array(dtype=int)):
+                            r: wp.array2d(dtype=f64), cand: wp.array2d(dtype=int), status: wp.array(dtype=int)):
             b = wp.tid()
             f = slot[b]  # the problem's state (active rows, multipliers, Gram inverse, z) is kept by slot
             cap = active.shape[1]
@@ -58,28 +59,53 @@ def _build():  # noqa: C901 - one kernel, kept whole
             result = int(0)
             steps = int(0)
             running = int(1)
+            n_cand = int(0)
+            cand_cap = cand.shape[1]
             while running == 1:
-                if p < 0:  # the most violated row joins: of the newest rows if any, else of all
+                if p < 0:  # a violated row joins: the most violated of those the last scan found, else scan
                     low = big
                     at = int(-1)
-                    first = last_seg
-                    while at < 0 and first >= 0:
-                        for k in range(first, last_seg + 1):
-                            for row in range(seg_start[f, k], seg_end[f, k]):
-                                acc = wp.dot(g[row], zl) - h[row]
-                                if acc < low:
-                                    low = acc
-                                    at = row
-                        if low >= -tol[b]:
-                            at = int(-1)
-                            if first > 0:
-                                first = 0
-                            else:
-                                first = -1
-                    if at < 0:
-                        result = 1
-                        running = 0
-                    else:
+                    for i in range(n_cand):
+                        row = cand[f, i]
+                        acc = wp.dot(g[row], zl) - h[row]
+                        if acc < low:
+                            low = acc
+                            at = row
+                    if low >= -tol[b]:  # none left: the newest rows, then (refined) all of them
+                        at = int(-1)
+                        for stage in range(2):
+                            if at < 0 and running == 1:
+                                first = last_seg
+                                if stage == 1:
+                                    first = int(0)
+                                    # the active rows' equalities refined once (to rounding), then every row
+                                    # checked: the end unless a row is violated after all
+                                    for i in range(s):
+                                        row = active[f, i]
+                                        u[f, i] = h[row] - wp.dot(g[row], zl)
+                                    for i in range(s):
+                                        acc = f64(0.0)
+                                        for j in range(s):
+                                            acc = acc + inverse[f, i, j] * u[f, j]
+                                        v[f, i] = v[f, i] + acc
+                                        zl = zl + acc * g[active[f, i]]
+                                low = big
+                                n_cand = int(0)
+                                for k in range(first, last_seg + 1):
+                                    for row in range(seg_start[f, k], seg_end[f, k]):
+                                        acc = wp.dot(g[row], zl) - h[row]
+                                        if acc < -tol[b] and n_cand < cand_cap:
+                                            cand[f, n_cand] = row
+                                            n_cand = n_cand + 1
+                                        if acc < low:
+                                            low = acc
+                                            at = row
+                                if low >= -tol[b]:
+                                    at = int(-1)
+                                    if stage == 1:
+                                        result = 1
+                                        running = 0
+                    if at >= 0:
                         p = at
                         gp = g[p]
                         slack = low
@@ -154,25 +180,13 @@ def _build():  # noqa: C901 - one kernel, kept whole
                             for j in range(last):
                                 inverse[f, i, j] = inverse[f, i, j] - inverse[f, i, last] * inverse[f, last, j] / pivot
                         s = last
-            if result == 1 and s > 0:  # one refinement: the active rows' equalities to rounding
-                for i in range(s):
-                    row = active[f, i]
-                    u[f, i] = h[row] - wp.dot(g[row], zl)
+            if result == 1:  # no multiplier below zero beyond rounding (a degenerate row)
                 top = f64(0.0)
                 for i in range(s):
-                    acc = f64(0.0)
-                    for j in range(s):
-                        acc = acc + inverse[f, i, j] * u[f, j]
-                    v[f, i] = v[f, i] + acc
-                    zl = zl + acc * g[active[f, i]]
                     top = wp.max(top, v[f, i])
                 for i in range(s):
                     if v[f, i] < -negative * top:
                         result = 0
-                for k in range(last_seg + 1):
-                    for row in range(seg_start[f, k], seg_end[f, k]):
-                        if not (wp.dot(g[row], zl) - h[row] >= -tol[b]):
-                            result = 0
             z[f] = zl
             count[f] = s
             status[b] = result
@@ -203,6 +217,7 @@ class LeastDistanceBatch:
         self.scale = np.zeros(n)  # max |h| of each slot's rows
         self._g, self._h, self.rows = np.empty((0, width)), np.empty(0), 0
         self._scratch = [np.zeros((n, self.cap)), np.zeros((n, self.cap))]
+        self._cand = np.zeros((n, CANDIDATES), dtype=np.int32)  # the violated rows a scan found
         self._vector = _wp.types.vector(length=width, dtype=_wp.float64)
 
     def add(self, slots: np.ndarray, g: np.ndarray, h: np.ndarray, first_row: np.ndarray) -> None:
@@ -257,7 +272,7 @@ class LeastDistanceBatch:
                           arr(tol, f64), int(max_steps), f64(INDEPENDENT), f64(NEGATIVE), f64(BIG)],
                   outputs=[arr(self.active, i32), arr(self.weights, f64), arr(self.count, i32),
                            arr(self.inverse, f64), arr(self.z, self._vector), *(arr(a, f64) for a in self._scratch),
-                           arr(status, i32)])
+                           arr(self._cand, i32), arr(status, i32)])
         wp.synchronize_device("cpu")
         solved = status.astype(bool)
         self.forget(slots[~solved])

@@ -85,9 +85,10 @@ def patches_below_palate(q: np.ndarray, basis: ModalBasis, nodes: np.ndarray, co
     R̃_i (Φ_i q + P_i c), R̃_i from the modes alone, so the clearances are those of the shape drawn and still
     linear in the patch coordinates c.  The sensor nodes stay to 1e-9 m.
     """
+    from tonguevis._blas import single_threaded_blas
     from tonguevis.sim.contact_kernel import Clearance
     from tonguevis.sim.patches import patch_costs
-    from tonguevis.sim.rotation import accumulated_rotation_matrix as accumulated_rotations
+    from tonguevis.sim.kernels import rotate_accumulated_compiled as rotated
 
     q = np.array(q, dtype=np.float64, copy=True)
     m = basis.info["global_modes"]
@@ -105,28 +106,28 @@ def patches_below_palate(q: np.ndarray, basis: ModalBasis, nodes: np.ndarray, co
     null = _null_space(rows, cost)
     shapes_null = (patch_flat @ null).reshape(len(cand), 3, -1)  # Φ_P N (k, 3, z)
     done = []
-    for first in range(0, len(q), 256):  # chunks: the rotations of every surface node are 72 bytes a frame
-        part = np.arange(first, min(first + 256, len(q)))
-        # each frame as the modes and its patch coordinates c0 place it (the patches in the modes' frame)
-        moved = ((q[part, :m] @ phi_modes.T) + (q[part, m:] @ patch_flat.T)).reshape(len(part), len(cand), 3)
-        turns = None
-        if w_rows is not None:
-            turns = accumulated_rotations((q[part, :m] @ w_rows.T).reshape(len(part), len(cand), 3))
-            moved = np.matmul(turns, moved[..., None])[..., 0]
-        gap, _ = query(moved, offsets[part])
-        low = np.where(allowed[part] & np.isfinite(gap), gap, np.inf).min(axis=1)
-        inside = np.flatnonzero(low < margin - 1e-7)  # the frames that go through the palate
-        if len(inside) == 0:
-            continue
-        chunk = part[inside]
-        steps = _held_below(shapes_null, None if turns is None else turns[inside], moved[inside], query,
-                            offsets[chunk], allowed[chunk], margin)
-        for j, f in enumerate(chunk):
-            if np.all(np.isfinite(steps[j])):
-                q[f, m:] = q[f, m:] + null @ steps[j]
-                done.append(f)
-            elif fallback is not None:
-                q[f, m:] = fallback[f]
+    with single_threaded_blas():  # many small products: a threaded BLAS's wake-ups cost more than they do
+        for first in range(0, len(q), 256):  # chunks: the rotations of every surface node are 72 bytes a frame
+            part = np.arange(first, min(first + 256, len(q)))
+            # each frame as the modes and its patch coordinates c0 place it (the patches in the modes' frame)
+            moved = ((q[part, :m] @ phi_modes.T) + (q[part, m:] @ patch_flat.T)).reshape(len(part), len(cand), 3)
+            turns = None  # the modes' rotation vectors at the candidates (f, k, 3): R̃(w) Φ_P c turns with them
+            if w_rows is not None:
+                turns = (q[part, :m] @ w_rows.T).reshape(len(part), len(cand), 3)
+                moved = rotated(turns, moved)
+            gap, _ = query(moved, offsets[part])
+            low = np.where(allowed[part] & np.isfinite(gap), gap, np.inf).min(axis=1)
+            inside = np.flatnonzero(low < margin - 1e-7)  # the frames that go through the palate
+            if len(inside) == 0:
+                continue
+            chunk = part[inside]
+            steps = _held_below(shapes_null, None if turns is None else turns[inside], moved[inside], query,
+                                offsets[chunk], allowed[chunk], margin)
+            found = np.all(np.isfinite(steps), axis=1)
+            q[chunk[found], m:] += steps[found] @ null.T
+            done.extend(chunk[found])
+            if fallback is not None:
+                q[chunk[~found], m:] = fallback[chunk[~found]]
     return q, np.asarray(done, dtype=np.int64)
 
 
@@ -144,7 +145,7 @@ def _held_below(shapes_null, turns, moved, query, offsets, ok, margin) -> np.nda
     The nearest patch coordinates to a frame's c0 in the cost metric keeping the sensor nodes are c0 + N z with
     N the sensors' rows' null space (N^T C N = I), so each pass is a least distance problem in z.
     shapes_null : (k, 3, z) Φ_P N, the candidates' patch shapes in the null space (the modes' frame);
-    turns : (f, k, 3, 3) the modes' rotations R̃ at the candidates (None: linear); moved : (f, k, 3) the
+    turns : (f, k, 3) the modes' rotation vectors w at the candidates, R̃ = R̃(w) (None: linear); moved : (f, k, 3) the
     candidates' displacements at c0 (rotated), m; query : the candidates'
     :class:`~tonguevis.sim.contact_kernel.Clearance`; offsets : (f, 3|4); ok : (f, k) the candidates the palate
     may hold.  A node at c0 + N z is at its place at c0 plus R̃ Φ_P N z, so its clearance's row is
@@ -157,6 +158,8 @@ def _held_below(shapes_null, turns, moved, query, offsets, ok, margin) -> np.nda
     frame's answer of the pass before, whose rows are all still there), the NNLS (:func:`_least_distance`)
     taking the few it gives back: the one optimum either way, to rounding (tests/sim/test_least_distance.py).
     :func:`held_below_reference` is one frame's, written out plainly (tests/sim/test_humps.py)."""
+    from tonguevis.sim.kernels import rotate_accumulated_compiled as rotated
+
     n, k = moved.shape[:2]
     width = shapes_null.shape[2]
     flat = shapes_null.reshape(3 * k, width)
@@ -169,7 +172,7 @@ def _held_below(shapes_null, turns, moved, query, offsets, ok, margin) -> np.nda
             break
         step = (z[going] @ flat.T).reshape(len(going), k, 3)
         if turns is not None:
-            step = np.matmul(turns[going], step[..., None])[..., 0]
+            step = rotated(turns[going], step)
         gap, normal = query(moved[going] + step, offsets[going], normals=True)
         usable = ok[going] & np.isfinite(gap)
         inside = np.any(usable & (gap < margin - 1e-7), axis=1)
@@ -177,8 +180,8 @@ def _held_below(shapes_null, turns, moved, query, offsets, ok, margin) -> np.nda
         # clearance(z') ~ gap + n . R̃ Φ_P N (z' - z) >= margin, for every near candidate of every frame inside
         pair_frame, near = np.nonzero(usable & (gap < margin + BAND) & inside[:, None])
         n_own = normal[pair_frame, near]
-        if turns is not None:
-            n_own = np.matmul(n_own[:, None, :], turns[going[pair_frame], near])[:, 0]
+        if turns is not None:  # R̃ᵀ n = R̃(-w) n (R̃ = I + a[w]× + b[w]×², [w]× antisymmetric)
+            n_own = rotated(-turns[going[pair_frame], near], n_own)
         rows = np.einsum("pc,pcz->pz", n_own, shapes_null[near])
         h = margin - gap[pair_frame, near] + np.einsum("pz,pz->p", rows, z[going[pair_frame]])
         frames = going[inside]
