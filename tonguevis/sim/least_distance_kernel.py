@@ -11,11 +11,13 @@ afresh): the same optimum to rounding (tests/sim/test_least_distance.py).
 
 from __future__ import annotations
 
+import os
 import threading
 from typing import Any
 
 import numpy as np
 
+from tonguevis.sim.contact_kernel import PARALLEL_WORKERS, thread_pool
 from tonguevis.sim.least_distance import FEASIBLE, INDEPENDENT, MAX_STEPS, NEGATIVE
 
 _lock = threading.Lock()
@@ -23,6 +25,7 @@ _kernel = None
 _wp = None
 BIG = 1e300  # no step (infinity)
 CANDIDATES = 32  # violated rows a scan keeps, to join before the next scan
+PARALLEL_PROBLEMS = 32  # a launch of at least twice this many problems is split over threads
 
 
 def _build():  # noqa: C901 - one kernel, kept whole
@@ -266,14 +269,24 @@ class LeastDistanceBatch:
             return wp.array(a, dtype=dtype, device="cpu", copy=False)
 
         f64, i32 = wp.float64, wp.int32
-        wp.launch(_kernel, dim=len(slots), device="cpu",
-                  inputs=[arr(self._g[:max(self.rows, 1)], self._vector), arr(self._h[:max(self.rows, 1)], f64),
-                          arr(self.seg_start, i32), arr(self.seg_end, i32), arr(self.n_seg, i32), arr(slots, i32),
-                          arr(tol, f64), int(max_steps), f64(INDEPENDENT), f64(NEGATIVE), f64(BIG)],
-                  outputs=[arr(self.active, i32), arr(self.weights, f64), arr(self.count, i32),
-                           arr(self.inverse, f64), arr(self.z, self._vector), *(arr(a, f64) for a in self._scratch),
-                           arr(self._cand, i32), arr(status, i32)])
-        wp.synchronize_device("cpu")
+        shared = [arr(self._g[:max(self.rows, 1)], self._vector), arr(self._h[:max(self.rows, 1)], f64),
+                  arr(self.seg_start, i32), arr(self.seg_end, i32), arr(self.n_seg, i32)]
+        state = [arr(self.active, i32), arr(self.weights, f64), arr(self.count, i32), arr(self.inverse, f64),
+                 arr(self.z, self._vector), *(arr(a, f64) for a in self._scratch), arr(self._cand, i32)]
+
+        def launch(part: slice) -> None:  # each problem writes only its slot's state: parts run side by side
+            wp.launch(_kernel, dim=len(slots[part]), device="cpu",
+                      inputs=[*shared, arr(slots[part], i32), arr(tol[part], f64), int(max_steps),
+                              f64(INDEPENDENT), f64(NEGATIVE), f64(BIG)],
+                      outputs=[*state, arr(status[part], i32)])
+            wp.synchronize_device("cpu")
+
+        workers = min(PARALLEL_WORKERS, os.cpu_count() or 1, len(slots) // PARALLEL_PROBLEMS)
+        if workers <= 1:
+            launch(slice(None))
+        else:  # a launch runs on one core and releases the GIL
+            edges = np.linspace(0, len(slots), workers + 1).astype(int)
+            list(thread_pool().map(launch, [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]))
         solved = status.astype(bool)
         self.forget(slots[~solved])
         return solved
