@@ -50,15 +50,16 @@ def test_goldfarb_idnani_from_each_earlier_answer_equals_the_nnls():
 @pytest.mark.parametrize("threads", [False, True])
 def test_the_compiled_batch_equals_the_nnls_pass_after_pass(threads, monkeypatch):
     """LeastDistanceBatch: 12 problems growing by blocks, all solved in one call a block (one launch, or split
-    over threads), each started from its answer of the block before: every z the NNLS's to rounding; an
-    infeasible problem is given back (False) and the next call starts it afresh."""
+    over threads: a width of its own, so its first call builds the kernel, in one launch before any split),
+    each started from its answer of the block before: every z the NNLS's to rounding; an infeasible problem
+    is given back (False) and the next call starts it afresh."""
     from tonguevis.sim import least_distance_kernel
     from tonguevis.sim.least_distance_kernel import LeastDistanceBatch
 
     if threads:
         monkeypatch.setattr(least_distance_kernel, "PARALLEL_PROBLEMS", 4)
         monkeypatch.setattr(least_distance_kernel.os, "cpu_count", lambda: 4)
-    width = 20
+    width = 21 if threads else 20
 
     rng = np.random.default_rng(11)
     n = 12

@@ -23,6 +23,7 @@ from tonguevis.sim.least_distance import FEASIBLE, INDEPENDENT, MAX_STEPS, NEGAT
 _lock = threading.Lock()
 _kernel = None
 _wp = None
+_launched: set = set()  # the widths launched once (their kernels built)
 BIG = 1e300  # no step (infinity)
 CANDIDATES = 32  # violated rows a scan keeps, to join before the next scan
 PARALLEL_PROBLEMS = 32  # a launch of at least twice this many problems is split over threads
@@ -282,8 +283,11 @@ class LeastDistanceBatch:
             wp.synchronize_device("cpu")
 
         workers = min(PARALLEL_WORKERS, os.cpu_count() or 1, len(slots) // PARALLEL_PROBLEMS)
-        if workers <= 1:
+        if workers <= 1 or self.width not in _launched:
+            # a width's first launch builds its kernel: never from two threads at once (warp's build is lazy
+            # and not thread-safe: a second thread found the kernel half built)
             launch(slice(None))
+            _launched.add(self.width)
         else:  # a launch runs on one core and releases the GIL
             edges = np.linspace(0, len(slots), workers + 1).astype(int)
             list(thread_pool().map(launch, [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]))
