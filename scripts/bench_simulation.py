@@ -67,7 +67,9 @@ of it the compiled solves), q within 1.4e-11 (relative) of before and closures.p
 Measured with another session loading the 2 cores (load average 1.6-5.0; one run's no-palate rate on
 /ta/ 009 was 1,057 frames/s, another's 1,972), so only ratios within a run say much: /ta/ 009 0.37, 0.38,
 0.52 (725/1,969, 753/1,972, 554/1,057 frames/s), /ka/ 006 0.54, 0.44, 0.43 (1,065/1,970, 841/1,918,
-839/1,935); the code before, in the same session, 0.26 (291/1,135) and 0.19 (347/1,788).  What bounds
+839/1,935); the code before, in the same session, 0.26 (291/1,135) and 0.19 (347/1,788).  Alternating
+free, new and previous projection in one process (best of 5, load average 2.5-3.0): /ta/ 009 1,228 / 573
+/ 296 frames/s (0.47 against 0.24), /ka/ 006 1,876 / 823 / 393 (0.44 against 0.21).  What bounds
 the palate's share now (/ta/ 009, ~1.1 s more than without it, profiled): the projection ~0.4 s (the
 compiled solves 0.13 s, each pass's clearance query and rows, the first screening of every frame), the
 contact ~0.4 s and its correction after the dynamics ~0.14 s (the guessed rounds' NumPy calls, spread
