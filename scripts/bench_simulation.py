@@ -59,6 +59,21 @@ palate (tonguevis.sim.patch_contact), and on a quiet machine /ta/ 009 runs at 48
 frames/s (0.26) and /ka/ 006 at 647 against 3,035 (0.21).  Of /ka/ 006's 3.3 s with the palate the
 projection takes 1.9 s (3,224 least distance problems on ~1,000 frames, NNLS ~0.3 ms each: 1.0 s),
 the contact 0.7 s; --no-humps gives the figures above.
+Later still (issue 36's speed work): the projection's least distance problems solved compiled, a pass's
+at once (tonguevis.sim.least_distance_kernel: Goldfarb-Idnani, each problem started from its answer of the
+pass before; 3-5 of 3,211 left to the NNLS on /ka/ 006), one BLAS thread, the modes' rotations applied by the
+compiled R̃(w)d instead of (f, k, 3, 3) matrices: /ka/ 006's projection alone 1.9 s -> 0.5-0.7 s (0.21 s
+of it the compiled solves), q within 1.4e-11 (relative) of before and closures.py's figures unchanged.
+Measured with another session loading the 2 cores (load average 1.6-5.0; one run's no-palate rate on
+/ta/ 009 was 1,057 frames/s, another's 1,972), so only ratios within a run say much: /ta/ 009 0.37, 0.38,
+0.52 (725/1,969, 753/1,972, 554/1,057 frames/s), /ka/ 006 0.54, 0.44, 0.43 (1,065/1,970, 841/1,918,
+839/1,935); the code before, in the same session, 0.26 (291/1,135) and 0.19 (347/1,788).  Alternating
+free, new and previous projection in one process (best of 5, load average 2.5-3.0): /ta/ 009 1,228 / 573
+/ 296 frames/s (0.47 against 0.24), /ka/ 006 1,876 / 823 / 393 (0.44 against 0.21).  What bounds
+the palate's share now (/ta/ 009, ~1.1 s more than without it, profiled): the projection ~0.4 s (the
+compiled solves 0.13 s, each pass's clearance query and rows, the first screening of every frame), the
+contact ~0.4 s and its correction after the dynamics ~0.14 s (the guessed rounds' NumPy calls, spread
+thin), the rest ~0.2 s.
 
 Domains (issue 26 item 5): ``domains_fps`` is simulate(method="domains") end to end on the
 demo (--recording) and our shipped tongue, default settings, best of 3 after a first call

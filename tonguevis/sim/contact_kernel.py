@@ -159,16 +159,17 @@ class Clearance:
             launch(slice(None))
         else:  # a launch runs on one core and releases the GIL: the frames in a few blocks, side by side
             edges = np.linspace(0, n_frames, workers + 1).astype(int)
-            list(_pool().map(launch, [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]))
+            list(thread_pool().map(launch, [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]))
         return gap, normal
 
 
 _executor = None
 
 
-def _pool():
+def thread_pool():
     """The threads the large queries are split over, started once: a new pool a query cost its thread
-    starts, up to 5 ms each on two busy cores (a simulation with a palate makes a dozen such queries)."""
+    starts, up to 5 ms each on two busy cores (a simulation with a palate makes a dozen such queries);
+    also :class:`~tonguevis.sim.least_distance_kernel.LeastDistanceBatch`'s launches."""
     global _executor
     with _lock:
         if _executor is None:

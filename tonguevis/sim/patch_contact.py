@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from tonguevis.sim.contact import BAND, CONFLICT_RADIUS, MARGIN, MAX_PASSES, clearance_at
+from tonguevis.sim.least_distance import least_distance as _least_distance
+from tonguevis.sim.least_distance_kernel import LeastDistanceBatch
 from tonguevis.sim.modal import ModalBasis
 
 #: A closure's pull engaged this far (0-1) has handed its sensors' neighbourhood over to the local shapes.
@@ -87,58 +89,49 @@ def patches_below_palate(q: np.ndarray, basis: ModalBasis, nodes: np.ndarray, co
     R̃_i (Φ_i q + P_i c), R̃_i from the modes alone, so the clearances are those of the shape drawn and still
     linear in the patch coordinates c.  The sensor nodes stay to 1e-9 m.
     """
+    from tonguevis._blas import single_threaded_blas
+    from tonguevis.sim.contact_kernel import Clearance
     from tonguevis.sim.patches import patch_costs
-    from tonguevis.sim.rotation import accumulated_rotation_matrix as accumulated_rotations
+    from tonguevis.sim.kernels import rotate_accumulated_compiled as rotated
 
     q = np.array(q, dtype=np.float64, copy=True)
     m = basis.info["global_modes"]
     cand = np.asarray(candidates, dtype=np.int64)
     dofs = (3 * cand[:, None] + np.arange(3)).ravel()
-    phi_modes = basis.phi[dofs, :m]
-    phi_patch = np.ascontiguousarray(basis.phi[dofs, m:]).reshape(len(cand), 3, -1)
+    phi_modes = np.ascontiguousarray(basis.phi[dofs, :m])
+    patch_flat = np.ascontiguousarray(basis.phi[dofs, m:])  # (3k, p)
     sensor_dofs = (3 * np.asarray(nodes, dtype=np.int64)[:, None] + np.arange(3)).ravel()
     rows = basis.phi[sensor_dofs, m:]  # (3S, p)
     cost = patch_costs(basis, nodes)
-    base = contact["points"][cand]
+    query = Clearance(contact["palate"], contact["points"][cand])
     offsets = np.asarray(contact["jaw_offset"])
-    w_rows = None if rotation is None else rotation[dofs, :m]
-
-    def placed(frames) -> tuple[np.ndarray, np.ndarray | None]:
-        """(the candidates' modal displacement (f, k, 3), the modes' rotations there (f, k, 3, 3) or None)."""
-        modal = (q[frames, :m] @ phi_modes.T).reshape(-1, len(cand), 3)
-        if w_rows is None:
-            return modal, None
-        return modal, accumulated_rotations((q[frames, :m] @ w_rows.T).reshape(-1, len(cand), 3))
-
+    w_rows = None if rotation is None else np.ascontiguousarray(rotation[dofs, :m])
     allowed = np.ones((len(q), len(cand)), dtype=bool) if allowed is None else allowed[:len(q)]
-    low = np.full(len(q), np.inf)
-    for start in range(0, len(q), 256):  # chunks: the rotations of every surface node are 72 bytes a frame
-        part = slice(start, min(start + 256, len(q)))
-        modal, turns = placed(part)
-        moved = modal + np.einsum("kcp,fp->fkc", phi_patch, q[part, m:])
-        if turns is not None:
-            moved = np.einsum("fkab,fkb->fka", turns, moved)
-        gap, _ = clearance_at(contact["palate"], base[None] + moved, offsets[part])
-        gap = np.where(allowed[part] & np.isfinite(gap), gap, np.inf)
-        low[part] = gap.min(axis=1)
-    frames = np.flatnonzero(low < margin - 1e-7)
     null = _null_space(rows, cost)
-    shapes_null = (phi_patch.reshape(-1, phi_patch.shape[2]) @ null).reshape(len(cand), 3, -1)  # Φ_P N (k, 3, z)
-    patch_flat = phi_patch.reshape(3 * len(cand), -1)
+    shapes_null = (patch_flat @ null).reshape(len(cand), 3, -1)  # Φ_P N (k, 3, z)
     done = []
-    for first in range(0, len(frames), 256):  # chunks, as above
-        chunk = frames[first:first + 256]
-        modal, turns = placed(chunk)
-        own = (q[chunk, m:] @ patch_flat.T).reshape(len(chunk), len(cand), 3)  # Φ_P c0, in the modes' frame
-        moved = modal + own
-        start = base[None] + (moved if turns is None else np.matmul(turns, moved[..., None])[..., 0])
-        steps = _held_below(shapes_null, turns, start, contact["palate"], offsets[chunk], allowed[chunk], margin)
-        for j, f in enumerate(chunk):
-            if np.all(np.isfinite(steps[j])):
-                q[f, m:] = q[f, m:] + null @ steps[j]
-                done.append(f)
-            elif fallback is not None:
-                q[f, m:] = fallback[f]
+    with single_threaded_blas():  # many small products: a threaded BLAS's wake-ups cost more than they do
+        for first in range(0, len(q), 256):  # chunks: the rotations of every surface node are 72 bytes a frame
+            part = np.arange(first, min(first + 256, len(q)))
+            # each frame as the modes and its patch coordinates c0 place it (the patches in the modes' frame)
+            moved = ((q[part, :m] @ phi_modes.T) + (q[part, m:] @ patch_flat.T)).reshape(len(part), len(cand), 3)
+            turns = None  # the modes' rotation vectors at the candidates (f, k, 3): R̃(w) Φ_P c turns with them
+            if w_rows is not None:
+                turns = (q[part, :m] @ w_rows.T).reshape(len(part), len(cand), 3)
+                moved = rotated(turns, moved)
+            gap, _ = query(moved, offsets[part])
+            low = np.where(allowed[part] & np.isfinite(gap), gap, np.inf).min(axis=1)
+            inside = np.flatnonzero(low < margin - 1e-7)  # the frames that go through the palate
+            if len(inside) == 0:
+                continue
+            chunk = part[inside]
+            steps = _held_below(shapes_null, None if turns is None else turns[inside], moved[inside], query,
+                                offsets[chunk], allowed[chunk], margin)
+            found = np.all(np.isfinite(steps), axis=1)
+            q[chunk[found], m:] += steps[found] @ null.T
+            done.extend(chunk[found])
+            if fallback is not None:
+                q[chunk[~found], m:] = fallback[chunk[~found]]
     return q, np.asarray(done, dtype=np.int64)
 
 
@@ -150,68 +143,63 @@ def _null_space(rows: np.ndarray, cost: np.ndarray) -> np.ndarray:
     return scale[:, None] * vt[rank:].T
 
 
-def _least_distance(g: np.ndarray, h: np.ndarray) -> np.ndarray | None:
-    """The shortest z with ``g @ z >= h`` (g (a, n), h (a,)), None if there is none: least distance
-    programming by one NNLS (Lawson & Hanson 1974, "Solving Least Squares Problems", ch. 23)."""
-    from scipy.optimize import nnls
-
-    n = g.shape[1]
-    e = np.vstack([g.T, h[None]])
-    f = np.zeros(n + 1)
-    f[n] = 1.0
-    u = nnls(e, f, maxiter=50 * max(len(h), 1))[0]
-    r = e @ u - f
-    if not np.isfinite(r).all() or abs(r[n]) < 1e-12:
-        return None
-    return -r[:n] / r[n]
-
-
-def _held_below(shapes_null, turns, start, palate, offsets, ok, margin) -> np.ndarray:
+def _held_below(shapes_null, turns, moved, query, offsets, ok, margin) -> np.ndarray:
     """(f, z) each frame's step z below the palate (NaN: none found within 2 x :data:`MAX_PASSES` passes).
 
     The nearest patch coordinates to a frame's c0 in the cost metric keeping the sensor nodes are c0 + N z with
     N the sensors' rows' null space (N^T C N = I), so each pass is a least distance problem in z.
     shapes_null : (k, 3, z) Φ_P N, the candidates' patch shapes in the null space (the modes' frame);
-    turns : (f, k, 3, 3) the modes' rotations R̃ at the candidates (None: linear); start : (f, k, 3) the candidates
-    at c0 (rotated), m; offsets : (f, 3|4); ok : (f, k) the candidates the palate may hold.  A node at c0 + N z is
-    at start + R̃ Φ_P N z, so its clearance's row is (R̃ᵀ n)ᵀ Φ_P N.  The frames take their passes in step (one
-    clearance query a pass for all those still going), each its own least distance problems.  Unlike
-    :func:`tonguevis.sim.contact._active_set`, each pass keeps every earlier pass's linearisation (cutting
-    planes): a hump moves a wide region under a curved palate, and a node linearised at one shape alone sent
-    the next pass elsewhere (passes that oscillated by 5-10 mm on the shared /ka/ 007).
+    turns : (f, k, 3) the modes' rotation vectors w at the candidates, R̃ = R̃(w) (None: linear); moved : (f, k, 3) the
+    candidates' displacements at c0 (rotated), m; query : the candidates'
+    :class:`~tonguevis.sim.contact_kernel.Clearance`; offsets : (f, 3|4); ok : (f, k) the candidates the palate
+    may hold.  A node at c0 + N z is at its place at c0 plus R̃ Φ_P N z, so its clearance's row is
+    (R̃ᵀ n)ᵀ Φ_P N.  The frames take their passes in step (one clearance query a pass for all those still
+    going), each its own least distance problems.  Unlike :func:`tonguevis.sim.contact._active_set`, each
+    pass keeps every earlier pass's linearisation (cutting planes): a hump moves a wide region under a curved
+    palate, and a node linearised at one shape alone sent the next pass elsewhere (passes that oscillated by
+    5-10 mm on the shared /ka/ 007).  A pass's problems are solved together, compiled
+    (:class:`~tonguevis.sim.least_distance_kernel.LeastDistanceBatch`: Goldfarb-Idnani, each started from the
+    frame's answer of the pass before, whose rows are all still there), the NNLS (:func:`_least_distance`)
+    taking the few it gives back: the one optimum either way, to rounding (tests/sim/test_least_distance.py).
     :func:`held_below_reference` is one frame's, written out plainly (tests/sim/test_humps.py)."""
-    n, k = start.shape[:2]
+    from tonguevis.sim.kernels import rotate_accumulated_compiled as rotated
+
+    n, k = moved.shape[:2]
     width = shapes_null.shape[2]
     flat = shapes_null.reshape(3 * k, width)
     z = np.zeros((n, width))
     out = np.full((n, width), np.nan)
-    planes = [(np.zeros((0, width)), np.zeros(0)) for _ in range(n)]
+    problems = LeastDistanceBatch(n, width, 2 * MAX_PASSES)  # each frame's rows, and its last answer
     going = np.arange(n)
     for _ in range(2 * MAX_PASSES):
         if len(going) == 0:
             break
         step = (z[going] @ flat.T).reshape(len(going), k, 3)
         if turns is not None:
-            step = np.matmul(turns[going], step[..., None])[..., 0]
-        gap, normal = clearance_at(palate, start[going] + step, offsets[going])
+            step = rotated(turns[going], step)
+        gap, normal = query(moved[going] + step, offsets[going], normals=True)
         usable = ok[going] & np.isfinite(gap)
         inside = np.any(usable & (gap < margin - 1e-7), axis=1)
         out[going[~inside]] = z[going[~inside]]
-        still = []
-        for j in np.flatnonzero(inside):
-            i = going[j]
-            near = np.flatnonzero(usable[j] & (gap[j] < margin + BAND))
-            # clearance(z') ~ gap + n . R̃ Φ_P N (z' - z) >= margin
-            n_own = normal[j, near] if turns is None else np.matmul(normal[j, near][:, None, :], turns[i, near])[:, 0]
-            rows = np.matmul(n_own[:, None, :], shapes_null[near])[:, 0]
-            g_all = np.vstack([planes[i][0], rows])
-            h_all = np.concatenate([planes[i][1], margin - gap[j, near] + rows @ z[i]])
-            planes[i] = (g_all, h_all)
-            found = _least_distance(g_all, h_all)
+        # clearance(z') ~ gap + n . R̃ Φ_P N (z' - z) >= margin, for every near candidate of every frame inside
+        pair_frame, near = np.nonzero(usable & (gap < margin + BAND) & inside[:, None])
+        n_own = normal[pair_frame, near]
+        if turns is not None:  # R̃ᵀ n = R̃(-w) n (R̃ = I + a[w]× + b[w]×², [w]× antisymmetric)
+            n_own = rotated(-turns[going[pair_frame], near], n_own)
+        rows = np.einsum("pc,pcz->pz", n_own, shapes_null[near])
+        h = margin - gap[pair_frame, near] + np.einsum("pz,pz->p", rows, z[going[pair_frame]])
+        frames = going[inside]
+        counts = np.bincount(pair_frame, minlength=len(going))[inside]
+        problems.add(frames, rows, h, np.concatenate([[0], np.cumsum(counts)]))
+        solved = problems.solve(frames)
+        z[frames[solved]] = problems.z[frames[solved]]
+        still = list(frames[solved])
+        for i in frames[~solved]:  # the few the compiled solver gives back: the NNLS
+            found = _least_distance(*problems.problem(i))
             if found is not None:
                 z[i] = found
                 still.append(i)
-        going = np.asarray(still, dtype=np.int64)
+        going = np.sort(np.asarray(still, dtype=np.int64))
     return out
 
 
