@@ -204,38 +204,46 @@ def keep_below_palate(q, contact, schedule, basis, phi_s, compliance: float, rot
     if rotation_rows is None:
         return out, corrected
     from tonguevis.sim.contact import MARGIN
-    from tonguevis.sim.rotation import rotate_accumulated
 
     k = len(cand)
     phi_flat = contact["phi_nodes"].reshape(3 * k, -1)
     offsets = contact["jaw_offset"]
+    if contact.get("backend", "warp") == "warp":
+        from tonguevis.sim.contact_kernel import Clearance
+        from tonguevis.sim.kernels import rotate_accumulated_compiled as rotated
+
+        query = Clearance(contact["palate"], pts[cand])
+    else:
+        from tonguevis.sim.rotation import rotate_accumulated as rotated
+
+        def query(u, at):
+            return clearance_at(contact["palate"], pts[cand][None] + u, at)
 
     def drawn(qs, frames):
-        """(linear Φq (f, k, 3), drawn R̃Φq (f, k, 3), the least allowed clearance as drawn (f,)) of ``frames``."""
+        """(R̃Φq - Φq (f, k, 3), the least allowed clearance as drawn (f,)) of ``frames``."""
         linear = (qs @ phi_flat.T).reshape(len(qs), k, 3)
-        shown = rotate_accumulated((qs @ rotation_rows.T).reshape(len(qs), k, 3), linear)
-        gap, _ = clearance_at(contact["palate"], pts[cand][None] + shown, offsets[frames])
-        return linear, shown, np.nanmin(np.where(allowed[frames] & np.isfinite(gap), gap, np.inf), axis=1)
+        shown = rotated((qs @ rotation_rows.T).reshape(len(qs), k, 3), linear)
+        gap = query(shown, offsets[frames])[0]
+        return shown - linear, np.nanmin(np.where(allowed[frames] & np.isfinite(gap), gap, np.inf), axis=1)
 
-    redone: set = set()
-    every = np.arange(len(out))
+    redone: list = []
     for _ in range(WARP_ROUNDS):
-        least = np.full(len(out), np.inf)
-        parts = {}
+        frames, shifts, least = [], [], []
         for start in range(0, len(out), 512):  # chunks: the drawn candidates are 24 bytes a node and frame
-            part = every[start:start + 512]
-            linear, shown, least[part] = drawn(out[part], part)
-            inside = part[least[part] < MARGIN - 1e-7]
-            parts.update({int(f): (shown[j] - linear[j]) for j, f in enumerate(part) if f in set(inside.tolist())})
-        frames = np.flatnonzero(least < MARGIN - 1e-7)
+            part = np.arange(start, min(start + 512, len(out)))
+            shift, low = drawn(out[part], part)
+            inside = low < MARGIN - 1e-7
+            frames.append(part[inside])
+            shifts.append(shift[inside])
+            least.append(low[inside])
+        frames = np.concatenate(frames)
         if len(frames) == 0:
             break
-        shift = np.stack([parts[int(f)] for f in frames])
-        tried = solve(q[frames], jaw_offset=offsets[frames], allowed=allowed[frames], shift=shift)[0]
-        better = drawn(tried, frames)[2] > least[frames]  # a correction that failed (the guard's q0) is not taken
+        tried = solve(q[frames], jaw_offset=offsets[frames], allowed=allowed[frames], shift=np.concatenate(shifts))[0]
+        better = drawn(tried, frames)[1] > np.concatenate(least)  # a correction that failed (the guard's q0): not taken
         out[frames[better]] = tried[better]
-        redone.update(frames[better].tolist())
-    return out, np.union1d(corrected, np.fromiter(redone, dtype=np.int64, count=len(redone)))
+        redone.extend(frames[better].tolist())
+    return out, np.union1d(corrected, np.asarray(redone, dtype=np.int64))
 
 
 #: Rounds of correcting the drawn (warped) shape after the linear one (:func:`keep_below_palate`).
