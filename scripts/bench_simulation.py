@@ -75,6 +75,15 @@ compiled solves 0.13 s, each pass's clearance query and rows, the first screenin
 contact ~0.4 s and its correction after the dynamics ~0.14 s (the guessed rounds' NumPy calls, spread
 thin), the rest ~0.2 s.
 
+Then (the same day) the dorsum is pressed at the /k/ closures as the tip is at /t/, the humps' projection
+holds the pulled nodes in every frame (the pulled frames are projected too) and the correction after the
+dynamics also holds the drawn (warped) shape: on a quiet machine (load average 0.2-1.5), two runs on
+2f05fe3, /ta/ 009 682 and 769 against 1,965 and 1,982 frames/s (0.35, 0.39), /ka/ 006 949 and 935 against
+2,985 and 3,020 (0.32, 0.31).  Of /ta/ 009's ~0.95 s more than without the palate (profiled): the
+projection 0.35 s, the drive's contact solve 0.33 s, the correction after the dynamics 0.22 s (the drawn
+check and its re-solve ~0.1 s of it), the palate's placement 0.07 s.  Of /ka/ 006's ~1.7 s: the contact
+solve 0.78 s, the projection 0.63 s, the correction 0.40 s.  The >= 0.5 goal is not met.
+
 Domains (issue 26 item 5): ``domains_fps`` is simulate(method="domains") end to end on the
 demo (--recording) and our shipped tongue, default settings, best of 3 after a first call
 that builds the domains (``domains_loop_fps`` its frame loop alone,
