@@ -310,3 +310,38 @@ def test_the_velum_lifts_live_with_the_dorsum_as_the_replay_lifts_it(osn12_palat
     assert sim is not None and len(lifts) > 100
     assert max(lifts) > 0.5e-3 and contacts_checked == 3  # the dorsum lifts the velum at the /k/ closures
     assert min(lifts) == 0.0  # and it comes down again
+
+
+def test_a_model_that_stops_following_the_sensors_is_said_and_a_new_rest_clears_it(demo):
+    """The shared /ta/ 009 streamed, its rest taken by itself in the jaw's opening before speech (0.06-0.56 s):
+    from 5 s on the model cannot follow most frames (the replay refuses that rest: 591 frames recovered).  The
+    session says so once, on the rest's line and the status bar, with what to do; a new rest clears it.  The
+    demo, on its own rest, is followed throughout and nothing is said."""
+    from tests.conftest import shared_file
+    from tonguevis.workflows import open_recording
+
+    recording = open_recording(shared_file("ema", "optispeech", "009_OSN12_Tah_withFb_natural_HR.tsv"),
+                               audio=False, labels=False)
+    positions, quaternions, times = recording_frames(recording)
+    session = LiveSession(RunSettings(), sensor_names=recording.sensor_names)
+    said = recorder(session)
+    recovered = 0
+    for i in range(len(times)):
+        update = session.process([LiveFrame(i + 1, float(times[i]), time.perf_counter(), positions[i],
+                                            quaternions[i], np.zeros(len(positions[i])))])
+        recovered += bool(update.step is not None and update.step.recovered)
+    warnings = [s for s in named(said, "status") if "not following" in s]
+    assert recovered > 300 and len(warnings) == 1
+    assert 4.5 < session.not_following_since < 6.0
+    assert "take the rest again at a still moment" in warnings[0]
+    assert session.rest_line.startswith("rest (stillest moment): 0.06-0.56 s") and "not following" in session.rest_line
+    assert session.take_rest_now() and session.not_following_since is None
+    assert "not following" not in session.rest_line
+
+    names, frames = demo
+    quiet = LiveSession(SETTINGS, sensor_names=names)
+    heard = recorder(quiet)
+    for frame in frames[:800]:
+        quiet.process([frame])
+    assert quiet.simulator is not None and quiet.not_following_since is None
+    assert not [s for s in named(heard, "status") if "not following" in s]

@@ -356,3 +356,37 @@ def test_the_window_shows_the_live_session_its_model_holds(qtbot, live, demo, tm
     assert window.frames_drawn == drawn + 2 and len(window.views.target_actors) == 1
     window.close()
     assert window.state.live_session is None
+
+
+def test_a_model_that_stops_following_is_said_in_the_rest_panel(qtbot, live, demo, tmp_path, monkeypatch):
+    """When the model stops following the sensors (the integrator's linear fallback in most frames: here made to
+    happen after 100 frames, as it did from 5 s on the shared /ta/ 009 fed frame by frame on its rest taken in the
+    jaw's opening), the Rest panel and the status bar say so and what to do, the layout holds the longer line at
+    1280 x 800, and "Take rest now" clears it."""
+    import dataclasses
+
+    from PySide6.QtWidgets import QScrollArea
+
+    from tests.gui.test_layout_1280 import _problems
+    from tonguevis.live.server import ReplayServer
+    from tonguevis.live.simulator import LiveSimulator
+
+    plain = LiveSimulator.step
+
+    def failing(self, positions_mm, reconstruct=True):
+        step = plain(self, positions_mm, reconstruct)
+        return dataclasses.replace(step, recovered=self.frames_done > 100)
+
+    monkeypatch.setattr(LiveSimulator, "step", failing)
+    with ReplayServer(demo, loop=True) as server:
+        window = live(wavefront(server.port))
+        window.resize(1280, 800)
+        qtbot.waitUntil(lambda: "not following" in window.rest_label.text(), timeout=60000)
+        assert "take the rest again at a still moment" in window.rest_label.text()
+        assert "not following" in window.statusBar().currentMessage()
+        window.grab().save("/tmp/shots/live_not_following.png" if os.path.isdir("/tmp/shots")
+                           else str(tmp_path / "n.png"))
+        assert _problems(window, {"live panel": window.findChildren(QScrollArea)[0].widget()}) == []
+        monkeypatch.setattr(LiveSimulator, "step", plain)
+        assert window.take_rest_now()
+        assert "not following" not in window.rest_label.text()

@@ -44,6 +44,14 @@ from tonguevis.live.simulator import REST_SEARCH_S, LiveSimulationError, LiveSim
 AUTO_REST_S = REST_SEARCH_S
 #: Frames simulated in one tick at most: after a stall the older ones of a burst are skipped (and counted).
 MAX_BURST = 50
+#: Frames over which the session judges whether the model follows the sensors (one second at 100 Hz) ...
+FOLLOW_WINDOW = 100
+#: ... and the share of them the model could not follow (the integrator's linear fallback, LiveStep.recovered)
+#: above which it says so: the replay refuses a recording with more than this share of such frames
+#: (:data:`tonguevis.sim.motion_builder.RECOVERED_SHARE`).  On the shared /ta/ 009 streamed, the rest taken by
+#: itself (0.06-0.56 s, the jaw opening before speech) left 591 of the 793 frames after it unfollowed from 5 s
+#: on, drawn without a word: the tongue a clinician saw was not the speaker's.
+NOT_FOLLOWING_SHARE = 0.10
 
 
 class LiveEvents(SignalGroup):
@@ -123,6 +131,8 @@ class LiveSession(SessionTargets):
         self.source = None
         self.simulator: LiveSimulator | None = None
         self.rest_line = "waiting for a still moment"
+        self._followed: deque = deque(maxlen=FOLLOW_WINDOW)  # the last frames' LiveStep.recovered
+        self.not_following_since: float | None = None  # the session's clock (s) when it stopped following
         self.sweep = None
         self.last_saved = None
         self.low_pass = DisplayLowPass()  # of what is drawn (off by default)
@@ -230,8 +240,11 @@ class LiveSession(SessionTargets):
                 else:
                     simulate_s += sum(v for key, v in step.timings.items() if key != "reconstruct")
                     corrected = step.corrected
+                    self._followed.append(step.recovered)
             if self.sweep is not None:
                 self._add_to_sweep(frame, corrected)
+        if step is not None:
+            self._check_following(newest)
         self.dropped_frames += len(frames) - 1
         update = self._update(newest, names, step, started, len(frames), simulate_s)
         self.last_frame, self.latest = newest, update
@@ -270,6 +283,25 @@ class LiveSession(SessionTargets):
         self.rest_line = line
         self._emit("rest_changed", line)
 
+    def _check_following(self, newest) -> None:
+        """Say when the model stops following the sensors (more than :data:`NOT_FOLLOWING_SHARE` of the last
+        :data:`FOLLOW_WINDOW` frames unfollowed), on the rest's line and the status bar, and when it follows
+        again (a whole window followed)."""
+        if len(self._followed) < FOLLOW_WINDOW // 2:
+            return
+        share = float(np.mean(self._followed))
+        if self.not_following_since is None and share > NOT_FOLLOWING_SHARE:
+            self.not_following_since = self.clock(newest)
+            advice = (f"the model is not following the sensors since {self.not_following_since:.1f} s "
+                      f"({100 * share:.0f} % of the last frames could not be simulated): take the rest again at a "
+                      "still moment")
+            self._rest_said(f"{self.rest_line.split('; the model is not following')[0]}; {advice}")
+            self.say(advice)
+        elif self.not_following_since is not None and share == 0.0 and len(self._followed) == FOLLOW_WINDOW:
+            self.not_following_since = None
+            self._rest_said(self.rest_line.split("; the model is not following")[0])
+            self.say("the model follows the sensors again")
+
     def take_rest(self, names: list[str] | None = None, *, stillest: bool = False, interval=None) -> bool:
         """The rest from the stillest moment of the recent frames, ``interval`` (start_s, end_s on the session's
         clock from its first frame), else the last half second.  names : the slots' (default
@@ -290,6 +322,8 @@ class LiveSession(SessionTargets):
             self.model = sim.source_model  # built once, kept for the next rest
         self.simulator = sim
         self.low_pass.reset()
+        self._followed.clear()
+        self.not_following_since = None
         self._palatogram_layout(sim)
         # On the session's clock (0 at its first frame, as a given rest is), not the device's or a looping
         # replay server's, whose time stamps run on from wherever it was (40 s into a 17 s recording's third lap).

@@ -64,6 +64,8 @@ class LiveStep:
         what a sweep saves as its live head correction.
     q : (m,) modal coordinates.  jaw_offset : (3,) m, the jaw's translation from rest (zeros without JAW).
     timings : stage -> seconds ("correct", "drive", "integrate", "reconstruct").
+    recovered : the model could not follow this frame (the integrator's linear fallback, as the replay's
+        recovered frames: :class:`~tonguevis.sim.newmark.IntegrationResult`).
     """
 
     surface: np.ndarray | None
@@ -72,6 +74,7 @@ class LiveStep:
     q: np.ndarray
     jaw_offset: np.ndarray
     timings: dict = field(default_factory=dict)
+    recovered: bool = False
 
 
 def stillest_window(times: np.ndarray, positions: np.ndarray, duration: float = REST_WINDOW_S) -> slice | None:
@@ -397,7 +400,8 @@ class LiveSimulator:
         self.frames_done += 1
         self.last_corrected = corrected
         return LiveStep(surface, self.sensor_rest_nodes + displacement, corrected, q, jaw_offset,
-                        {"correct": t1 - t0, "drive": t2 - t1, "integrate": t3 - t2, "reconstruct": t4 - t3})
+                        {"correct": t1 - t0, "drive": t2 - t1, "integrate": t3 - t2, "reconstruct": t4 - t3},
+                        bool(result.recovered[0]))
 
     def reconstruct(self, q: np.ndarray) -> np.ndarray:
         """(k, 3) surface node positions (m, ``dtype``) for modal coordinates q (m,; with sensor patches the
