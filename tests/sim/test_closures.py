@@ -143,7 +143,8 @@ def test_a_model_that_runs_away_at_the_closures_is_simulated_without_their_pulls
 def test_the_closures_are_said_where_the_tip_touches_not_where_the_tongue_touches_most(osn12_palate):
     """At a /t/ the sides and back of the tongue touch the palate too, over a larger area: on the real /ta/ 009
     "5 of 5 stop closures touch (back-left), the tip pressed on the palate there" was said while the tip was
-    short of it.  How often and where are now the pressed region's own contact at each closure."""
+    short of it.  How often and where are now the pressed region's own contact during each closure (its
+    nucleus: at the maximum constriction alone the tip of 009 touched at 2 of 5 closures, within 3 frames at 4)."""
     from tests.conftest import shared_file
     from tonguevis.sim import simulate
     from tonguevis.sim.contact import TOUCH, node_areas
@@ -158,15 +159,25 @@ def test_the_closures_are_said_where_the_tip_touches_not_where_the_tongue_touche
     areas = node_areas(motion.model.mesh.points, np.asarray(motion.model.surface_faces))
     frame = palate_frame(motion.palate)
     places, everywhere = [], []
-    for f in closures["maximum_constriction_frames"]:
-        points = motion.model.mesh.points + motion.displacement(f) + motion.jaw_offset[f]
-        gap = motion.palate_at(f).clearance(points)[0]
-        on = np.isfinite(gap[pressed]) & (gap[pressed] < TOUCH)
-        places.append(place_of(frame, points[pressed][on], areas[pressed][on]))
-        everywhere.append(bool(np.any(np.isfinite(gap) & (gap < TOUCH))))
+    windows = closures["closure_frames"]  # each closure's nucleus, where its pull holds
+    assert len(windows) == closures["closures"]
+    for (first, last), peak in zip(windows, closures["maximum_constriction_frames"]):
+        assert first <= peak <= last
+        where = ""
+        for f in range(first, last + 1):  # where the pressed region first touches during the closure
+            points = motion.model.mesh.points + motion.displacement(f) + motion.jaw_offset[f]
+            gap = motion.palate_at(f).clearance(points)[0]
+            on = np.isfinite(gap[pressed]) & (gap[pressed] < TOUCH)
+            where = place_of(frame, points[pressed][on], areas[pressed][on])
+            if where:
+                break
+        places.append(where)
+        points = motion.model.mesh.points + motion.displacement(peak) + motion.jaw_offset[peak]
+        gap = motion.palate_at(peak).clearance(points)[0]
+        everywhere.append(bool(np.any(np.isfinite(gap) & (gap < TOUCH))))  # the whole tongue, at the peak alone
     named = [p for p in places if p]
     assert c["closures_touching"] == len(named)
     assert c["closures_where"] == (max(set(named), key=named.count) if named else "")
-    assert len(named) < sum(everywhere)  # the whole tongue touches at more closures than the tip does
+    assert 0 < len(named) and sum(everywhere) == len(everywhere)  # the tongue touches at every peak: not what is counted
     line = contact_line(motion.metadata)
     assert f"the tip touches at {len(named)} of {closures['closures']} stop closures" in line

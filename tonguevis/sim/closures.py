@@ -163,6 +163,7 @@ def closure_contacts(recording, prep, model, contact) -> ClosureContacts | None:
     displacement = np.stack([chosen[n] for n in nodes], axis=1)
     info = {"articulator": articulator, "closures": len(windows), "nodes": nodes.tolist(),
             "maximum_constriction_frames": [int(middle) for _, middle, _ in windows],
+            "closure_frames": [[int(first), int(last)] for first, _, last in windows],
             "frames_held": int(np.any(np.all(np.isfinite(displacement), axis=2), axis=1).sum()),
             "largest_pull_mm": 1e3 * max(pulled) if pulled else 0.0,
             "median_pull_mm": 1e3 * float(np.median(pulled)) if pulled else 0.0}

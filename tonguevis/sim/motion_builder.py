@@ -78,8 +78,8 @@ class MotionBuilder:
 
     def _contact_places(self, q, contact_area, contact, warping) -> dict:
         """Where the tongue touches the palate (:func:`tonguevis.sim.palate_regions.place_of`): at the frame of the
-        largest contact area ("largest_contact_where") and, at each closure's maximum constriction, where the
-        region pressed for the closure (the tip and blade; the dorsum) touches: the place said most ("closures_where", with
+        largest contact area ("largest_contact_where") and, during each closure (its nucleus, where the pull
+        holds: :meth:`_closure_place`), where the region pressed for the closure (the tip and blade; the dorsum) touches: the place said most ("closures_where", with
         "closures_touching": at how many closures that region touches).  Not the whole tongue's contact there:
         at a /t/ the sides and back of the tongue touch too, over a larger area, and "the closures touch (back)"
         said of a /t/ misled."""
@@ -104,14 +104,27 @@ class MotionBuilder:
         if len(contact_area) and np.max(contact_area) > 0:
             out["largest_contact_where"] = place(int(np.argmax(contact_area)), cand)
         closures = contact.get("closures") or {}
-        frames = [f for f in closures.get("maximum_constriction_frames", []) if f < len(q)]
+        middles = closures.get("maximum_constriction_frames", [])
+        spans = closures.get("closure_frames") or [[f, f] for f in middles]  # older motions: the peak alone
+        spans = [(f0, min(f1, len(q) - 1)) for (f0, f1), f in zip(spans, middles) if f < len(q)]
         pressed = np.asarray(closures.get("nodes", []), dtype=np.int64)
-        if frames and len(pressed):
-            places = [place(f, pressed) for f in frames]
+        if spans and len(pressed):
+            places = [self._closure_place(place, pressed, f0, f1) for f0, f1 in spans]
             named = [p for p in places if p]
             out["closures_touching"] = len(named)
             out["closures_where"] = max(set(named), key=named.count) if named else ""
         return out
+
+    @staticmethod
+    def _closure_place(place, pressed: np.ndarray, first: int, last: int) -> str:
+        """Where the pressed region touches during a closure (its frames first..last, the nucleus the pull holds):
+        at the first frame it does, "" when it does not.  One frame (the maximum constriction) said "the tip
+        touches at 2 of 5" on the shared /ta/ 009 where the tip touched at 4 within three frames of it."""
+        for f in range(first, last + 1):
+            where = place(f, pressed)
+            if where:
+                return where
+        return ""
 
     def motion(self, result, figures, n: int) -> Motion:
         """The :class:`Motion` of frames 0..n-1 (``n`` = all: the simulation's result, made from ``result``
