@@ -130,7 +130,7 @@ class LiveSession(SessionTargets):
         self.palate = settings.palate_surface()  # unplaced: the simulator places it on the rest
         self.source = None
         self.simulator: LiveSimulator | None = None
-        self.rest_line = "waiting for a still moment"
+        self.rest_line = self._rest_plain = "waiting for a still moment"
         self._followed: deque = deque(maxlen=FOLLOW_WINDOW)  # the last frames' LiveStep.recovered
         self.not_following_since: float | None = None  # the session's clock (s) when it stopped following
         self.sweep = None
@@ -279,9 +279,11 @@ class LiveSession(SessionTargets):
         self.low_pass.set_time_constant(seconds)
 
     # ------------------------------------------------------------------ the rest
-    def _rest_said(self, line: str) -> None:
-        self.rest_line = line
-        self._emit("rest_changed", line)
+    def _rest_said(self, line: str, advice: str = "") -> None:
+        """The rest's line (``rest_line``, ``rest_changed``): ``line``, and after it ``advice`` while it holds."""
+        self._rest_plain = line
+        self.rest_line = f"{line}; {advice}" if advice else line
+        self._emit("rest_changed", self.rest_line)
 
     def _check_following(self, newest) -> None:
         """Say when the model stops following the sensors (more than :data:`NOT_FOLLOWING_SHARE` of the last
@@ -295,11 +297,11 @@ class LiveSession(SessionTargets):
             advice = (f"the model is not following the sensors since {self.not_following_since:.1f} s "
                       f"({100 * share:.0f} % of the last frames could not be simulated): take the rest again at a "
                       "still moment")
-            self._rest_said(f"{self.rest_line.split('; the model is not following')[0]}; {advice}")
+            self._rest_said(self._rest_plain, advice)
             self.say(advice)
         elif self.not_following_since is not None and share == 0.0 and len(self._followed) == FOLLOW_WINDOW:
             self.not_following_since = None
-            self._rest_said(self.rest_line.split("; the model is not following")[0])
+            self._rest_said(self._rest_plain)
             self.say("the model follows the sensors again")
 
     def take_rest(self, names: list[str] | None = None, *, stillest: bool = False, interval=None) -> bool:
